@@ -1,0 +1,20 @@
+//! # mpm_concrete
+//!
+//! Implicit dynamic Material Point Method (Newmark, updated Lagrangian, grid reset every step) with CPDI
+//! shape functions and a finite-strain, gradient-enhanced microplane damage model for concrete, solved
+//! monolithically in (u, eta_bar) by PETSc SNES.
+//!
+//! Source: Oropeza-Navarro, Platen, Chihadeh, Kaliske, "Modeling concrete at high-loading rates: insights by
+//! the material point method". Units everywhere: mm, s, N, MPa, t (tonne).
+//!
+//! Dependencies point one way:
+//! `cli -> io -> scenario -> solver -> {assembly, transfer, material, shape} -> {grid, particles} -> tensor`,
+//! and only `assembly`/`solver` talk to [`petsc`], the one module with `unsafe` FFI.
+
+pub mod grid;
+pub mod material;
+pub mod particles;
+pub mod petsc;
+pub mod plot;
+pub mod shape;
+pub mod transfer;

@@ -1,0 +1,28 @@
+#include "shim.h"
+
+MPI_Comm mpmc_comm_world(void) { return PETSC_COMM_WORLD; }
+MPI_Comm mpmc_comm_self(void) { return PETSC_COMM_SELF; }
+
+int mpmc_world_rank(void)
+{
+  PetscMPIInt rank = 0;
+  MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+  return rank;
+}
+
+int mpmc_world_size(void)
+{
+  PetscMPIInt size = 1;
+  MPI_Comm_size(PETSC_COMM_WORLD, &size);
+  return size;
+}
+
+PetscInt mpmc_petsc_decide(void) { return PETSC_DECIDE; }
+PetscReal mpmc_petsc_default_real(void) { return PETSC_DEFAULT; }
+
+#define MPMC_STR2(x) #x
+#define MPMC_STR(x) MPMC_STR2(x)
+const char *mpmc_petsc_version(void)
+{
+  return MPMC_STR(PETSC_VERSION_MAJOR) "." MPMC_STR(PETSC_VERSION_MINOR) "." MPMC_STR(PETSC_VERSION_SUBMINOR);
+}
