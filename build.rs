@@ -26,7 +26,12 @@ fn main() {
 
     let petsc = probe("PETSc");
     let mpi = probe("ompi-c");
-    let includes: Vec<PathBuf> = petsc.include_paths.iter().chain(&mpi.include_paths).cloned().collect();
+    let includes: Vec<PathBuf> = petsc
+        .include_paths
+        .iter()
+        .chain(&mpi.include_paths)
+        .cloned()
+        .collect();
 
     // The shared library directories go into the rpath so the binary runs without LD_LIBRARY_PATH.
     for dir in petsc.link_paths.iter().chain(&mpi.link_paths) {
@@ -43,7 +48,7 @@ fn main() {
     // Only the calls the safe wrappers make; the types they need follow from them.
     let functions = [
         "Petsc(Initialize|Finalize|Initialized|Finalized|ErrorMessage|PushErrorHandler|PopErrorHandler)",
-        "PetscOptions(SetValue|ClearValue|HasName|GetString|GetReal|GetInt|GetBool|Left|InsertString|Used)",
+        "PetscOptions(SetValue|ClearValue|HasName|GetString|GetReal|GetInt|GetBool|Left|LeftGet|LeftRestore|InsertString|Used)",
         "PetscObject(SetName|SetOptionsPrefix|GetComm)",
         "PetscLog(DefaultBegin|StageRegister|StagePush|StagePop|View|EventRegister|EventBegin|EventEnd)",
         "PetscMemory(GetCurrentUsage|GetMaximumUsage|SetGetMaximumUsage)|PetscTime|PetscClassIdRegister",
@@ -60,6 +65,7 @@ fn main() {
         "SNES(Create|Destroy|SetFunction|SetJacobian|SetFromOptions|SetOptionsPrefix|Solve|GetIterationNumber)",
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",
+        "SNES(GetConvergedReasonString|SetUp|GetLinearSolveFailures)|KSPGetConvergedReasonString|MatNullSpaceCreateRigidBody",
         "IS(CreateGeneral|CreateStride|Destroy)",
         "mpmc_.*",
     ];

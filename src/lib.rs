@@ -17,4 +17,5 @@ pub mod particles;
 pub mod petsc;
 pub mod plot;
 pub mod shape;
+pub mod smoke;
 pub mod transfer;

@@ -1,1 +1,315 @@
+//! Safe wrappers over PETSc (Debian's 3.18, real scalars, 32-bit `PetscInt`): the only module with
+//! `unsafe` foreign calls.
+//!
+//! * [`Session`]: the process-wide PETSc/MPI session, initialised once with the program's arguments so
+//!   that every `-snes_*`, `-ksp_*`, `-pc_*`, `-mat_*`, `-log_view`, `-help` option works. Every PETSc
+//!   object is created and used while holding the session guard, which serialises PETSc calls (PETSc is
+//!   not thread-safe; Rust's test harness runs tests on several threads).
+//! * [`Vector`], [`Matrix`], [`IndexSet`], [`Snes`]: one owning type per PETSc object, destroyed on drop.
+//! * Every PETSc error becomes a [`PetscError`] carrying PETSc's own message (captured by an error
+//!   handler pushed at start-up), never an abort.
+
+mod matrix;
+mod options;
+mod snes;
 pub mod sys;
+mod vector;
+
+pub use matrix::{IndexSet, Matrix};
+pub use options::{
+    apply_default_options, has_option, option_string, set_default_option, set_option,
+    unused_options,
+};
+pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo};
+pub use vector::Vector;
+
+use std::ffi::{CStr, CString, c_char, c_int, c_void};
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+/// PETSc's index type (32-bit in Debian's `petsc-dev`).
+pub type PetscInt = sys::PetscInt;
+
+/// A failed PETSc call, with PETSc's error code and message.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("PETSc error {code} in {call}: {message}")]
+pub struct PetscError {
+    /// PETSc error code (e.g. 86 = unknown type).
+    pub code: i32,
+    /// The wrapper call that failed.
+    pub call: &'static str,
+    /// PETSc's message (first line of its traceback), or a description from the wrapper.
+    pub message: String,
+}
+
+/// Result of a PETSc wrapper call.
+pub type Result<T> = std::result::Result<T, PetscError>;
+
+/// The message of the most recent PETSc error, recorded by [`error_handler`].
+static LAST_ERROR: Mutex<Option<String>> = Mutex::new(None);
+
+/// Turns a PETSc return code into a `Result`, attaching the recorded message.
+pub(crate) fn check(code: sys::PetscErrorCode, call: &'static str) -> Result<()> {
+    if code == 0 {
+        return Ok(());
+    }
+    let message = LAST_ERROR
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take()
+        .unwrap_or_else(|| "no message recorded".to_owned());
+    Err(PetscError {
+        code,
+        call,
+        message,
+    })
+}
+
+/// PETSc error handler: keeps the initial message (the one that names the cause) instead of printing.
+unsafe extern "C" fn error_handler(
+    _comm: sys::MPI_Comm,
+    line: c_int,
+    func: *const c_char,
+    file: *const c_char,
+    n: sys::PetscErrorCode,
+    p: sys::PetscErrorType,
+    mess: *const c_char,
+    _ctx: *mut c_void,
+) -> sys::PetscErrorCode {
+    let text = |s: *const c_char| {
+        if s.is_null() {
+            String::new()
+        } else {
+            // SAFETY: PETSc passes NUL-terminated strings valid for the duration of the call.
+            unsafe { CStr::from_ptr(s) }.to_string_lossy().into_owned()
+        }
+    };
+    if p == sys::PetscErrorType_PETSC_ERROR_INITIAL {
+        let mut msg = text(mess).trim().to_owned();
+        if msg.is_empty() {
+            let mut generic: *const c_char = std::ptr::null();
+            // SAFETY: PetscErrorMessage only writes a pointer to a static string.
+            unsafe { sys::PetscErrorMessage(n, &mut generic, std::ptr::null_mut()) };
+            msg = text(generic);
+        }
+        let origin = format!("{}() at {}:{}", text(func), text(file), line);
+        *LAST_ERROR.lock().unwrap_or_else(|e| e.into_inner()) = Some(format!("{msg} [{origin}]"));
+    }
+    n
+}
+
+/// The PETSc session of this process. Obtain it with [`Session::initialize`] (the binary, with its
+/// command line) or [`Session::get`] (tests and library users; initialises with no options if needed).
+pub struct Session {
+    _private: (),
+}
+
+static SESSION: OnceLock<std::result::Result<Mutex<Session>, PetscError>> = OnceLock::new();
+
+/// Exclusive access to PETSc for the current thread; PETSc objects are created and used under it.
+pub type SessionGuard = MutexGuard<'static, Session>;
+
+impl Session {
+    /// Initialises PETSc and MPI with `args` (the first is the program name; the rest are PETSc options
+    /// such as `-snes_monitor`). Later calls return the existing session and ignore `args`.
+    pub fn initialize(args: &[String]) -> Result<SessionGuard> {
+        let session =
+            SESSION.get_or_init(|| init_petsc(args).map(|()| Mutex::new(Session { _private: () })));
+        match session {
+            Ok(m) => Ok(m.lock().unwrap_or_else(|e| e.into_inner())),
+            Err(e) => Err(e.clone()),
+        }
+    }
+
+    /// The session, initialised with no command-line options if this is the first use.
+    pub fn get() -> Result<SessionGuard> {
+        Self::initialize(&["mpm_concrete".to_owned()])
+    }
+
+    /// Rank of this process in PETSc's world communicator.
+    pub fn rank(&self) -> usize {
+        // SAFETY: PETSc is initialised while a Session exists.
+        unsafe { sys::mpmc_world_rank() as usize }
+    }
+
+    /// Number of processes in PETSc's world communicator.
+    pub fn size(&self) -> usize {
+        // SAFETY: as above.
+        unsafe { sys::mpmc_world_size() as usize }
+    }
+
+    /// PETSc's version, e.g. "3.18.5".
+    pub fn version(&self) -> String {
+        // SAFETY: returns a pointer to a static string literal.
+        unsafe { CStr::from_ptr(sys::mpmc_petsc_version()) }
+            .to_string_lossy()
+            .into_owned()
+    }
+
+    /// Peak resident memory of this process in bytes, as PETSc measures it (needs
+    /// `-memory_view` or [`Session::track_peak_memory`] before the work).
+    pub fn peak_memory(&self) -> f64 {
+        let mut mem = 0.0;
+        // SAFETY: plain out-parameter.
+        unsafe { sys::PetscMemoryGetMaximumUsage(&mut mem) };
+        mem
+    }
+
+    /// Current resident memory of this process in bytes.
+    pub fn current_memory(&self) -> f64 {
+        let mut mem = 0.0;
+        // SAFETY: plain out-parameter.
+        unsafe { sys::PetscMemoryGetCurrentUsage(&mut mem) };
+        mem
+    }
+
+    /// Asks PETSc to track the peak memory from now on (sampled at object destruction and logging).
+    pub fn track_peak_memory(&self) -> Result<()> {
+        // SAFETY: no pointers involved.
+        check(
+            unsafe { sys::PetscMemorySetGetMaximumUsage() },
+            "PetscMemorySetGetMaximumUsage",
+        )
+    }
+
+    /// Registers a logging stage (shown by `-log_view`).
+    pub fn register_stage(&self, name: &str) -> Result<sys::PetscLogStage> {
+        let c = cstring(name)?;
+        let mut stage = 0;
+        // SAFETY: c outlives the call; PETSc copies the name.
+        check(
+            unsafe { sys::PetscLogStageRegister(c.as_ptr(), &mut stage) },
+            "PetscLogStageRegister",
+        )?;
+        Ok(stage)
+    }
+
+    /// Enters a logging stage until the returned guard is dropped.
+    pub fn push_stage(&self, stage: sys::PetscLogStage) -> Result<StageGuard> {
+        // SAFETY: stage was registered.
+        check(
+            unsafe { sys::PetscLogStagePush(stage) },
+            "PetscLogStagePush",
+        )?;
+        Ok(StageGuard { _private: () })
+    }
+
+    /// Finalises PETSc (prints `-log_view`, `-options_left` reports). PETSc cannot be re-initialised in
+    /// the same process, so this is for the end of `main` only.
+    pub fn finalize(self_guard: SessionGuard) -> Result<()> {
+        drop(self_guard);
+        // SAFETY: every object wrapper has been dropped by the caller (they borrow nothing from the
+        // guard, so this is the caller's contract: call at the very end of the program).
+        check(unsafe { sys::PetscFinalize() }, "PetscFinalize")
+    }
+}
+
+/// Leaves a logging stage on drop.
+pub struct StageGuard {
+    _private: (),
+}
+
+impl Drop for StageGuard {
+    fn drop(&mut self) {
+        // SAFETY: paired with the PetscLogStagePush of the constructor.
+        unsafe { sys::PetscLogStagePop() };
+    }
+}
+
+fn init_petsc(args: &[String]) -> Result<()> {
+    // PETSc keeps argc/argv for the whole session: leak them deliberately (a few bytes, once).
+    // argv is NULL-terminated, as MPI_Init expects.
+    let mut c_args: Vec<*mut c_char> = args
+        .iter()
+        .map(|a| {
+            CString::new(a.as_str())
+                .unwrap_or_else(|_| CString::from(c"?"))
+                .into_raw()
+        })
+        .collect();
+    let argc_value = c_args.len() as c_int;
+    c_args.push(std::ptr::null_mut());
+    let argv: &'static mut Vec<*mut c_char> = Box::leak(Box::new(c_args));
+    let argc: &'static mut c_int = Box::leak(Box::new(argc_value));
+    let argv_ptr: &'static mut *mut *mut c_char = Box::leak(Box::new(argv.as_mut_ptr()));
+    let help = c"mpm_concrete: implicit MPM with a gradient-enhanced microplane damage model.\nPETSc options follow; see `mpm-concrete --help` for the program's own arguments.\n";
+    // SAFETY: argc/argv live for the rest of the process; help is a static C string.
+    let code = unsafe { sys::PetscInitialize(argc, argv_ptr, std::ptr::null(), help.as_ptr()) };
+    if code != 0 {
+        return Err(PetscError {
+            code,
+            call: "PetscInitialize",
+            message: "PETSc/MPI initialisation failed".to_owned(),
+        });
+    }
+    // SAFETY: the handler is a plain function with the expected signature and no context.
+    check(
+        unsafe { sys::PetscPushErrorHandler(Some(error_handler), std::ptr::null_mut()) },
+        "PetscPushErrorHandler",
+    )
+}
+
+/// A Rust string as a C string, or a PETSc-style error if it holds a NUL byte.
+pub(crate) fn cstring(s: &str) -> Result<CString> {
+    CString::new(s).map_err(|_| PetscError {
+        code: 62,
+        call: "CString::new",
+        message: format!("string {s:?} contains a NUL byte"),
+    })
+}
+
+/// Converts a count or index to `PetscInt`, failing if it does not fit in 32 bits.
+pub(crate) fn to_petsc_int(n: usize, what: &'static str) -> Result<PetscInt> {
+    PetscInt::try_from(n).map_err(|_| PetscError {
+        code: 63,
+        call: what,
+        message: format!("{n} exceeds the 32-bit PetscInt of this PETSc build (use petsc64-dev)"),
+    })
+}
+
+/// The world communicator (valid after initialisation).
+pub(crate) fn comm_world() -> sys::MPI_Comm {
+    // SAFETY: reads PETSC_COMM_WORLD; only called while a session exists.
+    unsafe { sys::mpmc_comm_world() }
+}
+
+/// A user-registered logging event; time spent between [`LogEvent::begin`] and the drop of the returned
+/// guard is reported by `-log_view`.
+#[derive(Clone, Copy, Debug)]
+pub struct LogEvent(sys::PetscLogEvent);
+
+impl LogEvent {
+    /// Registers an event under PETSc's generic object class.
+    pub fn register(_session: &Session, name: &str) -> Result<Self> {
+        let c = cstring(name)?;
+        let mut class = 0;
+        let mut event = 0;
+        let class_name = c"mpm_concrete";
+        // SAFETY: PETSc copies both names.
+        check(
+            unsafe { sys::PetscClassIdRegister(class_name.as_ptr(), &mut class) },
+            "PetscClassIdRegister",
+        )?;
+        check(
+            unsafe { sys::PetscLogEventRegister(c.as_ptr(), class, &mut event) },
+            "PetscLogEventRegister",
+        )?;
+        Ok(Self(event))
+    }
+
+    /// Starts timing; stops when the guard drops.
+    pub fn begin(self) -> EventGuard {
+        // SAFETY: the event was registered.
+        unsafe { sys::mpmc_log_event_begin(self.0) };
+        EventGuard(self.0)
+    }
+}
+
+/// Ends a [`LogEvent`] on drop.
+pub struct EventGuard(sys::PetscLogEvent);
+
+impl Drop for EventGuard {
+    fn drop(&mut self) {
+        // SAFETY: paired with mpmc_log_event_begin.
+        unsafe { sys::mpmc_log_event_end(self.0) };
+    }
+}

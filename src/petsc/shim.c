@@ -26,3 +26,6 @@ const char *mpmc_petsc_version(void)
 {
   return MPMC_STR(PETSC_VERSION_MAJOR) "." MPMC_STR(PETSC_VERSION_MINOR) "." MPMC_STR(PETSC_VERSION_SUBMINOR);
 }
+
+PetscErrorCode mpmc_log_event_begin(PetscLogEvent e) { return PetscLogEventBegin(e, 0, 0, 0, 0); }
+PetscErrorCode mpmc_log_event_end(PetscLogEvent e) { return PetscLogEventEnd(e, 0, 0, 0, 0); }

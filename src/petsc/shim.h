@@ -16,4 +16,7 @@ PetscInt mpmc_petsc_decide(void);
 PetscReal mpmc_petsc_default_real(void);
 /* The version PETSc was built as, "3.18.5". */
 const char *mpmc_petsc_version(void);
+/* PetscLogEventBegin/End are macros in 3.18. */
+PetscErrorCode mpmc_log_event_begin(PetscLogEvent e);
+PetscErrorCode mpmc_log_event_end(PetscLogEvent e);
 #endif

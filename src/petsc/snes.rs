@@ -1,0 +1,389 @@
+//! PETSc SNES (Newton and friends) driving a Rust [`NonlinearProblem`]; its KSP/PC are chosen at run time
+//! through the options database (`-ksp_type`, `-pc_type`, `-pc_factor_mat_solver_type mumps`, ...).
+//!
+//! The residual/Jacobian contract: PETSc may evaluate the residual at any state (line search,
+//! finite-difference Jacobians, `-snes_mf_operator`, `-snes_test_jacobian`), so a problem must compute
+//! both from `x` alone and commit nothing inside a callback.
+
+use super::{
+    IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, Vector, check, comm_world, cstring, sys,
+};
+use std::ffi::{CStr, c_char, c_void};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+
+/// What a residual or Jacobian evaluation can report instead of success.
+#[derive(Debug, Clone)]
+pub enum CallbackError {
+    /// The state is outside the problem's domain (det F <= 0, a point left the grid, NaN): SNES is told
+    /// (`SNESSetFunctionDomainError`), stops with `DIVERGED_FUNCTION_DOMAIN`, and the caller may retry.
+    Domain(String),
+    /// An unrecoverable failure: SNESSolve returns an error carrying this message.
+    Fatal(String),
+}
+
+/// A nonlinear system R(x) = 0 with its Jacobian, evaluated by Rust code.
+pub trait NonlinearProblem {
+    /// Writes R(x) into `f` (both distributed like the solution vector).
+    fn residual(&mut self, x: &Vector, f: &mut Vector) -> std::result::Result<(), CallbackError>;
+    /// Assembles dR/dx at `x` into `jac` (the preconditioning matrix).
+    fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> std::result::Result<(), CallbackError>;
+}
+
+/// Statistics of one [`Snes::solve`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SolveInfo {
+    /// Nonlinear (Newton) iterations.
+    pub iterations: usize,
+    /// Linear (KSP) iterations summed over the Newton iterations.
+    pub linear_iterations: usize,
+    /// PETSc's `SNESConvergedReason` code (> 0 converged, < 0 diverged).
+    pub reason: i32,
+    /// The reason as PETSc names it, e.g. `CONVERGED_FNORM_RELATIVE`.
+    pub reason_name: String,
+    /// Residual norm at each Newton iteration, starting with the initial one.
+    pub residual_norms: Vec<f64>,
+    /// Messages of domain errors reported by the problem during the solve.
+    pub domain_errors: Vec<String>,
+}
+
+impl SolveInfo {
+    /// True if SNES reports convergence.
+    pub fn converged(&self) -> bool {
+        self.reason > 0
+    }
+}
+
+/// A PETSc SNES with its options prefix.
+pub struct Snes {
+    raw: sys::SNES,
+    residual: Option<Vector>,
+    configured: bool,
+}
+
+struct Context<'a> {
+    problem: &'a mut dyn NonlinearProblem,
+    fatal: Option<String>,
+    domain: Vec<String>,
+}
+
+/// PETSc's generic user error code (`PETSC_ERR_USER`).
+const ERR_USER: sys::PetscErrorCode = 83;
+
+impl Snes {
+    /// A SNES whose options are read with `prefix` (e.g. `Some("smoke_")` reads `-smoke_snes_rtol`); the
+    /// program's main solver uses no prefix so that plain `-snes_*`/`-ksp_*`/`-pc_*` options apply.
+    pub fn new(_s: &SessionGuard, prefix: Option<&str>) -> Result<Self> {
+        let mut raw = std::ptr::null_mut();
+        // SAFETY: out-parameter; the wrapper destroys it on drop.
+        check(
+            unsafe { sys::SNESCreate(comm_world(), &mut raw) },
+            "SNESCreate",
+        )?;
+        let snes = Self {
+            raw,
+            residual: None,
+            configured: false,
+        };
+        if let Some(p) = prefix {
+            let c = cstring(p)?;
+            check(
+                unsafe { sys::SNESSetOptionsPrefix(snes.raw, c.as_ptr()) },
+                "SNESSetOptionsPrefix",
+            )?;
+        }
+        // Keep the residual history of every solve (PETSc allocates it).
+        check(
+            unsafe {
+                sys::SNESSetConvergenceHistory(
+                    snes.raw,
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                    sys::mpmc_petsc_decide(),
+                    sys::PetscBool_PETSC_TRUE,
+                )
+            },
+            "SNESSetConvergenceHistory",
+        )?;
+        Ok(snes)
+    }
+
+    /// Reads the options database (command line, config defaults). Called by the first
+    /// [`Snes::solve`] if not called before; call it explicitly before [`Snes::set_fieldsplit`].
+    pub fn set_from_options(&mut self) -> Result<()> {
+        // SAFETY: valid SNES.
+        check(
+            unsafe { sys::SNESSetFromOptions(self.raw) },
+            "SNESSetFromOptions",
+        )?;
+        self.configured = true;
+        Ok(())
+    }
+
+    /// Names the fields for `-pc_type fieldsplit` (ignored by other preconditioners).
+    pub fn set_fieldsplit(&mut self, fields: &[(&str, &IndexSet)]) -> Result<()> {
+        let pc = self.pc()?;
+        for (name, is) in fields {
+            let c = cstring(name)?;
+            // SAFETY: valid PC and IS; PETSc takes a reference to the IS.
+            check(
+                unsafe { sys::PCFieldSplitSetIS(pc, c.as_ptr(), is.raw) },
+                "PCFieldSplitSetIS",
+            )?;
+        }
+        Ok(())
+    }
+
+    fn ksp(&self) -> Result<sys::KSP> {
+        let mut ksp = std::ptr::null_mut();
+        // SAFETY: out-parameter, borrowed reference.
+        check(unsafe { sys::SNESGetKSP(self.raw, &mut ksp) }, "SNESGetKSP")?;
+        Ok(ksp)
+    }
+
+    fn pc(&self) -> Result<sys::PC> {
+        let mut pc = std::ptr::null_mut();
+        // SAFETY: out-parameter, borrowed reference.
+        check(unsafe { sys::KSPGetPC(self.ksp()?, &mut pc) }, "KSPGetPC")?;
+        Ok(pc)
+    }
+
+    /// The solver combination in use, e.g. `"newtonls / preonly / lu"`.
+    pub fn describe(&self) -> Result<String> {
+        let mut snes_t: *const c_char = std::ptr::null();
+        let mut ksp_t: *const c_char = std::ptr::null();
+        let mut pc_t: *const c_char = std::ptr::null();
+        // SAFETY: PETSc returns pointers to its own type-name strings (or null if unset).
+        unsafe {
+            check(sys::SNESGetType(self.raw, &mut snes_t), "SNESGetType")?;
+            check(sys::KSPGetType(self.ksp()?, &mut ksp_t), "KSPGetType")?;
+            check(sys::PCGetType(self.pc()?, &mut pc_t), "PCGetType")?;
+        }
+        let name = |p: *const c_char| {
+            if p.is_null() {
+                "default".to_owned()
+            } else {
+                // SAFETY: non-null NUL-terminated string owned by PETSc.
+                unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+            }
+        };
+        Ok(format!(
+            "{} / {} / {}",
+            name(snes_t),
+            name(ksp_t),
+            name(pc_t)
+        ))
+    }
+
+    /// Solves `problem` from the initial guess in `x` (overwritten by the solution), assembling the
+    /// Jacobian into `jac`. PETSc failures (bad options, errors raised in callbacks) are `Err`; a solve
+    /// that simply does not converge is `Ok` with [`SolveInfo::converged`] false.
+    pub fn solve(
+        &mut self,
+        problem: &mut dyn NonlinearProblem,
+        x: &mut Vector,
+        jac: &mut Matrix,
+    ) -> Result<SolveInfo> {
+        if self.residual.is_none() {
+            self.residual = Some(x.duplicate()?);
+        }
+        let r = self
+            .residual
+            .as_ref()
+            .map_or(std::ptr::null_mut(), |v| v.raw);
+        let mut ctx = Context {
+            problem,
+            fatal: None,
+            domain: Vec::new(),
+        };
+        let ctx_ptr = (&mut ctx as *mut Context).cast::<c_void>();
+        *LAST_ERROR.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        // SAFETY: ctx outlives SNESSolve, the only place PETSc calls the callbacks; they are re-set on
+        // every solve, so PETSc never calls a stale context.
+        let result = unsafe {
+            check(
+                sys::SNESSetFunction(self.raw, r, Some(residual_cb), ctx_ptr),
+                "SNESSetFunction",
+            )
+            .and_then(|()| {
+                check(
+                    sys::SNESSetJacobian(self.raw, jac.raw, jac.raw, Some(jacobian_cb), ctx_ptr),
+                    "SNESSetJacobian",
+                )
+            })
+            .and_then(|()| {
+                if self.configured {
+                    Ok(())
+                } else {
+                    self.set_from_options()
+                }
+            })
+            .and_then(|()| {
+                check(
+                    sys::SNESSolve(self.raw, std::ptr::null_mut(), x.raw),
+                    "SNESSolve",
+                )
+            })
+        };
+        if let Err(mut e) = result {
+            if let Some(msg) = ctx.fatal.take() {
+                e.message = msg;
+            }
+            return Err(e);
+        }
+        self.info(ctx.domain)
+    }
+
+    fn info(&self, domain_errors: Vec<String>) -> Result<SolveInfo> {
+        let (mut its, mut lits, mut reason) = (0, 0, 0);
+        let mut name: *const c_char = std::ptr::null();
+        let mut hist: *mut f64 = std::ptr::null_mut();
+        let mut hist_its: *mut sys::PetscInt = std::ptr::null_mut();
+        let mut nhist = 0;
+        // SAFETY: out-parameters; the history arrays belong to the SNES and are copied immediately.
+        unsafe {
+            check(
+                sys::SNESGetIterationNumber(self.raw, &mut its),
+                "SNESGetIterationNumber",
+            )?;
+            check(
+                sys::SNESGetLinearSolveIterations(self.raw, &mut lits),
+                "SNESGetLinearSolveIterations",
+            )?;
+            check(
+                sys::SNESGetConvergedReason(self.raw, &mut reason),
+                "SNESGetConvergedReason",
+            )?;
+            check(
+                sys::SNESGetConvergedReasonString(self.raw, &mut name),
+                "SNESGetConvergedReasonString",
+            )?;
+            check(
+                sys::SNESGetConvergenceHistory(self.raw, &mut hist, &mut hist_its, &mut nhist),
+                "SNESGetConvergenceHistory",
+            )?;
+        }
+        let residual_norms = if hist.is_null() || nhist <= 0 {
+            Vec::new()
+        } else {
+            // SAFETY: PETSc reports nhist valid entries.
+            unsafe { std::slice::from_raw_parts(hist, nhist as usize) }.to_vec()
+        };
+        let reason_name = if name.is_null() {
+            reason.to_string()
+        } else {
+            // SAFETY: static string owned by PETSc.
+            unsafe { CStr::from_ptr(name) }
+                .to_string_lossy()
+                .into_owned()
+        };
+        Ok(SolveInfo {
+            iterations: its as usize,
+            linear_iterations: lits as usize,
+            reason,
+            reason_name,
+            residual_norms,
+            domain_errors,
+        })
+    }
+}
+
+impl Drop for Snes {
+    fn drop(&mut self) {
+        // SAFETY: we own the SNES.
+        unsafe { sys::SNESDestroy(&mut self.raw) };
+    }
+}
+
+fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".to_owned())
+}
+
+/// Runs a callback body, turning Rust errors and panics into PETSc's conventions.
+///
+/// # Safety
+/// `ctx` must point to the live `Context` of the current solve.
+unsafe fn guarded(
+    snes: sys::SNES,
+    ctx: *mut c_void,
+    domain_error: unsafe extern "C" fn(sys::SNES) -> sys::PetscErrorCode,
+    body: impl FnOnce(&mut dyn NonlinearProblem) -> std::result::Result<(), CallbackError>,
+) -> sys::PetscErrorCode {
+    // SAFETY: guaranteed by the caller.
+    let ctx = unsafe { &mut *ctx.cast::<Context>() };
+    match catch_unwind(AssertUnwindSafe(|| body(ctx.problem))) {
+        Ok(Ok(())) => 0,
+        Ok(Err(CallbackError::Domain(msg))) => {
+            ctx.domain.push(msg);
+            // SAFETY: valid SNES handed to the callback.
+            unsafe { domain_error(snes) }
+        }
+        Ok(Err(CallbackError::Fatal(msg))) => {
+            ctx.fatal = Some(msg);
+            ERR_USER
+        }
+        Err(p) => {
+            ctx.fatal = Some(format!(
+                "panic in a SNES callback: {}",
+                panic_message(p.as_ref())
+            ));
+            ERR_USER
+        }
+    }
+}
+
+unsafe extern "C" fn residual_cb(
+    snes: sys::SNES,
+    x: sys::PetscVec,
+    f: sys::PetscVec,
+    ctx: *mut c_void,
+) -> sys::PetscErrorCode {
+    // SAFETY: PETSc hands valid vectors for the duration of the call; ctx is ours.
+    unsafe {
+        let x = Vector::borrowed(x);
+        let mut f = Vector::borrowed(f);
+        guarded(snes, ctx, sys::SNESSetFunctionDomainError, |p| {
+            p.residual(&x, &mut f)
+        })
+    }
+}
+
+unsafe extern "C" fn jacobian_cb(
+    snes: sys::SNES,
+    x: sys::PetscVec,
+    a: sys::Mat,
+    p: sys::Mat,
+    ctx: *mut c_void,
+) -> sys::PetscErrorCode {
+    // SAFETY: as in residual_cb.
+    unsafe {
+        let x = Vector::borrowed(x);
+        let mut pmat = Matrix::borrowed(p);
+        let code = guarded(snes, ctx, sys::SNESSetJacobianDomainError, |prob| {
+            prob.jacobian(&x, &mut pmat)
+        });
+        if code == 0 && a != p {
+            // A matrix-free operator (-snes_mf_operator) only needs to be told the state changed.
+            let mut amat = Matrix::borrowed(a);
+            if let Err(e) = amat.assemble() {
+                return e.code;
+            }
+        }
+        code
+    }
+}
+
+impl From<CallbackError> for super::PetscError {
+    fn from(e: CallbackError) -> Self {
+        let message = match e {
+            CallbackError::Domain(m) | CallbackError::Fatal(m) => m,
+        };
+        super::PetscError {
+            code: ERR_USER,
+            call: "callback",
+            message,
+        }
+    }
+}

@@ -1,0 +1,284 @@
+//! PETSc `Vec` (called `PetscVec` in the bindings): distributed vectors with a block size.
+
+use super::{PetscError, PetscInt, Result, SessionGuard, check, comm_world, sys, to_petsc_int};
+
+/// A PETSc vector. Owned vectors are destroyed on drop; borrowed ones (handed to SNES callbacks) are not.
+pub struct Vector {
+    pub(crate) raw: sys::PetscVec,
+    owned: bool,
+}
+
+impl Vector {
+    /// A vector on PETSc's world communicator with `local` entries on this process (a multiple of
+    /// `block_size`), e.g. 3 unknowns (u_x, u_y, eta_bar) per grid node.
+    pub fn new(_s: &SessionGuard, local: usize, block_size: usize) -> Result<Self> {
+        let mut raw: sys::PetscVec = std::ptr::null_mut();
+        let n = to_petsc_int(local, "VecSetSizes")?;
+        // SAFETY: raw is an out-parameter; on failure it is destroyed by Drop (null is tolerated).
+        check(
+            unsafe { sys::VecCreate(comm_world(), &mut raw) },
+            "VecCreate",
+        )?;
+        let v = Self { raw, owned: true };
+        check(
+            unsafe { sys::VecSetSizes(v.raw, n, sys::mpmc_petsc_decide()) },
+            "VecSetSizes",
+        )?;
+        check(
+            unsafe { sys::VecSetBlockSize(v.raw, to_petsc_int(block_size, "VecSetBlockSize")?) },
+            "VecSetBlockSize",
+        )?;
+        check(
+            unsafe { sys::VecSetFromOptions(v.raw) },
+            "VecSetFromOptions",
+        )?;
+        Ok(v)
+    }
+
+    /// Wraps a vector PETSc owns (e.g. inside a callback) without taking ownership.
+    ///
+    /// # Safety
+    /// `raw` must be a valid vector for the lifetime of the returned value.
+    pub(crate) unsafe fn borrowed(raw: sys::PetscVec) -> Self {
+        Self { raw, owned: false }
+    }
+
+    /// A new vector with the same layout (values not copied).
+    pub fn duplicate(&self) -> Result<Self> {
+        let mut raw = std::ptr::null_mut();
+        // SAFETY: self.raw is valid.
+        check(
+            unsafe { sys::VecDuplicate(self.raw, &mut raw) },
+            "VecDuplicate",
+        )?;
+        Ok(Self { raw, owned: true })
+    }
+
+    /// Copies the values of `other` (same layout) into `self`.
+    pub fn copy_from(&mut self, other: &Vector) -> Result<()> {
+        // SAFETY: both valid.
+        check(unsafe { sys::VecCopy(other.raw, self.raw) }, "VecCopy")
+    }
+
+    /// Sets every entry to `alpha`.
+    pub fn set_all(&mut self, alpha: f64) -> Result<()> {
+        // SAFETY: valid vector.
+        check(unsafe { sys::VecSet(self.raw, alpha) }, "VecSet")
+    }
+
+    /// Global size.
+    pub fn global_size(&self) -> Result<usize> {
+        let mut n = 0;
+        // SAFETY: out-parameter.
+        check(unsafe { sys::VecGetSize(self.raw, &mut n) }, "VecGetSize")?;
+        Ok(n as usize)
+    }
+
+    /// Range `[start, end)` of global indices owned by this process.
+    pub fn ownership_range(&self) -> Result<std::ops::Range<usize>> {
+        let (mut lo, mut hi) = (0, 0);
+        // SAFETY: out-parameters.
+        check(
+            unsafe { sys::VecGetOwnershipRange(self.raw, &mut lo, &mut hi) },
+            "VecGetOwnershipRange",
+        )?;
+        Ok(lo as usize..hi as usize)
+    }
+
+    /// Euclidean norm.
+    pub fn norm2(&self) -> Result<f64> {
+        let mut r = 0.0;
+        // SAFETY: out-parameter.
+        check(
+            unsafe { sys::VecNorm(self.raw, sys::NormType_NORM_2, &mut r) },
+            "VecNorm",
+        )?;
+        Ok(r)
+    }
+
+    /// Max norm.
+    pub fn norm_inf(&self) -> Result<f64> {
+        let mut r = 0.0;
+        // SAFETY: out-parameter.
+        check(
+            unsafe { sys::VecNorm(self.raw, sys::NormType_NORM_INFINITY, &mut r) },
+            "VecNorm",
+        )?;
+        Ok(r)
+    }
+
+    /// `self += alpha * x`.
+    pub fn axpy(&mut self, alpha: f64, x: &Vector) -> Result<()> {
+        // SAFETY: both valid, same layout (checked by PETSc).
+        check(unsafe { sys::VecAXPY(self.raw, alpha, x.raw) }, "VecAXPY")
+    }
+
+    /// Global dot product `self . other`.
+    pub fn dot(&self, other: &Vector) -> Result<f64> {
+        let mut r = 0.0;
+        // SAFETY: both valid; out-parameter.
+        check(
+            unsafe { sys::VecDot(self.raw, other.raw, &mut r) },
+            "VecDot",
+        )?;
+        Ok(r)
+    }
+
+    /// `self *= alpha`.
+    pub fn scale(&mut self, alpha: f64) -> Result<()> {
+        // SAFETY: valid vector.
+        check(unsafe { sys::VecScale(self.raw, alpha) }, "VecScale")
+    }
+
+    /// Read access to the locally owned entries.
+    pub fn read<R>(&self, f: impl FnOnce(&[f64]) -> R) -> Result<R> {
+        let n = self.local_size()?;
+        let mut ptr: *const f64 = std::ptr::null();
+        // SAFETY: PETSc returns a pointer to n contiguous values, valid until restored.
+        check(
+            unsafe { sys::VecGetArrayRead(self.raw, &mut ptr) },
+            "VecGetArrayRead",
+        )?;
+        let slice = if n == 0 {
+            &[][..]
+        } else {
+            unsafe { std::slice::from_raw_parts(ptr, n) }
+        };
+        let r = f(slice);
+        check(
+            unsafe { sys::VecRestoreArrayRead(self.raw, &mut ptr) },
+            "VecRestoreArrayRead",
+        )?;
+        Ok(r)
+    }
+
+    /// Write access to the locally owned entries.
+    pub fn write<R>(&mut self, f: impl FnOnce(&mut [f64]) -> R) -> Result<R> {
+        let n = self.local_size()?;
+        let mut ptr: *mut f64 = std::ptr::null_mut();
+        // SAFETY: as in `read`, with exclusive access guaranteed by &mut self.
+        check(
+            unsafe { sys::VecGetArray(self.raw, &mut ptr) },
+            "VecGetArray",
+        )?;
+        let slice = if n == 0 {
+            &mut [][..]
+        } else {
+            unsafe { std::slice::from_raw_parts_mut(ptr, n) }
+        };
+        let r = f(slice);
+        check(
+            unsafe { sys::VecRestoreArray(self.raw, &mut ptr) },
+            "VecRestoreArray",
+        )?;
+        Ok(r)
+    }
+
+    /// Number of locally owned entries.
+    pub fn local_size(&self) -> Result<usize> {
+        let mut n = 0;
+        // SAFETY: out-parameter.
+        check(
+            unsafe { sys::VecGetLocalSize(self.raw, &mut n) },
+            "VecGetLocalSize",
+        )?;
+        Ok(n as usize)
+    }
+
+    /// Adds `values` at global `indices` (entries owned by other processes are communicated at
+    /// [`Vector::assemble`]); negative indices are skipped (e.g. constrained unknowns).
+    pub fn add_values(&mut self, indices: &[PetscInt], values: &[f64]) -> Result<()> {
+        if indices.len() != values.len() {
+            return Err(PetscError {
+                code: 60,
+                call: "VecSetValues",
+                message: format!("{} indices but {} values", indices.len(), values.len()),
+            });
+        }
+        // Debian's PETSc is built without debugging checks: an index past the end would corrupt memory,
+        // and negative indices are only skipped with VEC_IGNORE_NEGATIVE_INDICES. Check the range and
+        // pass the runs of non-negative indices.
+        let size = self.global_size()?;
+        if let Some(bad) = indices.iter().find(|&&i| i >= 0 && i as usize >= size) {
+            return Err(PetscError {
+                code: 63,
+                call: "VecSetValues",
+                message: format!("index {bad} out of range for a vector of size {size}"),
+            });
+        }
+        let mut start = 0;
+        while start < indices.len() {
+            if indices[start] < 0 {
+                start += 1;
+                continue;
+            }
+            let len = indices[start..].iter().take_while(|&&i| i >= 0).count();
+            let n = to_petsc_int(len, "VecSetValues")?;
+            // SAFETY: the run has len in-range indices and as many values.
+            check(
+                unsafe {
+                    sys::VecSetValues(
+                        self.raw,
+                        n,
+                        indices[start..].as_ptr(),
+                        values[start..].as_ptr(),
+                        sys::InsertMode_ADD_VALUES,
+                    )
+                },
+                "VecSetValues",
+            )?;
+            start += len;
+        }
+        Ok(())
+    }
+
+    /// Completes [`Vector::add_values`].
+    pub fn assemble(&mut self) -> Result<()> {
+        // SAFETY: valid vector.
+        check(
+            unsafe { sys::VecAssemblyBegin(self.raw) },
+            "VecAssemblyBegin",
+        )?;
+        check(unsafe { sys::VecAssemblyEnd(self.raw) }, "VecAssemblyEnd")
+    }
+
+    /// All entries of the (possibly distributed) vector on every process, in global order.
+    pub fn gather_all(&self) -> Result<Vec<f64>> {
+        let mut scatter: sys::VecScatter = std::ptr::null_mut();
+        let mut all: sys::PetscVec = std::ptr::null_mut();
+        // SAFETY: creates a sequential vector of the global size and a scatter into it.
+        check(
+            unsafe { sys::VecScatterCreateToAll(self.raw, &mut scatter, &mut all) },
+            "VecScatterCreateToAll",
+        )?;
+        let all = Vector {
+            raw: all,
+            owned: true,
+        };
+        let forward = sys::ScatterMode_SCATTER_FORWARD;
+        let insert = sys::InsertMode_INSERT_VALUES;
+        let res = (|| {
+            check(
+                unsafe { sys::VecScatterBegin(scatter, self.raw, all.raw, insert, forward) },
+                "VecScatterBegin",
+            )?;
+            check(
+                unsafe { sys::VecScatterEnd(scatter, self.raw, all.raw, insert, forward) },
+                "VecScatterEnd",
+            )?;
+            all.read(|s| s.to_vec())
+        })();
+        // SAFETY: destroys the scatter created above.
+        unsafe { sys::VecScatterDestroy(&mut scatter) };
+        res
+    }
+}
+
+impl Drop for Vector {
+    fn drop(&mut self) {
+        if self.owned && !self.raw.is_null() {
+            // SAFETY: we own the reference; errors on destruction cannot be reported from Drop.
+            unsafe { sys::VecDestroy(&mut self.raw) };
+        }
+    }
+}
