@@ -1,1 +1,704 @@
-//! (in progress)
+//! Material points as a structure of arrays, and their seeding from a geometry
+//! (spec `01-model.md`, Sec. 1, 2 and 5; `03-ct-test.md` for the CT plate).
+//!
+//! # Units and plane strain
+//! Lengths mm, time s, mass t, force N, stress MPa. The model is 2D plane strain: the deformation gradient is
+//! stored as its in-plane block `F` (a `Matrix2`) with `F_33 = 1` and `F_13 = F_23 = F_31 = F_32 = 0`. Volumes
+//! are per unit thickness: a volume `V_p` of `0.25` means 0.25 mm^2 of section times 1 mm of thickness =
+//! 0.25 mm^3, so masses (t), nodal forces (N) and reactions are per 1 mm of thickness.
+//!
+//! # Seeding
+//! [`Particles::seed`] fills the cells `[i h, (i + 1) h] x [j h, (j + 1) h]` of the lattice of multiples of
+//! `h` (the lattice [`crate::grid::Grid::covering`] snaps to) with `n x n` points at
+//! `((i + (a + 1/2)/n) h, (j + (b + 1/2)/n) h)`, `a, b = 0..n`, each with volume `V_p^0 = h^2 / n^2`, mass
+//! `m_p = rho V_p^0` and the initial CPDI domain = its square sub-cell: `r1^0 = (h/(2n), 0)`,
+//! `r2^0 = (0, h/(2n))`.
+//!
+//! A point is kept if it lies in the union of the `include` regions and in none of the `exclude` regions.
+//! Boundaries: include regions are closed and exclude regions are open, i.e. a point exactly on a boundary
+//! (within [`BOUNDARY_TOL`]) counts as material: the body is the closure of the union of the includes minus
+//! the interiors of the excludes. With region edges on grid lines (the CT plate and notch) no seeded point lies
+//! on a boundary, so the rule only matters for unusual geometry.
+
+use nalgebra::{Matrix2, Matrix3, Vector2};
+use serde::Deserialize;
+use thiserror::Error;
+
+/// Distance (mm) within which a point counts as lying on a region boundary.
+pub const BOUNDARY_TOL: f64 = 1e-9;
+
+/// A region of the plane (mm).
+///
+/// In TOML: `{ type = "rect", min = [0.0, 0.0], max = [200.0, 200.0] }` or
+/// `{ type = "polygon", vertices = [[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]] }`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Region {
+    /// Axis-aligned rectangle `[min_x, max_x] x [min_y, max_y]` (mm).
+    Rect {
+        /// Lower-left corner (mm).
+        min: [f64; 2],
+        /// Upper-right corner (mm).
+        max: [f64; 2],
+    },
+    /// Simple polygon, vertices in either orientation, not repeated at the end (mm). Inside by the even-odd
+    /// rule.
+    Polygon {
+        /// At least three vertices (mm).
+        vertices: Vec<[f64; 2]>,
+    },
+}
+
+/// The body to seed: the union of `include` minus the union of `exclude`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Geometry {
+    /// Regions that hold material (at least one).
+    pub include: Vec<Region>,
+    /// Regions cut out of the material (e.g. a notch); optional.
+    #[serde(default)]
+    pub exclude: Vec<Region>,
+}
+
+/// Parameters of [`Particles::seed`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Seeding {
+    /// Background-grid cell size `h` (mm).
+    pub h: f64,
+    /// Points per cell and direction `n` (`n x n` points per cell), >= 1.
+    pub points_per_cell: usize,
+    /// Mass density `rho` (t/mm^3), e.g. 2.4e-9 for concrete.
+    pub density: f64,
+    /// Body tag of the seeded points (e.g. 0 concrete, 1 loading plate).
+    pub body: u16,
+}
+
+/// Errors of seeding and of particle-set operations.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ParticleError {
+    /// The geometry has no include region.
+    #[error("empty geometry: at least one include region is needed")]
+    EmptyGeometry,
+    /// The geometry and seeding produced no material point.
+    #[error("the geometry contains no material point (all candidate points excluded or outside)")]
+    NoPoints,
+    /// A region is malformed.
+    #[error("{list} region {index}: {reason}")]
+    InvalidRegion {
+        /// `"include"` or `"exclude"`.
+        list: &'static str,
+        /// Index in that list.
+        index: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A seeding parameter is out of range.
+    #[error("invalid seeding: {reason}")]
+    InvalidSeeding {
+        /// What is wrong.
+        reason: String,
+    },
+    /// Particle sets with different history strides cannot be joined.
+    #[error(
+        "cannot append particles with history stride {other} to a set with history stride {this}"
+    )]
+    HistoryStrideMismatch {
+        /// Stride of the receiving set.
+        this: usize,
+        /// Stride of the appended set.
+        other: usize,
+    },
+}
+
+impl Region {
+    fn validate(&self) -> Result<(), String> {
+        let finite = |p: &[f64; 2]| p[0].is_finite() && p[1].is_finite();
+        match self {
+            Region::Rect { min, max } => {
+                if !(finite(min) && finite(max)) {
+                    return Err("rect corners must be finite".into());
+                }
+                if !(min[0] < max[0] && min[1] < max[1]) {
+                    return Err(format!(
+                        "rect needs min < max, got min = {min:?}, max = {max:?}"
+                    ));
+                }
+            }
+            Region::Polygon { vertices } => {
+                if vertices.len() < 3 {
+                    return Err(format!(
+                        "polygon needs at least 3 vertices, got {}",
+                        vertices.len()
+                    ));
+                }
+                if !vertices.iter().all(finite) {
+                    return Err("polygon vertices must be finite".into());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Bounding box `(min, max)` (mm).
+    pub fn bounding_box(&self) -> (Vector2<f64>, Vector2<f64>) {
+        match self {
+            Region::Rect { min, max } => (Vector2::from(*min), Vector2::from(*max)),
+            Region::Polygon { vertices } => vertices.iter().fold(
+                (
+                    Vector2::repeat(f64::INFINITY),
+                    Vector2::repeat(f64::NEG_INFINITY),
+                ),
+                |(lo, hi), v| {
+                    let v = Vector2::from(*v);
+                    (lo.inf(&v), hi.sup(&v))
+                },
+            ),
+        }
+    }
+
+    /// Whether `x` lies on the boundary, within [`BOUNDARY_TOL`].
+    pub fn on_boundary(&self, x: Vector2<f64>) -> bool {
+        match self {
+            Region::Rect { min, max } => {
+                let inside_tol =
+                    (0..2).all(|k| x[k] >= min[k] - BOUNDARY_TOL && x[k] <= max[k] + BOUNDARY_TOL);
+                let near_edge = (0..2).any(|k| {
+                    (x[k] - min[k]).abs() <= BOUNDARY_TOL || (x[k] - max[k]).abs() <= BOUNDARY_TOL
+                });
+                inside_tol && near_edge
+            }
+            Region::Polygon { vertices } => polygon_edges(vertices).any(|(a, b)| {
+                let ab = b - a;
+                let t = ((x - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+                let d = if t.is_finite() {
+                    (a + ab * t - x).norm()
+                } else {
+                    (a - x).norm()
+                };
+                d <= BOUNDARY_TOL
+            }),
+        }
+    }
+
+    /// Whether `x` lies in the open interior (boundary excluded).
+    pub fn in_interior(&self, x: Vector2<f64>) -> bool {
+        if self.on_boundary(x) {
+            return false;
+        }
+        match self {
+            Region::Rect { min, max } => (0..2).all(|k| x[k] > min[k] && x[k] < max[k]),
+            Region::Polygon { vertices } => {
+                // Even-odd crossing test along +x.
+                polygon_edges(vertices)
+                    .filter(|(a, b)| {
+                        (a.y > x.y) != (b.y > x.y)
+                            && x.x < a.x + (x.y - a.y) * (b.x - a.x) / (b.y - a.y)
+                    })
+                    .count()
+                    % 2
+                    == 1
+            }
+        }
+    }
+
+    /// Whether `x` lies in the closed region (boundary included).
+    pub fn in_closure(&self, x: Vector2<f64>) -> bool {
+        self.on_boundary(x) || self.in_interior(x)
+    }
+}
+
+fn polygon_edges(vertices: &[[f64; 2]]) -> impl Iterator<Item = (Vector2<f64>, Vector2<f64>)> + '_ {
+    let n = vertices.len();
+    (0..n).map(move |k| {
+        (
+            Vector2::from(vertices[k]),
+            Vector2::from(vertices[(k + 1) % n]),
+        )
+    })
+}
+
+impl Geometry {
+    /// Checks every region; an empty `include` list is an error.
+    pub fn validate(&self) -> Result<(), ParticleError> {
+        if self.include.is_empty() {
+            return Err(ParticleError::EmptyGeometry);
+        }
+        for (list, regions) in [("include", &self.include), ("exclude", &self.exclude)] {
+            for (index, r) in regions.iter().enumerate() {
+                r.validate()
+                    .map_err(|reason| ParticleError::InvalidRegion {
+                        list,
+                        index,
+                        reason,
+                    })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether `x` is material: in the closure of some include region and in the interior of no exclude
+    /// region.
+    pub fn contains(&self, x: Vector2<f64>) -> bool {
+        self.include.iter().any(|r| r.in_closure(x))
+            && !self.exclude.iter().any(|r| r.in_interior(x))
+    }
+
+    /// Bounding box of the include regions (mm); `None` without include regions.
+    pub fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        self.include
+            .iter()
+            .map(Region::bounding_box)
+            .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
+    }
+}
+
+/// Material points, structure of arrays: entry `p` of every column belongs to point `p`.
+///
+/// Invariant: every per-point column has [`Particles::len`] entries and `history` has
+/// `len() * history_stride()` entries. Columns are public so that solver stages can borrow them
+/// disjointly; change their lengths only through [`Particles::seed`], [`Particles::append`] and
+/// [`Particles::resize_history`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Particles {
+    /// Position `x_p` (mm).
+    pub x: Vec<Vector2<f64>>,
+    /// Initial volume `V_p^0` per unit thickness (mm^3 for 1 mm of thickness).
+    pub vol0: Vec<f64>,
+    /// Current volume `v_p = det(F_p) V_p^0` (mm^3 per mm of thickness).
+    pub vol: Vec<f64>,
+    /// Mass `m_p` (t per mm of thickness).
+    pub mass: Vec<f64>,
+    /// Velocity `v_p` (mm/s).
+    pub v: Vec<Vector2<f64>>,
+    /// Acceleration `a_p` (mm/s^2).
+    pub a: Vec<Vector2<f64>>,
+    /// In-plane deformation gradient `F_p` (`F_33 = 1`) [-].
+    pub f: Vec<Matrix2<f64>>,
+    /// CPDI1 half-edge vector `r1 = F_p r1^0` (mm).
+    pub r1: Vec<Vector2<f64>>,
+    /// CPDI1 half-edge vector `r2 = F_p r2^0` (mm).
+    pub r2: Vec<Vector2<f64>>,
+    /// Initial half-edge vector `r1^0` (mm).
+    pub r1_0: Vec<Vector2<f64>>,
+    /// Initial half-edge vector `r2^0` (mm).
+    pub r2_0: Vec<Vector2<f64>>,
+    /// CPDI2 corners `x_1..x_4`, counter-clockwise from `x_p - r1 - r2` (mm). Tracked by the grid motion for
+    /// CPDI2; for the other interpolators G2P keeps them at `x_p -+ r1 -+ r2` (for output).
+    pub corners: Vec<[Vector2<f64>; 4]>,
+    /// Body tag (e.g. concrete vs. rigid loading plate).
+    pub body: Vec<u16>,
+    /// Material history, `history_stride` values per point, point `p` at `p * stride..(p + 1) * stride`.
+    pub history: Vec<f64>,
+    /// Nonlocal equivalent strain `eta_bar_p = sum_I S_Ip eta_bar_I` (output) [-].
+    pub eta_bar: Vec<f64>,
+    /// Scalar damage (output) [-].
+    pub damage: Vec<f64>,
+    /// Cauchy stress `sigma_p` (MPa), 3x3 with `sigma_13 = sigma_23 = 0` (plane strain, `sigma_33` for output).
+    pub stress: Vec<Matrix3<f64>>,
+    history_stride: usize,
+}
+
+impl Particles {
+    /// An empty set (history stride 0).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Number of material points.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// Whether there is no material point.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Number of history values per point.
+    pub fn history_stride(&self) -> usize {
+        self.history_stride
+    }
+
+    /// History of point `p`.
+    pub fn history(&self, p: usize) -> &[f64] {
+        &self.history[p * self.history_stride..(p + 1) * self.history_stride]
+    }
+
+    /// Mutable history of point `p`.
+    pub fn history_mut(&mut self, p: usize) -> &mut [f64] {
+        &mut self.history[p * self.history_stride..(p + 1) * self.history_stride]
+    }
+
+    /// Sets the history stride and fills the whole column with `fill` (the material's initial state).
+    pub fn resize_history(&mut self, stride: usize, fill: f64) {
+        self.history_stride = stride;
+        self.history.clear();
+        self.history.resize(self.len() * stride, fill);
+    }
+
+    /// Adds one point at rest (`v = a = 0`, `F = I`, zero history and outputs) at `x` (mm) with volume `V_p^0`
+    /// (mm^3 per mm), mass `m_p` (t per mm) and a parallelogram domain of half-edges `r1^0`, `r2^0` (mm).
+    pub fn push(
+        &mut self,
+        x: Vector2<f64>,
+        vol0: f64,
+        mass: f64,
+        r1: Vector2<f64>,
+        r2: Vector2<f64>,
+        body: u16,
+    ) {
+        self.x.push(x);
+        self.vol0.push(vol0);
+        self.vol.push(vol0);
+        self.mass.push(mass);
+        self.v.push(Vector2::zeros());
+        self.a.push(Vector2::zeros());
+        self.f.push(Matrix2::identity());
+        self.r1.push(r1);
+        self.r2.push(r2);
+        self.r1_0.push(r1);
+        self.r2_0.push(r2);
+        self.corners.push(parallelogram_corners(x, r1, r2));
+        self.body.push(body);
+        self.history
+            .extend(std::iter::repeat_n(0.0, self.history_stride));
+        self.eta_bar.push(0.0);
+        self.damage.push(0.0);
+        self.stress.push(Matrix3::zeros());
+    }
+
+    /// Seeds `n x n` points per cell over the material of `geometry` (see the module docs for positions,
+    /// volumes, domains and the boundary rule). The points are ordered cell by cell (cells row by row,
+    /// points within a cell row by row), which keeps the P2G scatter local. History stride 0; set it with
+    /// [`Particles::resize_history`].
+    pub fn seed(geometry: &Geometry, seeding: &Seeding) -> Result<Self, ParticleError> {
+        geometry.validate()?;
+        let Seeding {
+            h,
+            points_per_cell: n,
+            density,
+            body,
+        } = *seeding;
+        let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
+        if !(h.is_finite() && h > 0.0) {
+            return bad(format!("cell size h = {h} mm must be positive"));
+        }
+        if n == 0 {
+            return bad("points_per_cell must be at least 1".into());
+        }
+        if !(density.is_finite() && density > 0.0) {
+            return bad(format!("density = {density} t/mm^3 must be positive"));
+        }
+        let (lo, hi) = geometry
+            .bounding_box()
+            .ok_or(ParticleError::EmptyGeometry)?;
+        let (i0, j0) = ((lo.x / h).floor(), (lo.y / h).floor());
+        let (ni, nj) = ((hi.x / h).ceil() - i0, (hi.y / h).ceil() - j0);
+        let candidates = ni * nj * (n * n) as f64;
+        if candidates.is_nan() || candidates > u32::MAX as f64 {
+            return bad(format!(
+                "{candidates} candidate points: cell size too small for the geometry"
+            ));
+        }
+        let (ni, nj) = (ni as usize, nj as usize);
+        let nf = n as f64;
+        let vol0 = h * h / (nf * nf);
+        let half = Vector2::new(h / (2.0 * nf), h / (2.0 * nf));
+        let (r1, r2) = (Vector2::new(half.x, 0.0), Vector2::new(0.0, half.y));
+        let mut particles = Particles::new();
+        for j in 0..nj {
+            for i in 0..ni {
+                for b in 0..n {
+                    for a in 0..n {
+                        let x = Vector2::new(
+                            (i0 + i as f64 + (a as f64 + 0.5) / nf) * h,
+                            (j0 + j as f64 + (b as f64 + 0.5) / nf) * h,
+                        );
+                        if geometry.contains(x) {
+                            particles.push(x, vol0, density * vol0, r1, r2, body);
+                        }
+                    }
+                }
+            }
+        }
+        if particles.is_empty() {
+            return Err(ParticleError::NoPoints);
+        }
+        Ok(particles)
+    }
+
+    /// Appends all points of `other` (e.g. a rigid loading plate seeded with another body tag). Both sets
+    /// must have the same history stride.
+    pub fn append(&mut self, other: &Particles) -> Result<(), ParticleError> {
+        if !other.is_empty() && !self.is_empty() && other.history_stride != self.history_stride {
+            return Err(ParticleError::HistoryStrideMismatch {
+                this: self.history_stride,
+                other: other.history_stride,
+            });
+        }
+        if self.is_empty() {
+            self.history_stride = other.history_stride;
+        }
+        self.x.extend_from_slice(&other.x);
+        self.vol0.extend_from_slice(&other.vol0);
+        self.vol.extend_from_slice(&other.vol);
+        self.mass.extend_from_slice(&other.mass);
+        self.v.extend_from_slice(&other.v);
+        self.a.extend_from_slice(&other.a);
+        self.f.extend_from_slice(&other.f);
+        self.r1.extend_from_slice(&other.r1);
+        self.r2.extend_from_slice(&other.r2);
+        self.r1_0.extend_from_slice(&other.r1_0);
+        self.r2_0.extend_from_slice(&other.r2_0);
+        self.corners.extend_from_slice(&other.corners);
+        self.body.extend_from_slice(&other.body);
+        self.history.extend_from_slice(&other.history);
+        self.eta_bar.extend_from_slice(&other.eta_bar);
+        self.damage.extend_from_slice(&other.damage);
+        self.stress.extend_from_slice(&other.stress);
+        Ok(())
+    }
+
+    /// Bounding box `(min, max)` (mm) of all positions and CPDI corners; `None` for an empty set. Feed it to
+    /// [`crate::grid::Grid::covering`].
+    pub fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        self.x
+            .iter()
+            .chain(self.corners.iter().flatten())
+            .map(|&x| (x, x))
+            .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
+    }
+}
+
+/// Corners `x_p - r1 - r2, x_p + r1 - r2, x_p + r1 + r2, x_p - r1 + r2` of a parallelogram domain (mm).
+pub fn parallelogram_corners(
+    x: Vector2<f64>,
+    r1: Vector2<f64>,
+    r2: Vector2<f64>,
+) -> [Vector2<f64>; 4] {
+    [x - r1 - r2, x + r1 - r2, x + r1 + r2, x - r1 + r2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The CT default plate: 200 x 200 mm minus a 110 x 10 mm notch from the left edge at mid-height.
+    fn ct_geometry() -> Geometry {
+        toml::from_str(
+            r#"
+            include = [{ type = "rect", min = [0.0, 0.0], max = [200.0, 200.0] }]
+            exclude = [{ type = "rect", min = [0.0, 95.0], max = [110.0, 105.0] }]
+            "#,
+        )
+        .unwrap()
+    }
+
+    fn seeding(h: f64, n: usize) -> Seeding {
+        Seeding {
+            h,
+            points_per_cell: n,
+            density: 2.4e-9,
+            body: 0,
+        }
+    }
+
+    #[test]
+    fn particles_seed_ct_plate_count_volume_and_mass() {
+        let p = Particles::seed(&ct_geometry(), &seeding(1.0, 2)).unwrap();
+        assert_eq!(p.len(), 4 * (40_000 - 1_100));
+        assert_eq!(p.len(), 155_600);
+        let vol: f64 = p.vol0.iter().sum();
+        assert!((vol - (40_000.0 - 1_100.0)).abs() < 1e-8);
+        let mass: f64 = p.mass.iter().sum();
+        assert!((mass / (2.4e-9 * 38_900.0) - 1.0).abs() < 1e-10);
+        assert!(
+            p.x.iter()
+                .all(|x| !(x.x < 110.0 && x.y > 95.0 && x.y < 105.0))
+        );
+        assert_eq!(p.x[0], Vector2::new(0.25, 0.25));
+        assert_eq!(p.x[3], Vector2::new(0.75, 0.75));
+        assert_eq!(p.r1[0], Vector2::new(0.25, 0.0));
+        assert_eq!(p.r2[0], Vector2::new(0.0, 0.25));
+        assert_eq!(
+            p.corners[0],
+            [
+                Vector2::new(0.0, 0.0),
+                Vector2::new(0.5, 0.0),
+                Vector2::new(0.5, 0.5),
+                Vector2::new(0.0, 0.5)
+            ]
+        );
+        assert!(p.f.iter().all(|f| *f == Matrix2::identity()));
+        let (lo, hi) = p.bounding_box().unwrap();
+        assert_eq!(
+            (lo, hi),
+            (Vector2::new(0.0, 0.0), Vector2::new(200.0, 200.0))
+        );
+    }
+
+    #[test]
+    fn particles_seed_polygon_and_boundary_rule() {
+        // Right triangle with legs 4 mm: 1 point per cell at cell centres.
+        let tri = Geometry {
+            include: vec![Region::Polygon {
+                vertices: vec![[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]],
+            }],
+            exclude: vec![],
+        };
+        let p = Particles::seed(&tri, &seeding(1.0, 1)).unwrap();
+        // Centres (i + 0.5, j + 0.5) with i + j + 1 <= 4: strictly inside for i + j <= 2 (6 points), on the
+        // hypotenuse for i + j = 3 (4 points, kept because include regions are closed).
+        assert_eq!(p.len(), 10);
+        // A thin exclude strip whose boundary passes through point centres removes nothing on its boundary.
+        let strip = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [4.0, 4.0],
+            }],
+            exclude: vec![Region::Rect {
+                min: [0.5, 0.0],
+                max: [1.5, 4.0],
+            }],
+        };
+        let p = Particles::seed(&strip, &seeding(1.0, 1)).unwrap();
+        assert_eq!(p.len(), 16);
+        let strip = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [4.0, 4.0],
+            }],
+            exclude: vec![Region::Rect {
+                min: [0.4, 0.0],
+                max: [1.6, 4.0],
+            }],
+        };
+        assert_eq!(Particles::seed(&strip, &seeding(1.0, 1)).unwrap().len(), 8);
+    }
+
+    #[test]
+    fn particles_seed_errors() {
+        let empty = Geometry {
+            include: vec![],
+            exclude: vec![],
+        };
+        assert_eq!(
+            Particles::seed(&empty, &seeding(1.0, 2)),
+            Err(ParticleError::EmptyGeometry)
+        );
+        let all_cut = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [2.0, 2.0],
+            }],
+            exclude: vec![Region::Rect {
+                min: [-1.0, -1.0],
+                max: [3.0, 3.0],
+            }],
+        };
+        assert_eq!(
+            Particles::seed(&all_cut, &seeding(1.0, 2)),
+            Err(ParticleError::NoPoints)
+        );
+        let bad_rect = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [0.0, 2.0],
+            }],
+            exclude: vec![],
+        };
+        assert!(matches!(
+            Particles::seed(&bad_rect, &seeding(1.0, 2)),
+            Err(ParticleError::InvalidRegion {
+                list: "include",
+                index: 0,
+                ..
+            })
+        ));
+        let bad_poly = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [1.0, 1.0],
+            }],
+            exclude: vec![Region::Polygon {
+                vertices: vec![[0.0, 0.0], [1.0, 1.0]],
+            }],
+        };
+        assert!(matches!(
+            Particles::seed(&bad_poly, &seeding(1.0, 2)),
+            Err(ParticleError::InvalidRegion {
+                list: "exclude",
+                index: 0,
+                ..
+            })
+        ));
+        let g = ct_geometry();
+        assert!(matches!(
+            Particles::seed(&g, &seeding(0.0, 2)),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+        assert!(matches!(
+            Particles::seed(&g, &seeding(1.0, 0)),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+        assert!(matches!(
+            Particles::seed(&g, &seeding(1e-9, 2)),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+    }
+
+    #[test]
+    fn particles_geometry_rejects_unknown_fields() {
+        let unknown_region: Result<Geometry, _> = toml::from_str(
+            r#"include = [{ type = "rect", min = [0.0, 0.0], max = [1.0, 1.0], maxx = 3 }]"#,
+        );
+        assert!(unknown_region.is_err());
+        let unknown_top: Result<Geometry, _> = toml::from_str(
+            r#"include = [{ type = "rect", min = [0.0, 0.0], max = [1.0, 1.0] }]
+            excluded = []"#,
+        );
+        assert!(unknown_top.is_err());
+        let unknown_kind: Result<Geometry, _> =
+            toml::from_str(r#"include = [{ type = "circle", r = 1.0 }]"#);
+        assert!(unknown_kind.is_err());
+    }
+
+    #[test]
+    fn particles_append_and_history() {
+        let g = ct_geometry();
+        let mut concrete = Particles::seed(&g, &seeding(2.0, 1)).unwrap();
+        let plate_geom = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 90.0],
+                max: [30.0, 95.0],
+            }],
+            exclude: vec![],
+        };
+        let plate = Particles::seed(
+            &plate_geom,
+            &Seeding {
+                body: 1,
+                density: 7.85e-9,
+                ..seeding(1.0, 2)
+            },
+        )
+        .unwrap();
+        assert_eq!(plate.len(), 30 * 5 * 4);
+        concrete.resize_history(3, 1.25e-3);
+        assert_eq!(
+            concrete.append(&plate),
+            Err(ParticleError::HistoryStrideMismatch { this: 3, other: 0 })
+        );
+        concrete.resize_history(0, 0.0);
+        let n0 = concrete.len();
+        concrete.append(&plate).unwrap();
+        assert_eq!(concrete.len(), n0 + 600);
+        assert_eq!(concrete.body.iter().filter(|&&b| b == 1).count(), 600);
+        concrete.resize_history(2, 7.0);
+        assert_eq!(concrete.history.len(), 2 * concrete.len());
+        concrete.history_mut(5)[1] = 3.0;
+        assert_eq!(concrete.history(5), &[7.0, 3.0]);
+        assert_eq!(concrete.vol.len(), concrete.len());
+        assert_eq!(concrete.stress.len(), concrete.len());
+    }
+}

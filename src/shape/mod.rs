@@ -1,1 +1,355 @@
-//! (in progress)
+//! Shape functions `S_Ip` and gradients `grad_{X_n} S_Ip` of the material points (spec `01-model.md`, Sec. 2),
+//! evaluated once per step in the converged configuration at `t_n` and stored in a [`ShapeTable`].
+//!
+//! Five interpolators share the [`Interpolator`] interface, all built on the bilinear hat functions `N_I` of
+//! the [`Grid`] (see `docs/shape-functions.md` for formulas, choices and a figure):
+//!
+//! | [`ShapeKind`]  | config       | support (max nodes) | domain used |
+//! |----------------|--------------|---------------------|-------------|
+//! | `Linear`       | `"linear"`   | 4  | point `x_p` |
+//! | `Gimp`         | `"gimp"`     | 9  | undeformed square `2 r1^0 x 2 r2^0` (`l_p = h / n`) around `x_p` |
+//! | `Cpdi1`        | `"cpdi1"`    | 16 | parallelogram `x_p -+ r1 -+ r2`, `r_i = F_p r_i^0` |
+//! | `Cpdi2`        | `"cpdi2"`    | 16 | quadrilateral with tracked corners |
+//! | `Bspline2`     | `"bspline2"` | 9  | point `x_p`, quadratic B-spline |
+//!
+//! Every interpolator satisfies `sum_I S_Ip = 1`, `sum_I grad S_Ip = 0`, `sum_I S_Ip x_I = x_p` and
+//! `sum_I x_I (x) grad S_Ip = I` (for CPDI2 `x_p` is the centroid of the quadrilateral); the tests check
+//! this on random, edge, node, stretched, sheared and near-margin configurations.
+//!
+//! The table has a fixed stride per point (the maximum support of the interpolator) and a per-point count;
+//! nodes appear once per point (the CPDI corners' contributions are merged) and entries whose value and
+//! gradient are exactly zero are dropped (e.g. a CPDI corner or GIMP support edge exactly on a grid line).
+//! Linear keeps all four nodes of the owning cell, since on a cell edge a node with `S = 0` still has a
+//! non-zero gradient.
+
+mod bspline;
+mod cpdi;
+mod gimp;
+mod linear;
+
+use nalgebra::Vector2;
+use rayon::prelude::*;
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::grid::{Grid, GridError, Locus};
+use crate::particles::Particles;
+
+pub use bspline::Bspline2;
+pub use cpdi::{Cpdi1, Cpdi2};
+pub use gimp::Gimp;
+pub use linear::Linear;
+
+/// The interpolator, chosen in the config by its lowercase name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapeKind {
+    /// Standard MPM: `S_Ip = N_I(x_p)`.
+    Linear,
+    /// uGIMP: `N_I` averaged over the undeformed particle square of side `l_p = h / n`.
+    Gimp,
+    /// CPDI1 (Sadeghirad, Brannon, Burghardt 2011): parallelogram domain `r_i = F_p r_i^0`.
+    Cpdi1,
+    /// CPDI2 / CPDI-Q4 (Sadeghirad, Brannon, Guilkey 2013): quadrilateral with tracked corners.
+    Cpdi2,
+    /// Quadratic B-spline on the grid nodes.
+    Bspline2,
+}
+
+impl ShapeKind {
+    /// All kinds, in config order.
+    pub const ALL: [ShapeKind; 5] = [
+        ShapeKind::Linear,
+        ShapeKind::Gimp,
+        ShapeKind::Cpdi1,
+        ShapeKind::Cpdi2,
+        ShapeKind::Bspline2,
+    ];
+
+    /// The config name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ShapeKind::Linear => "linear",
+            ShapeKind::Gimp => "gimp",
+            ShapeKind::Cpdi1 => "cpdi1",
+            ShapeKind::Cpdi2 => "cpdi2",
+            ShapeKind::Bspline2 => "bspline2",
+        }
+    }
+
+    /// Maximum number of support nodes of one point (the table stride).
+    pub fn max_support(self) -> usize {
+        match self {
+            ShapeKind::Linear => Linear::MAX_SUPPORT,
+            ShapeKind::Gimp => Gimp::MAX_SUPPORT,
+            ShapeKind::Cpdi1 => Cpdi1::MAX_SUPPORT,
+            ShapeKind::Cpdi2 => Cpdi2::MAX_SUPPORT,
+            ShapeKind::Bspline2 => Bspline2::MAX_SUPPORT,
+        }
+    }
+}
+
+/// One support node of a material point: `S_Ip` [-] and `grad_{X_n} S_Ip` [1/mm].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Weight {
+    /// Global grid node index `I`.
+    pub node: u32,
+    /// `S_Ip` [-].
+    pub value: f64,
+    /// `grad_{X_n} S_Ip` [1/mm], with respect to the start-of-step positions.
+    pub grad: Vector2<f64>,
+}
+
+/// Errors of the shape-function evaluation; all carry the material point index and are recoverable (report
+/// them to SNES as domain errors or shorten the step).
+#[derive(Debug, Clone, Copy, PartialEq, Error)]
+pub enum ShapeError {
+    /// A point, a CPDI corner or a GIMP/B-spline support left the grid.
+    #[error(transparent)]
+    Grid(#[from] GridError),
+    /// A CPDI domain with zero or negative area (inverted), so `grad S` is undefined.
+    #[error(
+        "material point {particle}: degenerate or inverted CPDI domain, signed area {area:e} mm^2"
+    )]
+    DegenerateDomain {
+        /// Material point index.
+        particle: usize,
+        /// Signed area of the domain (mm^2).
+        area: f64,
+    },
+    /// A uGIMP half-width outside `(0, h/2]`, for which the support is no longer 3 x 3 nodes.
+    #[error(
+        "material point {particle}: uGIMP half-width {half_width} mm must lie in (0, h/2 = {half_h}] mm"
+    )]
+    GimpWidth {
+        /// Material point index.
+        particle: usize,
+        /// Offending half-width `|r_i^0|` (mm).
+        half_width: f64,
+        /// `h / 2` (mm).
+        half_h: f64,
+    },
+}
+
+impl ShapeError {
+    /// The material point the error is about (for deterministic reporting: the smallest index wins).
+    pub fn particle(&self) -> usize {
+        match *self {
+            ShapeError::Grid(GridError::OutsideGrid { particle, .. })
+            | ShapeError::DegenerateDomain { particle, .. }
+            | ShapeError::GimpWidth { particle, .. } => particle,
+            ShapeError::Grid(_) => 0,
+        }
+    }
+}
+
+/// The error for point `particle` whose `locus` at `x` left the grid.
+pub(crate) fn outside(particle: usize, locus: Locus, x: Vector2<f64>) -> ShapeError {
+    ShapeError::Grid(GridError::OutsideGrid {
+        particle,
+        locus,
+        x: x.x,
+        y: x.y,
+    })
+}
+
+/// An interpolator: writes the compact weight list of one material point.
+pub trait Interpolator: Sync {
+    /// Maximum number of support nodes of one point.
+    const MAX_SUPPORT: usize;
+
+    /// Writes the weights of point `p` into `out[..n]` (`out.len() == MAX_SUPPORT`), each node at most once,
+    /// and returns `n`.
+    fn weights(
+        &self,
+        grid: &Grid,
+        particles: &Particles,
+        p: usize,
+        out: &mut [Weight],
+    ) -> Result<usize, ShapeError>;
+}
+
+/// Adds `(value, grad)` to the entry of `node` in `out[..*count]`, appending it if absent.
+#[inline]
+pub(crate) fn add_merged(
+    out: &mut [Weight],
+    count: &mut usize,
+    node: u32,
+    value: f64,
+    grad: Vector2<f64>,
+) {
+    if let Some(w) = out[..*count].iter_mut().find(|w| w.node == node) {
+        w.value += value;
+        w.grad += grad;
+    } else {
+        out[*count] = Weight { node, value, grad };
+        *count += 1;
+    }
+}
+
+/// Weights of a tensor-product kernel `S_Ip = phi_x(s_x - i) phi_y(s_y - j)` on the 3 x 3 nodes around the node
+/// nearest to `x_p` (`s = (x_p - x_0) / h` in cell units, `kernel(d, k) = (phi_k(d), phi_k'(d))` for direction
+/// `k`, support `|d| < 3/2`). Nodes whose value and gradient are exactly zero are dropped; a contributing node
+/// outside the grid is an error.
+pub(crate) fn tensor_product_weights(
+    grid: &Grid,
+    p: usize,
+    x: Vector2<f64>,
+    kernel: impl Fn(f64, usize) -> (f64, f64),
+    out: &mut [Weight],
+) -> Result<usize, ShapeError> {
+    if grid.cell_of(x).is_none() {
+        return Err(outside(p, Locus::Centre, x));
+    }
+    let s = grid.lattice_coords(x);
+    let inv_h = 1.0 / grid.cell_size();
+    let nearest = s.map(|c| c.round() as i64);
+    let mut phi = [[(0.0, 0.0); 3]; 2];
+    for (k, phi_k) in phi.iter_mut().enumerate() {
+        for (a, slot) in phi_k.iter_mut().enumerate() {
+            *slot = kernel(s[k] - (nearest[k] + a as i64 - 1) as f64, k);
+        }
+    }
+    let limit = [grid.nx() as i64, grid.ny() as i64];
+    let mut count = 0;
+    for (b, &(py, dpy)) in phi[1].iter().enumerate() {
+        if py == 0.0 && dpy == 0.0 {
+            continue;
+        }
+        let j = nearest[1] + b as i64 - 1;
+        for (a, &(px, dpx)) in phi[0].iter().enumerate() {
+            if px == 0.0 && dpx == 0.0 {
+                continue;
+            }
+            let i = nearest[0] + a as i64 - 1;
+            if i < 0 || j < 0 || i > limit[0] || j > limit[1] {
+                return Err(outside(p, Locus::Centre, x));
+            }
+            out[count] = Weight {
+                node: grid.node_index(i as usize, j as usize) as u32,
+                value: px * py,
+                grad: Vector2::new(dpx * py, px * dpy) * inv_h,
+            };
+            count += 1;
+        }
+    }
+    Ok(count)
+}
+
+/// Points per parallel work item of [`ShapeTable::compute`].
+const CHUNK: usize = 512;
+
+/// The shape functions of all material points for one step: a fixed stride of
+/// [`ShapeKind::max_support`] entries per point and a per-point count. Reuse one table across steps: after
+/// the first step [`ShapeTable::compute`] does not allocate.
+#[derive(Debug, Clone, Default)]
+pub struct ShapeTable {
+    kind: Option<ShapeKind>,
+    stride: usize,
+    weights: Vec<Weight>,
+    counts: Vec<u8>,
+}
+
+impl ShapeTable {
+    /// An empty table.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Number of material points in the table (0 after a failed [`ShapeTable::compute`]).
+    pub fn len(&self) -> usize {
+        self.counts.len()
+    }
+
+    /// Whether the table holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.counts.is_empty()
+    }
+
+    /// The interpolator of the last successful [`ShapeTable::compute`].
+    pub fn kind(&self) -> Option<ShapeKind> {
+        self.kind
+    }
+
+    /// Entries reserved per point.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// The support of point `p`: each node once, with `S_Ip` and `grad_{X_n} S_Ip`.
+    #[inline]
+    pub fn weights(&self, p: usize) -> &[Weight] {
+        let start = p * self.stride;
+        &self.weights[start..start + self.counts[p] as usize]
+    }
+
+    /// Iterator over `(p, weights(p))` for all points.
+    pub fn iter(&self) -> impl Iterator<Item = (usize, &[Weight])> {
+        (0..self.len()).map(|p| (p, self.weights(p)))
+    }
+
+    /// Evaluates `S_Ip` and `grad_{X_n} S_Ip` of every point with interpolator `kind` on `grid`, in the
+    /// current (start-of-step) configuration of `particles`, in parallel. On error the table is left empty and
+    /// the error names the smallest offending point index.
+    pub fn compute(
+        &mut self,
+        kind: ShapeKind,
+        grid: &Grid,
+        particles: &Particles,
+    ) -> Result<(), ShapeError> {
+        let result = match kind {
+            ShapeKind::Linear => self.fill(&Linear, grid, particles),
+            ShapeKind::Gimp => self.fill(&Gimp, grid, particles),
+            ShapeKind::Cpdi1 => self.fill(&Cpdi1, grid, particles),
+            ShapeKind::Cpdi2 => self.fill(&Cpdi2, grid, particles),
+            ShapeKind::Bspline2 => self.fill(&Bspline2, grid, particles),
+        };
+        match result {
+            Ok(()) => self.kind = Some(kind),
+            Err(_) => {
+                self.kind = None;
+                self.counts.clear();
+            }
+        }
+        result
+    }
+
+    fn fill<I: Interpolator>(
+        &mut self,
+        interp: &I,
+        grid: &Grid,
+        particles: &Particles,
+    ) -> Result<(), ShapeError> {
+        let n = particles.len();
+        let stride = I::MAX_SUPPORT;
+        self.stride = stride;
+        // Within capacity after the first step: no allocation.
+        self.weights.resize(n * stride, Weight::default());
+        self.counts.resize(n, 0);
+        self.weights
+            .par_chunks_mut(stride * CHUNK)
+            .zip(self.counts.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(chunk, (weights, counts))| {
+                for (k, (out, count)) in weights
+                    .chunks_exact_mut(stride)
+                    .zip(counts.iter_mut())
+                    .enumerate()
+                {
+                    *count = interp.weights(grid, particles, chunk * CHUNK + k, out)? as u8;
+                }
+                Ok(())
+            })
+            .reduce(
+                || Ok(()),
+                |a: Result<(), ShapeError>, b| match (a, b) {
+                    (Err(a), Err(b)) => Err(if a.particle() <= b.particle() { a } else { b }),
+                    (Err(e), Ok(())) | (Ok(()), Err(e)) => Err(e),
+                    (Ok(()), Ok(())) => Ok(()),
+                },
+            )
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,116 @@
+//! Shape-function evaluation, P2G and G2P for the CT plate of `spec/03-ct-test.md`: 200 x 200 mm minus a
+//! 110 x 10 mm notch, h = 1 mm, 2 x 2 points per cell (155,600 points; the paper reports 155,530).
+//!
+//! Two configurations: as seeded (CPDI corners and GIMP supports on grid lines, so 4 support nodes) and after a
+//! homogeneous deformation `F = [[1.002, 0.001], [0.0005, 0.998]]` about the plate centre (corners off the
+//! grid lines: 9 support nodes, the typical state during a run).
+//!
+//! Run: `cargo bench --bench shape`.
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use nalgebra::{Matrix2, Vector2};
+use std::hint::black_box;
+
+use mpm_concrete::grid::Grid;
+use mpm_concrete::particles::{Geometry, Particles, Region, Seeding, parallelogram_corners};
+use mpm_concrete::shape::{ShapeKind, ShapeTable};
+use mpm_concrete::transfer::{
+    DEFAULT_RELATIVE_MASS_TOLERANCE, GridState, StepSolution, grid_to_particles, particles_to_grid,
+};
+
+/// The CT plate as seeded, and the grid covering it with 3 cells of margin.
+fn ct_plate() -> (Grid, Particles) {
+    let geometry = Geometry {
+        include: vec![Region::Rect {
+            min: [0.0, 0.0],
+            max: [200.0, 200.0],
+        }],
+        exclude: vec![Region::Rect {
+            min: [0.0, 95.0],
+            max: [110.0, 105.0],
+        }],
+    };
+    let seeding = Seeding {
+        h: 1.0,
+        points_per_cell: 2,
+        density: 2.4e-9,
+        body: 0,
+    };
+    let particles = Particles::seed(&geometry, &seeding).expect("CT geometry seeds");
+    let grid = Grid::covering(Vector2::zeros(), Vector2::new(200.0, 200.0), 1.0, 3).expect("grid");
+    (grid, particles)
+}
+
+/// Applies a homogeneous deformation `F` about `centre` to positions, F, CPDI domains and volumes.
+fn deform(particles: &mut Particles, f: Matrix2<f64>, centre: Vector2<f64>) {
+    for p in 0..particles.len() {
+        particles.x[p] = centre + f * (particles.x[p] - centre);
+        particles.f[p] = f;
+        particles.r1[p] = f * particles.r1_0[p];
+        particles.r2[p] = f * particles.r2_0[p];
+        particles.corners[p] =
+            parallelogram_corners(particles.x[p], particles.r1[p], particles.r2[p]);
+        particles.vol[p] = f.determinant() * particles.vol0[p];
+    }
+}
+
+fn bench_shape(c: &mut Criterion) {
+    let (grid, seeded) = ct_plate();
+    let mut deformed = seeded.clone();
+    deform(
+        &mut deformed,
+        Matrix2::new(1.002, 0.001, 0.0005, 0.998),
+        Vector2::new(100.0, 100.0),
+    );
+    let n = seeded.len();
+    let mut group = c.benchmark_group(format!("shape_{n}"));
+    let mut table = ShapeTable::new();
+    for kind in ShapeKind::ALL {
+        for (state, particles) in [("seeded", &seeded), ("deformed", &deformed)] {
+            group.bench_function(BenchmarkId::new(kind.name(), state), |b| {
+                b.iter(|| {
+                    table
+                        .compute(black_box(kind), &grid, black_box(particles))
+                        .expect("in grid")
+                })
+            });
+        }
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group(format!("transfer_{n}"));
+    let mut state = GridState::new();
+    for kind in [ShapeKind::Linear, ShapeKind::Cpdi1] {
+        table.compute(kind, &grid, &deformed).expect("in grid");
+        group.bench_function(BenchmarkId::new("p2g", kind.name()), |b| {
+            b.iter(|| {
+                particles_to_grid(
+                    &table,
+                    black_box(&deformed),
+                    &grid,
+                    DEFAULT_RELATIVE_MASS_TOLERANCE,
+                    &mut state,
+                )
+                .expect("sizes match")
+            })
+        });
+        let zero = vec![Vector2::zeros(); grid.num_nodes()];
+        let solution = StepSolution {
+            du: &zero,
+            acceleration: &zero,
+            gamma: 0.5,
+            dt: 1e-6,
+        };
+        let mut particles = deformed.clone();
+        group.bench_function(BenchmarkId::new("g2p", kind.name()), |b| {
+            b.iter(|| {
+                grid_to_particles(&table, &grid, black_box(&solution), &mut particles)
+                    .expect("sizes match")
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_shape);
+criterion_main!(benches);

@@ -1,0 +1,63 @@
+//! uGIMP (Bardenhagen & Kober 2004): the hat function averaged over the undeformed particle square,
+//! `S_Ip = (1/V_p) int_{Omega_p} N_I dx`. Per direction, with the half-width `l = |r_k^0| / h` in cell units
+//! (`l = 1/(2n)` for `n` points per cell, i.e. side `l_p = h / n`) and `d = (x_p - x_I) / h`:
+//!
+//! ```text
+//! phi(d) = 1 - (d^2 + l^2) / (2 l)          |d| < l
+//!        = 1 - |d|                          l <= |d| <= 1 - l
+//!        = (1 + l - |d|)^2 / (4 l)          1 - l < |d| < 1 + l
+//!        = 0                                otherwise
+//! S_Ip = phi_x(d_x) phi_y(d_y),   grad S_Ip = (phi_x'(d_x) phi_y(d_y), phi_x(d_x) phi_y'(d_y)) / h
+//! ```
+//!
+//! The domain is not updated with `F_p` ("undeformed" GIMP), and `l <= 1/2` keeps the support within 3 x 3
+//! nodes.
+
+use nalgebra::Vector2;
+
+use super::{Interpolator, ShapeError, Weight, tensor_product_weights};
+use crate::grid::Grid;
+use crate::particles::Particles;
+
+/// uGIMP interpolator with the particle square `2 |r1^0| x 2 |r2^0|`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Gimp;
+
+/// `(phi(d), phi'(d))` of the 1D uGIMP function with half-width `l`, in cell units.
+fn gimp_1d(d: f64, l: f64) -> (f64, f64) {
+    let a = d.abs();
+    if a < l {
+        (1.0 - (d * d + l * l) / (2.0 * l), -d / l)
+    } else if a <= 1.0 - l {
+        (1.0 - a, -d.signum())
+    } else if a < 1.0 + l {
+        let t = 1.0 + l - a;
+        (t * t / (4.0 * l), -d.signum() * t / (2.0 * l))
+    } else {
+        (0.0, 0.0)
+    }
+}
+
+impl Interpolator for Gimp {
+    const MAX_SUPPORT: usize = 9;
+
+    fn weights(
+        &self,
+        grid: &Grid,
+        particles: &Particles,
+        p: usize,
+        out: &mut [Weight],
+    ) -> Result<usize, ShapeError> {
+        let h = grid.cell_size();
+        let half = Vector2::new(particles.r1_0[p].norm(), particles.r2_0[p].norm());
+        if let Some(&half_width) = half.iter().find(|&&l| !(l > 0.0 && l <= 0.5 * h)) {
+            return Err(ShapeError::GimpWidth {
+                particle: p,
+                half_width,
+                half_h: 0.5 * h,
+            });
+        }
+        let l = half / h;
+        tensor_product_weights(grid, p, particles.x[p], |d, k| gimp_1d(d, l[k]), out)
+    }
+}
