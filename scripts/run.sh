@@ -5,4 +5,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 cargo build --release --quiet
-exec target/release/mpm-concrete smoke "$@"
+exec target/release/mpm-concrete run configs/ct-demo.toml "$@"

@@ -11,11 +11,17 @@
 //! `cli -> io -> scenario -> solver -> {assembly, transfer, material, shape} -> {grid, particles} -> tensor`,
 //! and only `assembly`/`solver` talk to [`petsc`], the one module with `unsafe` FFI.
 
+pub mod assembly;
+pub mod config;
+pub mod dofs;
 pub mod grid;
+pub mod io;
 pub mod material;
 pub mod particles;
 pub mod petsc;
 pub mod plot;
+pub mod scenario;
 pub mod shape;
 pub mod smoke;
+pub mod solver;
 pub mod transfer;

@@ -5,8 +5,13 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use mpm_concrete::petsc::{self, Session};
+use mpm_concrete::config::RunConfig;
+use mpm_concrete::io::RunOutput;
+use mpm_concrete::petsc::{self, Session, SessionGuard};
+use mpm_concrete::scenario;
 use mpm_concrete::smoke::{self, SmokeParams};
+use mpm_concrete::solver::Simulation;
+use std::path::PathBuf;
 
 #[derive(Parser)]
 #[command(
@@ -22,6 +27,23 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a simulation described by a TOML configuration (see configs/ and docs/configuration.md).
+    Run {
+        /// Configuration file.
+        config: PathBuf,
+        /// Override `run.steps`.
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Override the output directory.
+        #[arg(long)]
+        output: Option<PathBuf>,
+        /// No progress bar (log lines instead).
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Material-point driver: strain or mixed paths through one constitutive law (CSV + PNG); prints the
+    /// implied uniaxial strengths. No PETSc involved.
+    MaterialDriver(mpm_concrete::material::driver::DriverArgs),
     /// Solve a small nonlinear lattice problem (3 unknowns per node) with SNES: checks the PETSc set-up
     /// and the solver options given on the command line.
     Smoke {
@@ -58,6 +80,11 @@ fn split_args(args: Vec<String>) -> (Vec<String>, Vec<String>) {
 }
 
 fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .without_time()
+        .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
     let cli = Cli::parse_from(own);
     match run(cli, &petsc_args) {
@@ -70,8 +97,23 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
+    let command = match cli.command {
+        Command::MaterialDriver(args) => {
+            let summary = mpm_concrete::material::driver::run_driver(&args)?;
+            println!("{summary}");
+            return Ok(());
+        }
+        other => other,
+    };
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
-    match cli.command {
+    match command {
+        Command::Run {
+            config,
+            steps,
+            output,
+            quiet,
+        } => run_simulation(&session, &config, steps, output, quiet)?,
+        Command::MaterialDriver(_) => {} // handled above, without PETSc
         Command::Smoke {
             n,
             load,
@@ -120,6 +162,162 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
     }
     Session::finalize(session)?;
     Ok(())
+}
+
+/// Default solver of MPM runs: Newton with line search and a direct LU solve through MUMPS (robust for
+/// the non-symmetric coupled Jacobian); every option can be overridden from the config's
+/// `run.petsc_options` or, with the final word, from the command line.
+const DEFAULT_MPM_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 -ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
+
+fn run_simulation(
+    session: &SessionGuard,
+    path: &std::path::Path,
+    steps: Option<usize>,
+    output: Option<PathBuf>,
+    quiet: bool,
+) -> Result<()> {
+    let mut cfg = RunConfig::from_file(path)?;
+    if let Some(n) = steps {
+        anyhow::ensure!(n > 0, "--steps must be at least 1");
+        cfg.run.steps = n;
+    }
+    petsc::apply_default_options(session, &cfg.run.petsc_options)
+        .with_context(|| format!("{}: run.petsc_options", path.display()))?;
+    // Built-in defaults that a user's solver choice makes irrelevant (e.g. the MUMPS option under
+    // -pc_type hypre) must not be reported as unused.
+    let defaults: Vec<String> = petsc::apply_default_options(session, DEFAULT_MPM_OPTIONS)?
+        .into_iter()
+        .map(|(name, _)| format!("-{name}"))
+        .collect();
+    let setup =
+        scenario::build(&cfg).with_context(|| format!("{}: building the model", path.display()))?;
+    let mut sim = Simulation::new(setup)?;
+    let dir = output.unwrap_or_else(|| cfg.output_dir());
+    let text = std::fs::read_to_string(path)?;
+    let mut out = RunOutput::create(&dir, &cfg.run.name, &text, &sim)?;
+    let np = sim.setup.particles.len();
+    let grid = &sim.setup.grid;
+    eprintln!(
+        "{}: {np} material points, grid {}x{} cells of {} mm, {} steps of {:e} s, {} unknowns per node, output in {}",
+        cfg.run.name,
+        grid.nx(),
+        grid.ny(),
+        grid.cell_size(),
+        cfg.run.steps,
+        cfg.time.dt,
+        sim.fields(),
+        dir.display()
+    );
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(cfg.run.steps as u64)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let started = std::time::Instant::now();
+    let mut unused_checked = false;
+    out.snapshot(&sim)?;
+    while sim.step < cfg.run.steps {
+        let report = match sim.advance(session) {
+            Ok(r) => r,
+            Err(e) => {
+                bar.abandon();
+                out.snapshot(&sim)?;
+                out.force_plots()?;
+                return Err(anyhow::Error::new(e).context(format!(
+                    "run stopped; the last converged state (step {}) is saved in {}",
+                    sim.step,
+                    dir.display()
+                )));
+            }
+        };
+        if !unused_checked {
+            let mut unused = petsc::unused_options(session)?;
+            unused.retain(|o| !defaults.contains(o));
+            anyhow::ensure!(
+                unused.is_empty(),
+                "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options)",
+                unused.join(" ")
+            );
+            unused_checked = true;
+        }
+        let msg = format!(
+            "t = {:.2} us, Newton {}, KSP {}, {}",
+            report.time * 1e6,
+            report.solve.iterations,
+            report.solve.linear_iterations,
+            report.solve.reason_name
+        );
+        if quiet {
+            eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
+        }
+        bar.set_message(msg);
+        bar.inc(1);
+        out.record(report)?;
+        let every = cfg.run.output_every;
+        if (every > 0 && sim.step % every == 0) || sim.step == cfg.run.steps {
+            out.snapshot(&sim)?;
+            out.force_plots()?;
+        }
+    }
+    bar.finish();
+    summary(&out, started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// Final table: steps, iterations, times, memory, reactions.
+fn summary(out: &RunOutput, wall: f64) {
+    let rows = out.rows();
+    let newton: usize = rows.iter().map(|r| r.solve.iterations).sum();
+    let linear: usize = rows.iter().map(|r| r.solve.linear_iterations).sum();
+    let retries: usize = rows.iter().map(|r| r.attempts - 1).sum();
+    let assembly: f64 = rows.iter().map(|r| r.wall_assembly).sum();
+    let solve: f64 = rows.iter().map(|r| r.wall_solve - r.wall_assembly).sum();
+    let setup: f64 = rows.iter().map(|r| r.wall_setup).sum();
+    let peak = peak_rss_mb();
+    println!("\n| quantity | value |\n|---|---|");
+    println!(
+        "| steps | {} ({} retried with a smaller dt) |",
+        rows.len(),
+        retries
+    );
+    println!(
+        "| Newton iterations | {newton} ({:.2} per step) |",
+        newton as f64 / rows.len().max(1) as f64
+    );
+    println!("| linear iterations | {linear} |");
+    println!(
+        "| wall time | {wall:.1} s (set-up {setup:.1} s, assembly {assembly:.1} s, PETSc solve {solve:.1} s) |"
+    );
+    println!("| peak memory | {peak:.0} MB |");
+    if let Some(last) = rows.last() {
+        for (name, f) in &last.reactions {
+            println!(
+                "| final reaction `{name}` | ({:.4e}, {:.4e}) N/mm |",
+                f[0], f[1]
+            );
+        }
+    }
+    println!("| output | {} |", out.dir().display());
+}
+
+/// Peak resident set size of this process (MB), from /proc.
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+            })
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
 #[cfg(test)]

@@ -1,1 +1,548 @@
-//! (in progress)
+//! Constitutive models in the first-Piola form used by the implicit MPM assembly.
+//!
+//! Every material is evaluated in 3D from the deformation gradient `F` (a 2D plane-strain run passes
+//! `F13 = F23 = F31 = F32 = 0`, `F33 = 1`). Units: stress and energy density in MPa (= mJ/mm^3 per
+//! reference volume), strains dimensionless, the gradient parameter `c` in mm^2.
+//!
+//! Models (see `docs/material.md`):
+//! - [`LinearElastic`]: geometrically linear Hooke law, verification only.
+//! - [`StVenantKirchhoff`]: `S = lambda tr(E) I + 2 mu E`.
+//! - [`NeoHookean`]: compressible, `P = mu (F - F^-T) + lambda ln J F^-T`.
+//! - [`Microplane`]: the finite-strain, gradient-enhanced microplane damage model of the source paper
+//!   (Oropeza-Navarro et al., eqs. 9-16), see [`microplane`].
+//!
+//! The interface is incremental and pure: [`Constitutive::update`] reads the committed history `h_n`
+//! and writes the trial history `h_trial`, which the caller commits only after the step converged.
+
+pub mod driver;
+pub mod elastic;
+pub mod microplane;
+pub mod quadrature;
+
+use nalgebra::{Matrix3, SMatrix};
+use serde::{Deserialize, Serialize};
+
+pub use elastic::{ElasticConfig, ElasticModuli, LinearElastic, NeoHookean, StVenantKirchhoff};
+pub use microplane::{EtaMode, Microplane, MicroplaneConfig, MicroplaneParams, Preset};
+pub use quadrature::Quadrature;
+
+/// 9x9 matrix of a fourth-order two-point tangent, `A_iJkL` stored at `(3*i+J, 3*k+L)`.
+pub type Matrix9 = SMatrix<f64, 9, 9>;
+
+/// Output of one constitutive evaluation (units: MPa; energy in MPa = mJ/mm^3 per reference volume).
+#[derive(Clone, Copy, Debug)]
+pub struct Response {
+    /// First Piola-Kirchhoff stress `P = F S` (MPa).
+    pub p: Matrix3<f64>,
+    /// Consistent tangent `A_iJkL = dP_iJ/dF_kL` stored at `(3*i+J, 3*k+L)` (MPa), at fixed `eta_bar`.
+    pub a: Matrix9,
+    /// `dP/d eta_bar` at fixed `F` (MPa; zero for local/elastic materials).
+    pub dp_deta_bar: Matrix3<f64>,
+    /// Macroscopic local equivalent strain `eta`, the source of the Helmholtz equation (eq. 3; 0 for elastic).
+    pub eta: f64,
+    /// `d eta / dF` (`= F d eta/dE` for an `eta(E)`).
+    pub deta_df: Matrix3<f64>,
+    /// Scalar damage for output. Microplane: energy-weighted `1 - Psi/Psi_0` (see
+    /// [`Microplane`]); 0 for elastic materials.
+    pub damage: f64,
+    /// Stored (free) energy density `Psi` per reference volume (MPa).
+    pub energy: f64,
+}
+
+impl Response {
+    /// All fields zero.
+    pub fn zeros() -> Self {
+        Self {
+            p: Matrix3::zeros(),
+            a: Matrix9::zeros(),
+            dp_deta_bar: Matrix3::zeros(),
+            eta: 0.0,
+            deta_df: Matrix3::zeros(),
+            damage: 0.0,
+            energy: 0.0,
+        }
+    }
+
+    /// Tangent of `P` along a local path `eta_bar = eta(F)`:
+    /// `A + dP/d eta_bar (x) d eta/dF` (the Jacobian a local material-point driver needs).
+    pub fn local_tangent(&self) -> Matrix9 {
+        let mut a = self.a;
+        for ij in 0..9 {
+            let dp = self.dp_deta_bar[(ij / 3, ij % 3)];
+            if dp != 0.0 {
+                for kl in 0..9 {
+                    a[(ij, kl)] += dp * self.deta_df[(kl / 3, kl % 3)];
+                }
+            }
+        }
+        a
+    }
+}
+
+impl Default for Response {
+    fn default() -> Self {
+        Self::zeros()
+    }
+}
+
+/// Errors of the material layer: invalid configuration, inadmissible states, driver failures.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum MaterialError {
+    /// A parameter is outside its admissible range.
+    #[error("material parameter `{field}` = {value} is invalid: allowed is {allowed}")]
+    InvalidParameter {
+        field: &'static str,
+        value: f64,
+        allowed: &'static str,
+    },
+    /// A parameter is neither given nor provided by a preset.
+    #[error("material parameter `{field}` is missing: {hint}")]
+    MissingParameter {
+        field: &'static str,
+        hint: &'static str,
+    },
+    /// Parameters that exclude each other were given together.
+    #[error("conflicting material parameters: {0}")]
+    Conflict(&'static str),
+    /// `det F <= 0`: the configuration is inverted (report as a domain error to the solver).
+    #[error("non-positive Jacobian det F = {det}")]
+    NonPositiveJacobian { det: f64 },
+    /// `F` or `eta_bar` contains NaN or infinity.
+    #[error("non-finite input to the material update ({what})")]
+    NonFiniteInput { what: &'static str },
+    /// The history slices do not have [`Constitutive::history_len`] entries.
+    #[error("history slice has length {got}, the material needs {expected}")]
+    HistoryLength { expected: usize, got: usize },
+    /// The material-point driver's Newton iteration on the free components did not converge.
+    #[error("material-point driver: no convergence at step {step} (residual {residual:e} MPa)")]
+    DriverNotConverged { step: usize, residual: f64 },
+    /// Invalid driver arguments.
+    #[error("material-point driver: {0}")]
+    DriverArgument(String),
+    /// Reading a configuration file failed.
+    #[error("cannot read material config `{path}`: {message}")]
+    Config { path: String, message: String },
+    /// Writing output failed.
+    #[error("cannot write `{path}`: {message}")]
+    Io { path: String, message: String },
+    /// Plotting failed.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+}
+
+/// A constitutive law in first-Piola form (see [`Response`]).
+pub trait Constitutive: Send + Sync {
+    /// Number of f64 history slots per material point (microplane: one `gamma` per direction).
+    fn history_len(&self) -> usize;
+    /// Initial (virgin) history.
+    fn init_history(&self, h: &mut [f64]);
+    /// Pure in the committed history `h_n`; writes the trial history to `h_trial` (committed by the
+    /// caller only after the step converges).
+    fn update(
+        &self,
+        f: &Matrix3<f64>,
+        eta_bar: f64,
+        h_n: &[f64],
+        h_trial: &mut [f64],
+        out: &mut Response,
+    ) -> Result<(), MaterialError>;
+}
+
+/// The materials of the project (enum dispatch).
+#[derive(Clone, Debug)]
+pub enum Material {
+    LinearElastic(LinearElastic),
+    StVenantKirchhoff(StVenantKirchhoff),
+    NeoHookean(NeoHookean),
+    Microplane(Box<Microplane>),
+}
+
+impl Material {
+    /// True for the microplane model with a gradient parameter `c > 0` (then the Helmholtz field is solved).
+    pub fn is_nonlocal(&self) -> bool {
+        self.gradient_parameter() > 0.0
+    }
+
+    /// Gradient activity parameter `c` of eq. 3 (mm^2); 0 for local and elastic materials.
+    pub fn gradient_parameter(&self) -> f64 {
+        match self {
+            Material::Microplane(m) => m.params().c,
+            _ => 0.0,
+        }
+    }
+
+    /// Small-strain elastic moduli `(K, G)` in MPa (for wave speeds, time-step estimates, scaling).
+    pub fn elastic_moduli(&self) -> ElasticModuli {
+        match self {
+            Material::LinearElastic(m) => m.moduli,
+            Material::StVenantKirchhoff(m) => m.moduli,
+            Material::NeoHookean(m) => m.moduli,
+            Material::Microplane(m) => ElasticModuli {
+                bulk: m.params().bulk_modulus,
+                shear: m.params().shear_modulus,
+            },
+        }
+    }
+}
+
+impl Constitutive for Material {
+    fn history_len(&self) -> usize {
+        match self {
+            Material::LinearElastic(m) => m.history_len(),
+            Material::StVenantKirchhoff(m) => m.history_len(),
+            Material::NeoHookean(m) => m.history_len(),
+            Material::Microplane(m) => m.history_len(),
+        }
+    }
+
+    fn init_history(&self, h: &mut [f64]) {
+        match self {
+            Material::LinearElastic(m) => m.init_history(h),
+            Material::StVenantKirchhoff(m) => m.init_history(h),
+            Material::NeoHookean(m) => m.init_history(h),
+            Material::Microplane(m) => m.init_history(h),
+        }
+    }
+
+    fn update(
+        &self,
+        f: &Matrix3<f64>,
+        eta_bar: f64,
+        h_n: &[f64],
+        h_trial: &mut [f64],
+        out: &mut Response,
+    ) -> Result<(), MaterialError> {
+        match self {
+            Material::LinearElastic(m) => m.update(f, eta_bar, h_n, h_trial, out),
+            Material::StVenantKirchhoff(m) => m.update(f, eta_bar, h_n, h_trial, out),
+            Material::NeoHookean(m) => m.update(f, eta_bar, h_n, h_trial, out),
+            Material::Microplane(m) => m.update(f, eta_bar, h_n, h_trial, out),
+        }
+    }
+}
+
+/// Material section of a TOML config, tagged by `model`. Density is not part of it.
+///
+/// ```toml
+/// [material]
+/// model = "microplane"
+/// preset = "paper"        # Table 1; any field given explicitly overrides the preset
+/// gamma_0 = 1.25e-4
+/// ```
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "model")]
+pub enum MaterialConfig {
+    /// Small-strain Hooke law (verification).
+    #[serde(rename = "linear_elastic")]
+    LinearElastic(ElasticConfig),
+    /// St. Venant-Kirchhoff.
+    #[serde(rename = "svk")]
+    StVenantKirchhoff(ElasticConfig),
+    /// Compressible neo-Hooke.
+    #[serde(rename = "neo_hookean")]
+    NeoHookean(ElasticConfig),
+    /// Gradient-enhanced finite-strain microplane damage (spec Sec. 3).
+    #[serde(rename = "microplane")]
+    Microplane(MicroplaneConfig),
+}
+
+impl MaterialConfig {
+    /// Validates all parameters and builds the material (precomputing the microplane tensors).
+    pub fn build(&self) -> Result<Material, MaterialError> {
+        Ok(match self {
+            MaterialConfig::LinearElastic(c) => {
+                Material::LinearElastic(LinearElastic::new(c.moduli()?))
+            }
+            MaterialConfig::StVenantKirchhoff(c) => {
+                Material::StVenantKirchhoff(StVenantKirchhoff::new(c.moduli()?))
+            }
+            MaterialConfig::NeoHookean(c) => Material::NeoHookean(NeoHookean::new(c.moduli()?)),
+            MaterialConfig::Microplane(c) => {
+                Material::Microplane(Box::new(Microplane::new(c.resolve()?)?))
+            }
+        })
+    }
+}
+
+/// Symmetric second-order tensor in tensor components `[T11, T22, T33, T12, T23, T13]`.
+pub(crate) type Sym6 = [f64; 6];
+
+/// Index pairs `(I, J)` of the [`Sym6`] components.
+pub(crate) const PAIRS: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2)];
+
+/// Component index in [`Sym6`] of the pair `(I, J)`.
+pub(crate) const PAIR_INDEX: [[usize; 3]; 3] = [[0, 3, 5], [3, 1, 4], [5, 4, 2]];
+
+/// Green-Lagrange strain `E = (F^T F - I)/2` as [`Sym6`].
+pub(crate) fn green_lagrange(f: &Matrix3<f64>) -> Sym6 {
+    let mut e = [0.0; 6];
+    for (a, &(i, j)) in PAIRS.iter().enumerate() {
+        let mut cij = 0.0;
+        for k in 0..3 {
+            cij += f[(k, i)] * f[(k, j)];
+        }
+        e[a] = 0.5 * (cij - if i == j { 1.0 } else { 0.0 });
+    }
+    e
+}
+
+/// Full matrix of a [`Sym6`].
+pub(crate) fn sym_to_matrix(s: &Sym6) -> Matrix3<f64> {
+    Matrix3::new(s[0], s[3], s[5], s[3], s[1], s[4], s[5], s[4], s[2])
+}
+
+/// First Piola stress and two-point tangent from `S` and a material tangent `dS/dE`.
+///
+/// `d[a][b] = C_IJKL` with `(I, J) = PAIRS[a]`, `(K, L) = PAIRS[b]`, minor-symmetric in both pairs
+/// (need not be major-symmetric). Then `P = F S` and
+/// `A_iJkL = delta_ik S_JL + F_iI C_IJML F_kM`.
+pub(crate) fn first_piola_from_pk2(
+    f: &Matrix3<f64>,
+    s: &Sym6,
+    d: &[[f64; 6]; 6],
+    p: &mut Matrix3<f64>,
+    a: &mut Matrix9,
+) {
+    let sm = sym_to_matrix(s);
+    *p = f * sm;
+    // b[a][k][l] = sum_M C_{pair a, M l} F_kM
+    let mut b = [[[0.0; 3]; 3]; 6];
+    for (ab, row) in d.iter().enumerate() {
+        for k in 0..3 {
+            for l in 0..3 {
+                let mut acc = 0.0;
+                for m in 0..3 {
+                    acc += row[PAIR_INDEX[m][l]] * f[(k, m)];
+                }
+                b[ab][k][l] = acc;
+            }
+        }
+    }
+    for i in 0..3 {
+        for jj in 0..3 {
+            for k in 0..3 {
+                for l in 0..3 {
+                    let mut acc = if i == k { sm[(jj, l)] } else { 0.0 };
+                    for ii in 0..3 {
+                        acc += f[(i, ii)] * b[PAIR_INDEX[ii][jj]][k][l];
+                    }
+                    a[(3 * i + jj, 3 * k + l)] = acc;
+                }
+            }
+        }
+    }
+}
+
+/// Checks `F` and `eta_bar` for NaN/inf.
+pub(crate) fn check_finite(f: &Matrix3<f64>, eta_bar: f64) -> Result<(), MaterialError> {
+    if !f.iter().all(|x| x.is_finite()) {
+        return Err(MaterialError::NonFiniteInput {
+            what: "deformation gradient F",
+        });
+    }
+    if !eta_bar.is_finite() {
+        return Err(MaterialError::NonFiniteInput { what: "eta_bar" });
+    }
+    Ok(())
+}
+
+/// Finite-difference helpers shared by the material tests.
+#[cfg(test)]
+pub(crate) mod fdcheck {
+    use super::*;
+
+    /// Relative error `|a - b| / max(|a|, |b|)` in the Frobenius norm (0 when both vanish).
+    pub fn rel_err<const R: usize, const C: usize>(
+        a: &SMatrix<f64, R, C>,
+        b: &SMatrix<f64, R, C>,
+    ) -> f64 {
+        let den = a.norm().max(b.norm());
+        if den == 0.0 {
+            0.0
+        } else {
+            (a - b).norm() / den
+        }
+    }
+
+    /// Evaluates the material, panicking on error (test helper).
+    pub fn eval(
+        m: &dyn Constitutive,
+        f: &Matrix3<f64>,
+        eta_bar: f64,
+        h_n: &[f64],
+    ) -> (Response, Vec<f64>) {
+        let mut out = Response::zeros();
+        let mut h = vec![0.0; m.history_len()];
+        m.update(f, eta_bar, h_n, &mut h, &mut out)
+            .expect("material update");
+        (out, h)
+    }
+
+    /// Central finite differences of `P` w.r.t. `F`, of `P` w.r.t. `eta_bar` and of `eta` w.r.t. `F`.
+    /// Returns the relative errors `(A, dP/d eta_bar, d eta/dF)`.
+    pub fn tangent_errors(
+        m: &dyn Constitutive,
+        f: &Matrix3<f64>,
+        eta_bar: f64,
+        h_n: &[f64],
+    ) -> (f64, f64, f64) {
+        let (r, _) = eval(m, f, eta_bar, h_n);
+        let h = 1e-8;
+        let mut a_fd = Matrix9::zeros();
+        let mut deta_fd = Matrix3::zeros();
+        for k in 0..3 {
+            for l in 0..3 {
+                let mut fp = *f;
+                fp[(k, l)] += h;
+                let mut fm = *f;
+                fm[(k, l)] -= h;
+                let (rp, _) = eval(m, &fp, eta_bar, h_n);
+                let (rm, _) = eval(m, &fm, eta_bar, h_n);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        a_fd[(3 * i + j, 3 * k + l)] = (rp.p[(i, j)] - rm.p[(i, j)]) / (2.0 * h);
+                    }
+                }
+                deta_fd[(k, l)] = (rp.eta - rm.eta) / (2.0 * h);
+            }
+        }
+        let he = 1e-7 * eta_bar.abs().max(1e-4);
+        let (rp, _) = eval(m, f, eta_bar + he, h_n);
+        let (rm, _) = eval(m, f, eta_bar - he, h_n);
+        let dp_fd = (rp.p - rm.p) / (2.0 * he);
+        (
+            rel_err(&r.a, &a_fd),
+            rel_err(&r.dp_deta_bar, &dp_fd),
+            rel_err(&r.deta_df, &deta_fd),
+        )
+    }
+
+    /// A rotation matrix from a rotation vector (Rodrigues).
+    pub fn rotation(axis: [f64; 3]) -> Matrix3<f64> {
+        nalgebra::Rotation3::new(nalgebra::Vector3::from(axis)).into_inner()
+    }
+
+    /// A generic (non-symmetric) deformation gradient `I + scale * G` with a fixed pattern `G`.
+    pub fn generic_f(scale: f64) -> Matrix3<f64> {
+        let g = Matrix3::new(0.83, 0.31, -0.22, -0.17, -0.41, 0.27, 0.12, 0.35, 0.56);
+        Matrix3::identity() + g * scale
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_parses_tagged_sections_and_rejects_unknown_fields() {
+        let c: MaterialConfig =
+            toml::from_str("model = \"microplane\"\npreset = \"paper\"\ngamma_0 = 2e-4\n").unwrap();
+        let m = c.build().unwrap();
+        assert!(m.is_nonlocal());
+        assert_eq!(m.gradient_parameter(), 1.0);
+        let Material::Microplane(mp) = &m else {
+            panic!("not a microplane")
+        };
+        assert_eq!(mp.params().gamma_0, 2e-4);
+        assert_eq!(mp.params().k_r, 14.0);
+
+        let c: MaterialConfig =
+            toml::from_str("model = \"svk\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0\n")
+                .unwrap();
+        assert!(!c.build().unwrap().is_nonlocal());
+        assert!(
+            toml::from_str::<MaterialConfig>("model = \"svk\"\nyoungs_modulus = 1.0\nfoo = 1\n")
+                .is_err()
+        );
+        assert!(
+            toml::from_str::<MaterialConfig>(
+                "model = \"microplane\"\npreset = \"paper\"\nkr = 3\n"
+            )
+            .is_err()
+        );
+        assert!(toml::from_str::<MaterialConfig>("model = \"plastic\"\n").is_err());
+    }
+
+    #[test]
+    fn invalid_parameters_name_field_and_value() {
+        let c: MaterialConfig =
+            toml::from_str("model = \"microplane\"\npreset = \"paper\"\nk_r = 0.5\n").unwrap();
+        let err = c.build().unwrap_err();
+        assert!(
+            matches!(err, MaterialError::InvalidParameter { field: "k_r", value, .. } if value == 0.5)
+        );
+        let msg = err.to_string();
+        assert!(
+            msg.contains("k_r") && msg.contains("0.5") && msg.contains("> 1"),
+            "{msg}"
+        );
+
+        for (toml_src, field) in [
+            ("alpha = 1.5", "alpha"),
+            ("beta = -1.0", "beta"),
+            ("gamma_0 = 0.0", "gamma_0"),
+            ("c = -1.0", "c"),
+            ("poisson_ratio = 0.5", "poisson_ratio"),
+            ("bulk_modulus = -3.0", "bulk_modulus"),
+            ("shear_modulus = 0.0", "shear_modulus"),
+        ] {
+            let c: MaterialConfig = toml::from_str(&format!(
+                "model = \"microplane\"\npreset = \"paper\"\n{toml_src}\n"
+            ))
+            .unwrap();
+            let err = c.build().unwrap_err();
+            assert!(
+                matches!(err, MaterialError::InvalidParameter { field: f, .. } if f == field),
+                "{toml_src}: {err}"
+            );
+        }
+        let c: MaterialConfig = toml::from_str("model = \"microplane\"\nk_r = 10.0\n").unwrap();
+        assert!(matches!(
+            c.build().unwrap_err(),
+            MaterialError::MissingParameter { .. }
+        ));
+        let c: MaterialConfig =
+            toml::from_str("model = \"neo_hookean\"\nyoungs_modulus = -1.0\npoisson_ratio = 0.3\n")
+                .unwrap();
+        assert!(matches!(
+            c.build().unwrap_err(),
+            MaterialError::InvalidParameter {
+                field: "youngs_modulus",
+                ..
+            }
+        ));
+        let c: MaterialConfig = toml::from_str(
+            "model = \"linear_elastic\"\nyoungs_modulus = 1.0\npoisson_ratio = 0.3\nbulk_modulus = 1.0\nshear_modulus = 1.0\n",
+        )
+        .unwrap();
+        assert!(matches!(c.build().unwrap_err(), MaterialError::Conflict(_)));
+    }
+
+    #[test]
+    fn wrong_history_length_and_nan_are_errors() {
+        let m = MaterialConfig::Microplane(MicroplaneConfig::preset(Preset::Paper))
+            .build()
+            .unwrap();
+        let mut h = vec![0.0; m.history_len()];
+        m.init_history(&mut h);
+        let mut ht = vec![0.0; 3];
+        let mut out = Response::zeros();
+        let f = Matrix3::identity();
+        assert!(matches!(
+            m.update(&f, 0.0, &h, &mut ht, &mut out),
+            Err(MaterialError::HistoryLength { .. })
+        ));
+        let mut ht = h.clone();
+        let mut fnan = f;
+        fnan[(0, 1)] = f64::NAN;
+        assert!(matches!(
+            m.update(&fnan, 0.0, &h, &mut ht, &mut out),
+            Err(MaterialError::NonFiniteInput { .. })
+        ));
+        let finv = Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, -1.0));
+        assert!(matches!(
+            m.update(&finv, 0.0, &h, &mut ht, &mut out),
+            Err(MaterialError::NonPositiveJacobian { .. })
+        ));
+    }
+}

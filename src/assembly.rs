@@ -1,0 +1,659 @@
+//! Residual and consistent Jacobian of one implicit step, assembled node by node from per-particle
+//! contributions (spec Sec. 1 step 5-6 and Sec. 4).
+//!
+//! Unknowns per active node `I`: `du_I` (mm) and, for gradient-enhanced runs, `eta_bar_I` (-). With the
+//! start-of-step gradients `g_I = grad_{X_n} S_Ip`, `G_I = F_n^T g_I` (the gradient w.r.t. the initial
+//! configuration), `F = (I + sum_J du_J (x) g_J) F_n` (plane strain, F33 = 1) and the first Piola stress
+//! `P(F, eta_bar_p)` of the constitutive law:
+//!
+//! ```text
+//! R^u_I   = m_I a_I^{n+1} + sum_p V_p^0 P_p G_Ip - m_I b                  (N)
+//! R^eb_I  = s_eb sum_p V_p^n [ S_Ip (eta_bar_p - eta_p) + c grad_{X_n} S_Ip . grad_{X_n} eta_bar_p ]
+//! K^uu    = m_I/(beta dt^2) delta_IJ + sum_p V_p^0 G_Ip . A_p . G_Jp      (A = dP/dF: material + geometric)
+//! K^u,eb  = sum_p V_p^0 (dP/d eta_bar . G_Ip) S_Jp
+//! K^eb,u  = -s_eb sum_p V_p^n S_Ip (d eta/dF F_n^T) g_Jp
+//! K^eb,eb = s_eb sum_p V_p^n (S_Ip S_Jp + c g_Ip . g_Jp)
+//! ```
+//!
+//! `sum_p V^0 P G_I` equals `sum_p v_p sigma_p grad_x S_Ip` of the spec (with `v_p = det F V^0`), and its
+//! derivative through `A` contains both the material and the geometric stiffness with gradients on the
+//! current iterate, so Newton converges quadratically at finite strain. The Helmholtz terms are evaluated
+//! on the configuration at `t_n` (the spec's [choice]; `K^eb,eb` is constant within a step); `s_eb`
+//! scales those rows to the magnitude of the momentum rows.
+//!
+//! Assembly is a gather: every active node sums over the particles in its support (the node-to-particle
+//! incidence is built once per step), so rows are filled in parallel without races or atomics and
+//! results do not depend on the number of threads. The block sparsity pattern (the union of the supports
+//! of the particles around each node) is built once per step and reused by every Newton iteration.
+
+use crate::dofs::DofMap;
+use crate::material::{Constitutive, Material, MaterialError, Response};
+use crate::particles::Particles;
+use crate::shape::ShapeTable;
+use nalgebra::{Matrix2, Matrix3, Vector2};
+use rayon::prelude::*;
+
+/// Newmark parameters of the dynamic step; `None` in [`StepInput::newmark`] means quasi-static.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Newmark {
+    /// Newmark beta (> 0).
+    pub beta: f64,
+    /// Newmark gamma.
+    pub gamma: f64,
+    /// Time step (s).
+    pub dt: f64,
+}
+
+impl Newmark {
+    /// `a^{n+1} = du/(beta dt^2) - v/(beta dt) - (1/(2 beta) - 1) a` (mm/s^2).
+    pub fn acceleration(&self, du: Vector2<f64>, v: Vector2<f64>, a: Vector2<f64>) -> Vector2<f64> {
+        let (b, dt) = (self.beta, self.dt);
+        du / (b * dt * dt) - v / (b * dt) - (0.5 / b - 1.0) * a
+    }
+
+    /// `d a^{n+1} / d du = 1/(beta dt^2)` (1/s^2).
+    pub fn mass_factor(&self) -> f64 {
+        1.0 / (self.beta * self.dt * self.dt)
+    }
+}
+
+/// What the residual and Jacobian of a step read (all fixed during the Newton iterations).
+pub struct StepInput<'a> {
+    /// Start-of-step shape functions of the deformable particles.
+    pub table: &'a ShapeTable,
+    /// Committed particle state at `t_n`.
+    pub particles: &'a Particles,
+    /// Constitutive law per body tag (`particles.body[p]` indexes this slice).
+    pub materials: &'a [Material],
+    /// Unknown numbering and constraints.
+    pub dofs: &'a DofMap,
+    /// Nodal mass `m_I` (t), velocity `v_I` (mm/s), acceleration `a_I` (mm/s^2) from P2G, per grid node.
+    pub mass: &'a [f64],
+    /// Nodal velocity (mm/s).
+    pub velocity: &'a [Vector2<f64>],
+    /// Nodal acceleration (mm/s^2).
+    pub acceleration: &'a [Vector2<f64>],
+    /// Newmark parameters, or `None` for a quasi-static step.
+    pub newmark: Option<Newmark>,
+    /// Body force per unit mass `b` (mm/s^2), e.g. gravity times the load factor.
+    pub body_force: Vector2<f64>,
+    /// Scale of constrained rows and of the Helmholtz rows (MPa), about the stiffness of the body.
+    pub row_scale: f64,
+}
+
+/// A failed evaluation at a Newton iterate (reported to SNES as a domain error).
+#[derive(Debug, thiserror::Error)]
+pub enum AssemblyError {
+    /// The deformation gradient of a particle is not invertible or inverted.
+    #[error("particle {particle}: det F = {det:e} <= 0 (element inversion)")]
+    Inverted {
+        /// Particle index.
+        particle: usize,
+        /// det F.
+        det: f64,
+    },
+    /// The constitutive law rejected the state.
+    #[error("particle {particle}: {source}")]
+    Material {
+        /// Particle index.
+        particle: usize,
+        /// The material's error.
+        source: MaterialError,
+    },
+    /// A residual entry is not finite.
+    #[error("non-finite residual at unknown {dof}")]
+    NonFinite {
+        /// Unknown index.
+        dof: usize,
+    },
+}
+
+/// Cached constitutive evaluation of one particle at the current iterate.
+#[derive(Debug, Clone, Copy)]
+struct PointEval {
+    /// First Piola stress (MPa).
+    p: Matrix3<f64>,
+    /// In-plane `A_iJkL = dP_iJ/dF_kL`, index `(2i+J)*4 + 2k+L`.
+    a: [f64; 16],
+    /// In-plane `dP/d eta_bar` (MPa).
+    dp_deb: Matrix2<f64>,
+    /// In-plane `d eta/dF F_n^T` (for the Helmholtz-displacement coupling).
+    deta_dx: Matrix2<f64>,
+    /// Local equivalent strain eta_p.
+    eta: f64,
+    /// Interpolated eta_bar_p and its gradient w.r.t. X_n.
+    eta_bar: f64,
+    grad_eta_bar: Vector2<f64>,
+    /// Stored energy density (MPa) and damage of the iterate.
+    energy: f64,
+    damage: f64,
+    /// det F.
+    det: f64,
+}
+
+impl Default for PointEval {
+    fn default() -> Self {
+        Self {
+            p: Matrix3::zeros(),
+            a: [0.0; 16],
+            dp_deb: Matrix2::zeros(),
+            deta_dx: Matrix2::zeros(),
+            eta: 0.0,
+            eta_bar: 0.0,
+            grad_eta_bar: Vector2::zeros(),
+            energy: 0.0,
+            damage: 0.0,
+            det: 1.0,
+        }
+    }
+}
+
+/// Per-step workspace of the assembly: incidence, pattern, cached particle evaluations, trial history.
+/// Buffers are reused from step to step; nothing is allocated per Newton iteration.
+#[derive(Default)]
+pub struct Assembler {
+    fields: usize,
+    /// Node -> (particle, slot in its weight list), CSR over grid nodes.
+    inc_offsets: Vec<usize>,
+    inc_entries: Vec<(u32, u8)>,
+    /// Block pattern: for active node a, its column active nodes `cols[row_ptr[a]..row_ptr[a+1]]` (sorted).
+    row_ptr: Vec<usize>,
+    cols: Vec<u32>,
+    /// `G = F_n^T g` per table slot.
+    g0: Vec<Vector2<f64>>,
+    /// Nodal unknowns of the current iterate, per grid node.
+    du: Vec<Vector2<f64>>,
+    eb: Vec<f64>,
+    evals: Vec<PointEval>,
+    trial_history: Vec<f64>,
+    values: Vec<f64>,
+    /// The iterate the cache was computed at.
+    key: Vec<f64>,
+    key_valid: bool,
+}
+
+impl Assembler {
+    /// An empty workspace.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Prepares a step: incidence, block pattern, `G = F_n^T g`. Call after the shape table and the
+    /// unknown numbering of the step are known.
+    pub fn begin_step(&mut self, input: &StepInput<'_>) {
+        let (table, particles, dofs) = (input.table, input.particles, input.dofs);
+        self.fields = dofs.fields();
+        let nodes = dofs.node_indices().len();
+        let np = particles.len();
+        // Incidence (counting sort by node).
+        self.inc_offsets.clear();
+        self.inc_offsets.resize(nodes + 1, 0);
+        for p in 0..np {
+            for w in table.weights(p) {
+                self.inc_offsets[w.node as usize + 1] += 1;
+            }
+        }
+        for i in 0..nodes {
+            self.inc_offsets[i + 1] += self.inc_offsets[i];
+        }
+        self.inc_entries.clear();
+        self.inc_entries.resize(self.inc_offsets[nodes], (0, 0));
+        let mut fill = self.inc_offsets.clone();
+        for p in 0..np {
+            for (k, w) in table.weights(p).iter().enumerate() {
+                let slot = &mut fill[w.node as usize];
+                self.inc_entries[*slot] = (p as u32, k as u8);
+                *slot += 1;
+            }
+        }
+        // Block pattern: per active node, the sorted union of the supports of its particles.
+        let node_index = dofs.node_indices();
+        let rows: Vec<Vec<u32>> = dofs
+            .active_nodes()
+            .par_iter()
+            .map_init(Vec::new, |scratch: &mut Vec<u32>, &node| {
+                scratch.clear();
+                let (lo, hi) = (
+                    self.inc_offsets[node as usize],
+                    self.inc_offsets[node as usize + 1],
+                );
+                for &(p, _) in &self.inc_entries[lo..hi] {
+                    for w in table.weights(p as usize) {
+                        let b = node_index[w.node as usize];
+                        if b != crate::dofs::INACTIVE {
+                            scratch.push(b);
+                        }
+                    }
+                }
+                scratch.sort_unstable();
+                scratch.dedup();
+                scratch.clone()
+            })
+            .collect();
+        self.row_ptr.clear();
+        self.row_ptr.push(0);
+        self.cols.clear();
+        for r in &rows {
+            self.cols.extend_from_slice(r);
+            self.row_ptr.push(self.cols.len());
+        }
+        // G = F_n^T g per slot.
+        let stride = table.stride();
+        self.g0.resize(np * stride, Vector2::zeros());
+        self.g0
+            .par_chunks_mut(stride.max(1))
+            .enumerate()
+            .for_each(|(p, g)| {
+                let fnt = particles.f[p].transpose();
+                for (k, w) in table.weights(p).iter().enumerate() {
+                    g[k] = fnt * w.grad;
+                }
+            });
+        self.evals.resize(np, PointEval::default());
+        let hs = particles.history_stride();
+        // One slot per particle even for history-free laws, so the parallel zip stays aligned.
+        self.trial_history.resize(np * hs.max(1), 0.0);
+        self.du.resize(nodes, Vector2::zeros());
+        self.eb.resize(nodes, 0.0);
+        self.values
+            .resize(self.cols.len() * self.fields * self.fields, 0.0);
+        self.key_valid = false;
+    }
+
+    /// Number of nonzero entries of the Jacobian (blocks times fields^2).
+    pub fn nonzeros(&self) -> usize {
+        self.cols.len() * self.fields * self.fields
+    }
+
+    /// The COO pattern of the Jacobian with global indices offset by `first` (the first unknown owned by
+    /// this process), in the order of [`Assembler::jacobian`]'s values.
+    pub fn pattern(&self, first: usize) -> (Vec<i32>, Vec<i32>) {
+        let nf = self.fields;
+        let n = self.nonzeros();
+        let (mut rows, mut cols) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for a in 0..self.row_ptr.len() - 1 {
+            for &b in &self.cols[self.row_ptr[a]..self.row_ptr[a + 1]] {
+                for i in 0..nf {
+                    for k in 0..nf {
+                        rows.push((first + a * nf + i) as i32);
+                        cols.push((first + b as usize * nf + k) as i32);
+                    }
+                }
+            }
+        }
+        (rows, cols)
+    }
+
+    /// Evaluates every particle at the iterate `x` (unknowns in [`DofMap`] order) unless the cache
+    /// already holds `x`. Trial history is written to the workspace, never to the particles.
+    pub fn evaluate(&mut self, input: &StepInput<'_>, x: &[f64]) -> Result<(), AssemblyError> {
+        if self.key_valid && self.key.as_slice() == x {
+            return Ok(());
+        }
+        self.key_valid = false;
+        let nf = self.fields;
+        let dofs = input.dofs;
+        // Scatter the unknowns to grid nodes (inactive nodes stay zero).
+        self.du.iter_mut().for_each(|d| *d = Vector2::zeros());
+        self.eb.iter_mut().for_each(|e| *e = 0.0);
+        for (a, &node) in dofs.active_nodes().iter().enumerate() {
+            let node = node as usize;
+            self.du[node] = Vector2::new(x[a * nf], x[a * nf + 1]);
+            if nf == 3 {
+                self.eb[node] = x[a * nf + 2];
+            }
+        }
+        let (du, eb) = (&self.du, &self.eb);
+        let (table, particles, materials) = (input.table, input.particles, input.materials);
+        let hs = particles.history_stride();
+        let nonlocal = nf == 3;
+        self.evals
+            .par_iter_mut()
+            .zip(self.trial_history.par_chunks_mut(hs.max(1)))
+            .enumerate()
+            .try_for_each(|(p, (ev, h_trial))| {
+                let ws = table.weights(p);
+                let mut grad_du = Matrix2::zeros();
+                let (mut ebp, mut geb) = (0.0, Vector2::zeros());
+                for w in ws {
+                    let n = w.node as usize;
+                    grad_du += du[n] * w.grad.transpose();
+                    ebp += w.value * eb[n];
+                    geb += w.grad * eb[n];
+                }
+                let fn2 = particles.f[p];
+                let f2 = (Matrix2::identity() + grad_du) * fn2;
+                let det = f2.determinant();
+                if det.is_nan() || det <= 0.0 {
+                    return Err(AssemblyError::Inverted { particle: p, det });
+                }
+                let f3 = Matrix3::new(
+                    f2[(0, 0)],
+                    f2[(0, 1)],
+                    0.0,
+                    f2[(1, 0)],
+                    f2[(1, 1)],
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                );
+                let material = &materials[particles.body[p] as usize];
+                let h_n = particles.history(p);
+                let h_trial = &mut h_trial[..hs];
+                let mut r = Response::zeros();
+                let err = |source| AssemblyError::Material {
+                    particle: p,
+                    source,
+                };
+                if nonlocal {
+                    material
+                        .update(&f3, ebp, h_n, h_trial, &mut r)
+                        .map_err(err)?;
+                } else {
+                    local_update(material, &f3, h_n, h_trial, &mut r).map_err(err)?;
+                    ebp = r.eta;
+                }
+                *ev = PointEval {
+                    p: r.p,
+                    a: in_plane(&r),
+                    dp_deb: r.dp_deta_bar.fixed_view::<2, 2>(0, 0).into_owned(),
+                    deta_dx: r.deta_df.fixed_view::<2, 2>(0, 0) * fn2.transpose(),
+                    eta: r.eta,
+                    eta_bar: ebp,
+                    grad_eta_bar: geb,
+                    energy: r.energy,
+                    damage: r.damage,
+                    det,
+                };
+                Ok(())
+            })?;
+        self.key.clear();
+        self.key.extend_from_slice(x);
+        self.key_valid = true;
+        Ok(())
+    }
+
+    /// Writes the residual at the last evaluated iterate `x` into `out` (same layout). With
+    /// `physical = true`, constrained rows hold the unbalanced force instead of `s (x - prescribed)`:
+    /// the reaction the constraint exerts (N).
+    pub fn residual(
+        &self,
+        input: &StepInput<'_>,
+        x: &[f64],
+        out: &mut [f64],
+        physical: bool,
+    ) -> Result<(), AssemblyError> {
+        let nf = self.fields;
+        let (table, particles, dofs) = (input.table, input.particles, input.dofs);
+        let stride = table.stride();
+        let s = input.row_scale;
+        out.par_chunks_mut(nf).enumerate().for_each(|(a, r)| {
+            let node = dofs.node(a);
+            let mut ru = Vector2::zeros();
+            let mut reb = 0.0;
+            for &(p, k) in &self.inc_entries[self.inc_offsets[node]..self.inc_offsets[node + 1]] {
+                let (p, k) = (p as usize, k as usize);
+                let ev = &self.evals[p];
+                let g0 = self.g0[p * stride + k];
+                let pp = ev.p.fixed_view::<2, 2>(0, 0);
+                ru += particles.vol0[p] * (pp * g0);
+                if nf == 3 {
+                    let w = &table.weights(p)[k];
+                    let c = input.materials[particles.body[p] as usize].gradient_parameter();
+                    reb += particles.vol[p]
+                        * (w.value * (ev.eta_bar - ev.eta) + c * w.grad.dot(&ev.grad_eta_bar));
+                }
+            }
+            let m = input.mass[node];
+            if let Some(nm) = input.newmark {
+                let acc = nm.acceleration(
+                    self.du[node],
+                    input.velocity[node],
+                    input.acceleration[node],
+                );
+                ru += m * acc;
+            }
+            ru -= m * input.body_force;
+            r[0] = ru.x;
+            r[1] = ru.y;
+            if nf == 3 {
+                r[2] = s * reb;
+            }
+            if !physical {
+                for (c, rc) in r.iter_mut().enumerate() {
+                    if let Some(v) = dofs.prescribed(a * nf + c) {
+                        *rc = s * (x[a * nf + c] - v);
+                    }
+                }
+            }
+        });
+        match out.iter().position(|v| !v.is_finite()) {
+            Some(dof) => Err(AssemblyError::NonFinite { dof }),
+            None => Ok(()),
+        }
+    }
+
+    /// Fills and returns the Jacobian values at the last evaluated iterate, in the order of
+    /// [`Assembler::pattern`].
+    pub fn jacobian(&mut self, input: &StepInput<'_>) -> &[f64] {
+        let nf = self.fields;
+        let bs2 = nf * nf;
+        let rows = self.row_ptr.len() - 1;
+        let asm = AssemblerView {
+            inc_offsets: &self.inc_offsets,
+            inc_entries: &self.inc_entries,
+            row_ptr: &self.row_ptr,
+            cols: &self.cols,
+            g0: &self.g0,
+            evals: &self.evals,
+        };
+        let ctx = JacobianRows { asm, input, nf };
+        fill_rows(&ctx, 0..rows, &mut self.values, 0, bs2);
+        &self.values
+    }
+
+    /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
+    /// `sigma = P F^T / det F`, `eta_bar_p`, damage. Returns the stored energy `sum_p V^0 Psi_p` (N mm).
+    pub fn commit(&self, particles: &mut Particles, new_f: &[Matrix2<f64>]) -> f64 {
+        let hs = particles.history_stride();
+        if hs > 0 {
+            let n = particles.len() * hs;
+            particles.history.copy_from_slice(&self.trial_history[..n]);
+        }
+        let mut energy = 0.0;
+        for (p, ev) in self.evals.iter().enumerate() {
+            let f2 = new_f[p];
+            let f3 = Matrix3::new(
+                f2[(0, 0)],
+                f2[(0, 1)],
+                0.0,
+                f2[(1, 0)],
+                f2[(1, 1)],
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+            );
+            particles.stress[p] = ev.p * f3.transpose() / ev.det;
+            particles.eta_bar[p] = ev.eta_bar;
+            particles.damage[p] = ev.damage;
+            energy += particles.vol0[p] * ev.energy;
+        }
+        energy
+    }
+
+    /// Nodal displacement increment of the last evaluated iterate, per grid node (mm).
+    pub fn nodal_du(&self) -> &[Vector2<f64>] {
+        &self.du
+    }
+}
+
+/// Read-only view of the assembler used by the parallel row filling (the values are borrowed apart).
+struct AssemblerView<'a> {
+    inc_offsets: &'a [usize],
+    inc_entries: &'a [(u32, u8)],
+    row_ptr: &'a [usize],
+    cols: &'a [u32],
+    g0: &'a [Vector2<f64>],
+    evals: &'a [PointEval],
+}
+
+struct JacobianRows<'a> {
+    asm: AssemblerView<'a>,
+    input: &'a StepInput<'a>,
+    nf: usize,
+}
+
+/// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
+/// range in two (rayon::join) until it is small: parallel, allocation-free and race-free because block
+/// rows own disjoint value ranges.
+fn fill_rows(
+    ctx: &JacobianRows<'_>,
+    rows: std::ops::Range<usize>,
+    values: &mut [f64],
+    base: usize,
+    bs2: usize,
+) {
+    if rows.len() <= 64 {
+        for a in rows {
+            let lo = ctx.asm.row_ptr[a] * bs2 - base;
+            let hi = ctx.asm.row_ptr[a + 1] * bs2 - base;
+            fill_row(ctx, a, &mut values[lo..hi]);
+        }
+        return;
+    }
+    let mid = rows.start + rows.len() / 2;
+    let split = ctx.asm.row_ptr[mid] * bs2 - base;
+    let (left, right) = values.split_at_mut(split);
+    rayon::join(
+        || fill_rows(ctx, rows.start..mid, left, base, bs2),
+        || fill_rows(ctx, mid..rows.end, right, base + split, bs2),
+    );
+}
+
+/// One block row of the Jacobian (active node `a`).
+fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
+    let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
+    let bs2 = nf * nf;
+    let (table, particles, dofs) = (input.table, input.particles, input.dofs);
+    let stride = table.stride();
+    let s = input.row_scale;
+    let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
+    row.fill(0.0);
+    let node = dofs.node(a);
+    for &(p, k) in &asm.inc_entries[asm.inc_offsets[node]..asm.inc_offsets[node + 1]] {
+        let (p, k) = (p as usize, k as usize);
+        let ev = &asm.evals[p];
+        let ws = table.weights(p);
+        let gi0 = asm.g0[p * stride + k];
+        let (si, gi) = (ws[k].value, ws[k].grad);
+        let v0 = particles.vol0[p];
+        let vn = particles.vol[p];
+        // M[i][k][L] = sum_J G_I,J A_iJkL
+        let mut m = [[[0.0; 2]; 2]; 2];
+        for (i, mi) in m.iter_mut().enumerate() {
+            for (kk, mik) in mi.iter_mut().enumerate() {
+                for (l, v) in mik.iter_mut().enumerate() {
+                    *v = gi0.x * ev.a[(2 * i) * 4 + 2 * kk + l]
+                        + gi0.y * ev.a[(2 * i + 1) * 4 + 2 * kk + l];
+                }
+            }
+        }
+        let q = ev.dp_deb * gi0;
+        let c = input.materials[particles.body[p] as usize].gradient_parameter();
+        for (kj, wj) in ws.iter().enumerate() {
+            let b = dofs.node_indices()[wj.node as usize];
+            if b == crate::dofs::INACTIVE {
+                continue;
+            }
+            let Ok(pos) = cols.binary_search(&b) else {
+                continue;
+            };
+            let blk = &mut row[pos * bs2..(pos + 1) * bs2];
+            let gj0 = asm.g0[p * stride + kj];
+            for i in 0..2 {
+                for kk in 0..2 {
+                    blk[i * nf + kk] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
+                }
+            }
+            if nf == 3 {
+                let (sj, gj) = (wj.value, wj.grad);
+                blk[2] += v0 * q.x * sj;
+                blk[nf + 2] += v0 * q.y * sj;
+                let h = ev.deta_dx * gj;
+                blk[2 * nf] -= s * vn * si * h.x;
+                blk[2 * nf + 1] -= s * vn * si * h.y;
+                blk[2 * nf + 2] += s * vn * (si * sj + c * gi.dot(&gj));
+            }
+        }
+    }
+    // Inertia on the diagonal block, then constraints: identity rows, zero columns.
+    let diag = cols.binary_search(&(a as u32)).ok();
+    if let (Some(nm), Some(d)) = (input.newmark, diag) {
+        let mf = input.mass[node] * nm.mass_factor();
+        row[d * bs2] += mf;
+        row[d * bs2 + nf + 1] += mf;
+    }
+    for (pos, &b) in cols.iter().enumerate() {
+        for kk in 0..nf {
+            if dofs.is_constrained(b as usize * nf + kk) {
+                for i in 0..nf {
+                    row[pos * bs2 + i * nf + kk] = 0.0;
+                }
+            }
+        }
+    }
+    for i in 0..nf {
+        if dofs.is_constrained(a * nf + i) {
+            for pos in 0..cols.len() {
+                for kk in 0..nf {
+                    row[pos * bs2 + i * nf + kk] = 0.0;
+                }
+            }
+            if let Some(d) = diag {
+                row[d * bs2 + i * nf + i] = s;
+            }
+        }
+    }
+}
+
+/// In-plane part of `A` as `(2i+J)*4 + 2k+L`.
+fn in_plane(r: &Response) -> [f64; 16] {
+    let mut out = [0.0; 16];
+    for i in 0..2 {
+        for j in 0..2 {
+            for k in 0..2 {
+                for l in 0..2 {
+                    out[(2 * i + j) * 4 + 2 * k + l] = r.a[(3 * i + j, 3 * k + l)];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The local model (`eta_bar = eta`, no Helmholtz field): evaluates the law with `eta_bar` set to its
+/// own `eta` and completes the tangent with the chain rule `A + dP/d eta_bar (x) d eta/dF` (eta does not
+/// depend on eta_bar). Elastic laws return zero for both, so this is exact for them too.
+pub fn local_update(
+    material: &Material,
+    f: &Matrix3<f64>,
+    h_n: &[f64],
+    h_trial: &mut [f64],
+    out: &mut Response,
+) -> Result<(), MaterialError> {
+    material.update(f, 0.0, h_n, h_trial, out)?;
+    if out.dp_deta_bar.iter().all(|v| *v == 0.0) && out.eta == 0.0 {
+        return Ok(());
+    }
+    let eta = out.eta;
+    material.update(f, eta, h_n, h_trial, out)?;
+    for ij in 0..9 {
+        for kl in 0..9 {
+            out.a[(ij, kl)] += out.dp_deta_bar[(ij / 3, ij % 3)] * out.deta_df[(kl / 3, kl % 3)];
+        }
+    }
+    out.dp_deta_bar = Matrix3::zeros();
+    Ok(())
+}

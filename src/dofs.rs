@@ -1,0 +1,128 @@
+//! Unknowns of one step: which grid nodes carry unknowns, their numbering, and Dirichlet constraints.
+//!
+//! The grid is reset every step, so the map is rebuilt every step from the nodal masses of P2G: only
+//! nodes with `m_I` above a relative tolerance carry unknowns. Each active node carries `fields`
+//! interleaved unknowns, `(du_x, du_y)` or `(du_x, du_y, eta_bar)` (block size 2 or 3), numbered in node
+//! order. Constrained components stay in the system as identity rows (so the block structure is kept)
+//! with their prescribed value in the initial guess; their columns are zeroed in the Jacobian.
+
+/// Marker for a node without unknowns.
+pub const INACTIVE: u32 = u32::MAX;
+
+/// Node-to-unknown numbering and constraints of one step.
+#[derive(Debug, Default, Clone)]
+pub struct DofMap {
+    fields: usize,
+    /// Active-node index of each grid node, or [`INACTIVE`].
+    node_index: Vec<u32>,
+    /// Grid node of each active node.
+    active: Vec<u32>,
+    /// Per unknown: prescribed value if constrained.
+    prescribed: Vec<Option<f64>>,
+}
+
+impl DofMap {
+    /// Numbers the nodes flagged in `active` with `fields` unknowns each; nothing constrained yet.
+    pub fn rebuild(&mut self, active: &[bool], fields: usize) {
+        self.fields = fields;
+        self.node_index.clear();
+        self.active.clear();
+        for (node, &a) in active.iter().enumerate() {
+            if a {
+                self.node_index.push(self.active.len() as u32);
+                self.active.push(node as u32);
+            } else {
+                self.node_index.push(INACTIVE);
+            }
+        }
+        self.prescribed.clear();
+        self.prescribed.resize(self.active.len() * fields, None);
+    }
+
+    /// Unknowns per node (2: displacement; 3: displacement and eta_bar).
+    pub fn fields(&self) -> usize {
+        self.fields
+    }
+
+    /// Number of active nodes.
+    pub fn num_active(&self) -> usize {
+        self.active.len()
+    }
+
+    /// Number of unknowns.
+    pub fn len(&self) -> usize {
+        self.prescribed.len()
+    }
+
+    /// True if no node carries unknowns.
+    pub fn is_empty(&self) -> bool {
+        self.prescribed.is_empty()
+    }
+
+    /// Active-node index of grid node `node`, if active.
+    pub fn active_index(&self, node: usize) -> Option<usize> {
+        match self.node_index.get(node) {
+            Some(&i) if i != INACTIVE => Some(i as usize),
+            _ => None,
+        }
+    }
+
+    /// Grid node of active node `a`.
+    pub fn node(&self, a: usize) -> usize {
+        self.active[a] as usize
+    }
+
+    /// Active-node indices of all grid nodes ([`INACTIVE`] where inactive).
+    pub fn node_indices(&self) -> &[u32] {
+        &self.node_index
+    }
+
+    /// Grid nodes of the active nodes, in unknown order.
+    pub fn active_nodes(&self) -> &[u32] {
+        &self.active
+    }
+
+    /// Prescribes component `comp` of grid node `node` (ignored if the node is inactive). A later call
+    /// for the same component wins.
+    pub fn constrain(&mut self, node: usize, comp: usize, value: f64) {
+        if let Some(a) = self.active_index(node) {
+            self.prescribed[a * self.fields + comp] = Some(value);
+        }
+    }
+
+    /// Prescribed value of unknown `dof`, if constrained.
+    pub fn prescribed(&self, dof: usize) -> Option<f64> {
+        self.prescribed[dof]
+    }
+
+    /// True if unknown `dof` is constrained.
+    pub fn is_constrained(&self, dof: usize) -> bool {
+        self.prescribed[dof].is_some()
+    }
+
+    /// Number of constrained unknowns.
+    pub fn num_constrained(&self) -> usize {
+        self.prescribed.iter().filter(|p| p.is_some()).count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbering_skips_inactive_nodes_and_keeps_constraints_per_component() {
+        let mut d = DofMap::default();
+        d.rebuild(&[false, true, true, false, true], 3);
+        assert_eq!(d.num_active(), 3);
+        assert_eq!(d.len(), 9);
+        assert_eq!(d.active_index(0), None);
+        assert_eq!(d.active_index(2), Some(1));
+        assert_eq!(d.node(2), 4);
+        d.constrain(2, 1, 0.5);
+        d.constrain(3, 0, 1.0); // inactive: ignored
+        assert_eq!(d.prescribed(4), Some(0.5));
+        assert!(!d.is_constrained(3));
+        assert_eq!(d.num_constrained(), 1);
+    }
+}

@@ -1,0 +1,811 @@
+//! Finite-strain, implicit-gradient-enhanced microplane damage model (source paper eqs. 9-16;
+//! Platen, Zreid & Kaliske 2023; Zreid & Kaliske 2014). Notation of the paper and of spec Sec. 3.
+//!
+//! **Kinematics.** Green-Lagrange strain `E = (F^T F - I)/2`. On a microplane with unit normal `n`:
+//! `E_V = tr(E)/3`, `E_D = E n - E_V n`, and `Dev^T . E_D = (n (x) E_D + E_D (x) n)/2 - (n . E_D)/3 I`.
+//!
+//! **Energy (eqs. 9, 10).** `Psi = (3/(4 pi)) int_Omega psi_mic dOmega = 6 sum_I w_I psi_mic,I` with
+//! `psi_mic = (1 - d_mic) (K_mic E_V^2/2 + G_mic E_D . E_D)`, and `S = dPsi/dE = 6 sum_I w_I (1 - d_I) s_I`,
+//! `s_I = K_mic E_V I/3 + 2 G_mic Dev^T . E_D`. With this normalisation the undamaged response is
+//! isotropic with bulk modulus `K_mic/3` and shear modulus `G_mic`; the config holds the macroscopic
+//! `K`, `G` (Table 1) and the model uses `K_mic = 3K`, `G_mic = G`.
+//!
+//! **Damage (eqs. 11, 12).** `d(gamma) = 1 - (gamma_0/gamma)(1 - alpha + alpha exp(beta (gamma_0 - gamma)))`,
+//! one history variable per direction, `gamma_I = max(gamma_0, gamma_I^n, eta_bar_mic,I)`.
+//! `d -> 1` as `gamma -> inf` while the microplane "stress" `(1 - d) gamma -> (1 - alpha) gamma_0`.
+//!
+//! **Equivalent strains (eqs. 13-16).** `eta_mic = 3 k1 E_V + sqrt((3 k1 E_V)^2 + 3/2 k2 E_D . E_D)`,
+//! `k1 = (k_r - 1)/(2 k_r (1 - 2 nu))`, `k2 = 3/(k_r (1 + nu)^2)`. The macroscopic local equivalent
+//! strain `eta` (source of the Helmholtz equation) is `max_I eta_mic,I` ([`EtaMode::Max`], the paper's
+//! "maximum local equivalent strain") or the sphere average `2 sum_I w_I eta_mic,I` ([`EtaMode::Mean`]).
+//! Nonlocal microplane strain (eq. 13): `eta_bar_mic,I = (eta_bar/eta) eta_mic,I`; for `eta <= 1e-14`
+//! (undeformed or purely hydrostatically compressed point) `eta_bar_mic,I = eta_bar` on every plane.
+//!
+//! **Tangent.** `dS/dE = 6 sum_I w_I [(1 - d_I) C_I - chi_I d'(gamma_I) s_I (x) d eta_bar_mic,I/dE]`
+//! with the constant per-plane `C_I = K_mic V (x) V + 2 G_mic Dev_I^T . Dev_I` (summed through the
+//! precomputed `n_I (x) n_I`, see `Microplane::add_elastic_tangent`) and the
+//! loading indicator `chi_I = 1` iff `eta_bar_mic,I > gamma_I^n` and `> gamma_0`;
+//! `dS/d eta_bar = -6 sum_I w_I chi_I d'(gamma_I) (eta_mic,I/eta) s_I`; `A` follows from
+//! [`super::first_piola_from_pk2`], `dP/d eta_bar = F dS/d eta_bar`, `d eta/dF = F d eta/dE`.
+//! At `r_I = sqrt((k1 tr E)^2 + 3/2 k2 E_D . E_D) = 0` the gradient of `eta_mic` is taken as its
+//! one-sided limit (`2 k1 I` if `k1 tr E > 0`, else 0).
+//!
+//! **Output damage.** [`Response::damage`] is the energy-weighted damage `1 - Psi/Psi_0`, `Psi_0` the
+//! undamaged energy at the same `E` (i.e. the `psi_0`-weighted mean of `d_I`); at `Psi_0 = 0`
+//! (`E = 0`) the plain sphere average `2 sum_I w_I d_I` is reported instead.
+
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+
+use super::elastic::positive;
+use super::quadrature::{MAX_DIRECTIONS, Quadrature};
+use super::{
+    Constitutive, MaterialError, PAIRS, Response, Sym6, check_finite, first_piola_from_pk2,
+    green_lagrange,
+};
+
+/// Below this macroscopic `eta` the ratio `eta_bar/eta` of eq. 13 is replaced by `eta_bar_mic = eta_bar`.
+const ETA_TINY: f64 = 1e-14;
+/// Below this `r_I` the gradient of `eta_mic` takes its one-sided limit.
+const R_TINY: f64 = 1e-200;
+
+/// How the macroscopic local equivalent strain `eta` is formed from the microplane values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum EtaMode {
+    /// `eta = max_I eta_mic,I` (the paper's "maximum local equivalent strain"; default).
+    #[default]
+    Max,
+    /// `eta = 2 sum_I w_I eta_mic,I` (sphere average).
+    Mean,
+}
+
+/// Named parameter sets (Table 1 of the paper and its low-threshold variant).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum Preset {
+    /// Table 1: K = 18750 MPa, G = 15254 MPa, nu = 0.18, gamma_0 = 1.25e-3, k_r = 14, alpha = 0.98,
+    /// beta = 650, c = 1 mm^2.
+    #[serde(rename = "paper")]
+    #[value(name = "paper")]
+    Paper,
+    /// Table 1 with gamma_0 = 1.25e-4 (a tensile strength near that of concrete).
+    #[serde(rename = "paper_gamma0_1.25e-4")]
+    #[value(name = "paper_gamma0_1.25e-4")]
+    PaperGamma0Low,
+}
+
+impl Preset {
+    /// The name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Paper => "paper",
+            Preset::PaperGamma0Low => "paper_gamma0_1.25e-4",
+        }
+    }
+
+    /// The complete parameter set.
+    pub fn params(self) -> MicroplaneParams {
+        let paper = MicroplaneParams {
+            bulk_modulus: 18750.0,
+            shear_modulus: 15254.0,
+            poisson_ratio: 0.18,
+            gamma_0: 1.25e-3,
+            k_r: 14.0,
+            alpha: 0.98,
+            beta: 650.0,
+            c: 1.0,
+            quadrature: Quadrature::Bo21,
+            eta_mode: EtaMode::Max,
+        };
+        match self {
+            Preset::Paper => paper,
+            Preset::PaperGamma0Low => MicroplaneParams {
+                gamma_0: 1.25e-4,
+                ..paper
+            },
+        }
+    }
+}
+
+/// The `model = "microplane"` config section. Every field is optional when a `preset` is given;
+/// an explicit field overrides the preset.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MicroplaneConfig {
+    /// `"paper"` or `"paper_gamma0_1.25e-4"`.
+    pub preset: Option<Preset>,
+    /// Macroscopic bulk modulus K (MPa), > 0; `K_mic = 3K`.
+    pub bulk_modulus: Option<f64>,
+    /// Macroscopic shear modulus G (MPa), > 0; `G_mic = G`.
+    pub shear_modulus: Option<f64>,
+    /// Poisson's ratio nu used in k1, k2 (eqs. 15, 16) only, 0 <= nu < 0.5.
+    pub poisson_ratio: Option<f64>,
+    /// Damage threshold gamma_0 (-), > 0.
+    pub gamma_0: Option<f64>,
+    /// Ratio of compressive to tensile strength k_r (-), > 1.
+    pub k_r: Option<f64>,
+    /// Maximum degradation alpha (-), 0 <= alpha <= 1.
+    pub alpha: Option<f64>,
+    /// Softening parameter beta (-), >= 0.
+    pub beta: Option<f64>,
+    /// Gradient activity parameter c (mm^2), >= 0; 0 means local.
+    pub c: Option<f64>,
+    /// Sphere integration rule (default `bo21`).
+    pub quadrature: Option<Quadrature>,
+    /// `"max"` (default) or `"mean"`.
+    pub eta_mode: Option<EtaMode>,
+}
+
+/// Complete, validated microplane parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MicroplaneParams {
+    /// Macroscopic bulk modulus K (MPa).
+    pub bulk_modulus: f64,
+    /// Macroscopic shear modulus G (MPa).
+    pub shear_modulus: f64,
+    /// Poisson's ratio in k1, k2.
+    pub poisson_ratio: f64,
+    /// Damage threshold gamma_0.
+    pub gamma_0: f64,
+    /// Compressive/tensile strength ratio k_r.
+    pub k_r: f64,
+    /// Maximum degradation alpha.
+    pub alpha: f64,
+    /// Softening parameter beta.
+    pub beta: f64,
+    /// Gradient activity parameter c (mm^2).
+    pub c: f64,
+    /// Sphere integration rule.
+    pub quadrature: Quadrature,
+    /// Definition of the macroscopic eta.
+    pub eta_mode: EtaMode,
+}
+
+impl MicroplaneConfig {
+    /// A config holding only a preset.
+    pub fn preset(p: Preset) -> Self {
+        Self {
+            preset: Some(p),
+            ..Default::default()
+        }
+    }
+
+    /// Merges the preset with the explicit fields and validates the result.
+    pub fn resolve(&self) -> Result<MicroplaneParams, MaterialError> {
+        let base = self.preset.map(Preset::params);
+        let get = |v: Option<f64>, from: fn(&MicroplaneParams) -> f64, field: &'static str| {
+            v.or(base.as_ref().map(from)).ok_or(MaterialError::MissingParameter {
+                field,
+                hint: "give it in the [material] section or choose a preset (\"paper\", \"paper_gamma0_1.25e-4\")",
+            })
+        };
+        let p = MicroplaneParams {
+            bulk_modulus: get(self.bulk_modulus, |p| p.bulk_modulus, "bulk_modulus")?,
+            shear_modulus: get(self.shear_modulus, |p| p.shear_modulus, "shear_modulus")?,
+            poisson_ratio: get(self.poisson_ratio, |p| p.poisson_ratio, "poisson_ratio")?,
+            gamma_0: get(self.gamma_0, |p| p.gamma_0, "gamma_0")?,
+            k_r: get(self.k_r, |p| p.k_r, "k_r")?,
+            alpha: get(self.alpha, |p| p.alpha, "alpha")?,
+            beta: get(self.beta, |p| p.beta, "beta")?,
+            c: get(self.c, |p| p.c, "c")?,
+            quadrature: self.quadrature.unwrap_or_default(),
+            eta_mode: self.eta_mode.unwrap_or_default(),
+        };
+        p.validate()?;
+        Ok(p)
+    }
+}
+
+impl MicroplaneParams {
+    /// Checks every parameter range.
+    pub fn validate(&self) -> Result<(), MaterialError> {
+        let bad = |field, value, allowed| {
+            Err(MaterialError::InvalidParameter {
+                field,
+                value,
+                allowed,
+            })
+        };
+        positive("bulk_modulus", self.bulk_modulus)?;
+        positive("shear_modulus", self.shear_modulus)?;
+        positive("gamma_0", self.gamma_0)?;
+        let nu = self.poisson_ratio;
+        if !(nu.is_finite() && (0.0..0.5).contains(&nu)) {
+            return bad("poisson_ratio", nu, "0 <= nu < 0.5");
+        }
+        if !(self.k_r.is_finite() && self.k_r > 1.0) {
+            return bad("k_r", self.k_r, "a finite value > 1");
+        }
+        if !(0.0..=1.0).contains(&self.alpha) {
+            return bad("alpha", self.alpha, "0 <= alpha <= 1");
+        }
+        if !(self.beta.is_finite() && self.beta >= 0.0) {
+            return bad("beta", self.beta, "a finite value >= 0");
+        }
+        if !(self.c.is_finite() && self.c >= 0.0) {
+            return bad("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
+        }
+        Ok(())
+    }
+}
+
+/// One integration direction.
+#[derive(Clone, Debug)]
+struct Direction {
+    /// Unit normal n_I.
+    n: [f64; 3],
+    /// `n_I (x) n_I` as [`Sym6`].
+    nn: Sym6,
+    /// `6 w_I` (sphere integral weight).
+    w6: f64,
+}
+
+/// The microplane damage material (spec Sec. 3). History: one `gamma_I` per direction.
+#[derive(Clone, Debug)]
+pub struct Microplane {
+    params: MicroplaneParams,
+    k1: f64,
+    k2: f64,
+    k_mic: f64,
+    g_mic: f64,
+    dirs: Vec<Direction>,
+}
+
+/// Per-plane strain projections: `E_D` and `n . E_D`.
+#[inline(always)]
+fn project(n: &[f64; 3], e: &Sym6, ev: f64) -> ([f64; 3], f64) {
+    let en = [
+        e[0] * n[0] + e[3] * n[1] + e[5] * n[2],
+        e[3] * n[0] + e[1] * n[1] + e[4] * n[2],
+        e[5] * n[0] + e[4] * n[1] + e[2] * n[2],
+    ];
+    let ed = [en[0] - ev * n[0], en[1] - ev * n[1], en[2] - ev * n[2]];
+    let ned = n[0] * ed[0] + n[1] * ed[1] + n[2] * ed[2];
+    (ed, ned)
+}
+
+/// `Dev^T . E_D = sym(n (x) E_D) - (n . E_D)/3 I` as [`Sym6`].
+#[inline(always)]
+fn dev_t(n: &[f64; 3], ed: &[f64; 3], ned: f64) -> Sym6 {
+    let mut t = [0.0; 6];
+    for (a, &(i, j)) in PAIRS.iter().enumerate() {
+        t[a] = 0.5 * (n[i] * ed[j] + n[j] * ed[i]) - if i == j { ned / 3.0 } else { 0.0 };
+    }
+    t
+}
+
+impl Microplane {
+    /// Validates the parameters, then builds the model, precomputing `n_I (x) n_I` and `6 w_I` per direction.
+    pub fn new(params: MicroplaneParams) -> Result<Self, MaterialError> {
+        params.validate()?;
+        let nu = params.poisson_ratio;
+        let k_r = params.k_r;
+        let k_mic = 3.0 * params.bulk_modulus;
+        let g_mic = params.shear_modulus;
+        let dirs = params
+            .quadrature
+            .directions()
+            .map(|(n, w)| Direction {
+                n,
+                nn: PAIRS.map(|(i, j)| n[i] * n[j]),
+                w6: 6.0 * w,
+            })
+            .collect();
+        Ok(Self {
+            params,
+            k1: (k_r - 1.0) / (2.0 * k_r * (1.0 - 2.0 * nu)),
+            k2: 3.0 / (k_r * (1.0 + nu) * (1.0 + nu)),
+            k_mic,
+            g_mic,
+            dirs,
+        })
+    }
+
+    /// The validated parameters.
+    pub fn params(&self) -> &MicroplaneParams {
+        &self.params
+    }
+
+    /// `(k1, k2)` of eqs. 15, 16.
+    pub fn k1_k2(&self) -> (f64, f64) {
+        (self.k1, self.k2)
+    }
+
+    /// Micro moduli `(K_mic, G_mic) = (3K, G)` in MPa.
+    pub fn micro_moduli(&self) -> (f64, f64) {
+        (self.k_mic, self.g_mic)
+    }
+
+    /// Damage of eq. 11 and its derivative `d'(gamma)`.
+    pub fn damage_law(&self, gamma: f64) -> (f64, f64) {
+        let (omd, dd) = self.integrity(gamma);
+        (1.0 - omd, dd)
+    }
+
+    /// Integrity `1 - d(gamma) = (gamma_0/gamma)(1 - alpha + alpha exp(beta (gamma_0 - gamma)))` (eq. 11),
+    /// evaluated without the cancellation of `1 - d` near full damage, and `d'(gamma)`.
+    #[inline(always)]
+    fn integrity(&self, gamma: f64) -> (f64, f64) {
+        let MicroplaneParams {
+            gamma_0,
+            alpha,
+            beta,
+            ..
+        } = self.params;
+        let ex = (beta * (gamma_0 - gamma)).exp();
+        let g = 1.0 - alpha + alpha * ex;
+        let r = gamma_0 / gamma;
+        (r * g, r / gamma * g + r * alpha * beta * ex)
+    }
+
+    /// Adds `sum_I m_I C_I` to `d` (pair form), given `m0 = sum_I m_I` and `mm = sum_I m_I n_I (x) n_I`.
+    ///
+    /// `C_I = K_mic V (x) V + 2 G_mic Dev_I^T . Dev_I` depends on `n_I` only through `n_I (x) n_I`:
+    /// `(Dev^T . Dev)_ijkl = (N_il d_jk + N_ik d_jl + N_jl d_ik + N_jk d_il)/4 - d_kl N_ij/3 - N_kl d_ij/3
+    /// + d_ij d_kl/9` with `N = n (x) n`, so the weighted sum over the planes needs only 7 numbers.
+    #[inline(always)]
+    fn add_elastic_tangent(&self, m0: f64, mm: &Sym6, d: &mut [[f64; 6]; 6]) {
+        let m = super::sym_to_matrix(mm);
+        let kd = |i: usize, j: usize| if i == j { 1.0 } else { 0.0 };
+        let vol = self.k_mic / 9.0 * m0 + 2.0 * self.g_mic * m0 / 9.0;
+        for (a, &(i, j)) in PAIRS.iter().enumerate() {
+            for (b, &(k, l)) in PAIRS.iter().enumerate() {
+                let dev = 0.25
+                    * (m[(i, l)] * kd(j, k)
+                        + m[(i, k)] * kd(j, l)
+                        + m[(j, l)] * kd(i, k)
+                        + m[(j, k)] * kd(i, l))
+                    - (kd(k, l) * m[(i, j)] + m[(k, l)] * kd(i, j)) / 3.0;
+                d[a][b] += vol * kd(i, j) * kd(k, l) + 2.0 * self.g_mic * dev;
+            }
+        }
+    }
+
+    /// Largest microplane damage `max_I d(gamma_I)` of a history (an alternative output scalar).
+    pub fn max_plane_damage(&self, h: &[f64]) -> f64 {
+        h.iter()
+            .map(|&g| self.damage_law(g.max(self.params.gamma_0)).0)
+            .fold(0.0, f64::max)
+    }
+}
+
+impl Constitutive for Microplane {
+    fn history_len(&self) -> usize {
+        self.dirs.len()
+    }
+
+    fn init_history(&self, h: &mut [f64]) {
+        h.fill(self.params.gamma_0);
+    }
+
+    fn update(
+        &self,
+        f: &Matrix3<f64>,
+        eta_bar: f64,
+        h_n: &[f64],
+        h_trial: &mut [f64],
+        out: &mut Response,
+    ) -> Result<(), MaterialError> {
+        let nd = self.dirs.len();
+        for got in [h_n.len(), h_trial.len()] {
+            if got != nd {
+                return Err(MaterialError::HistoryLength { expected: nd, got });
+            }
+        }
+        check_finite(f, eta_bar)?;
+        let det = f.determinant();
+        if det <= 0.0 {
+            return Err(MaterialError::NonPositiveJacobian { det });
+        }
+        let (k1, k2, k_mic, g_mic) = (self.k1, self.k2, self.k_mic, self.g_mic);
+        let gamma_0 = self.params.gamma_0;
+
+        let e = green_lagrange(f);
+        let tr = e[0] + e[1] + e[2];
+        let ev = tr / 3.0;
+        let a_vol = k1 * tr; // = 3 k1 E_V
+
+        // Pass 1: projections and local equivalent strains (eq. 14).
+        let mut ed_all = [[0.0; 3]; MAX_DIRECTIONS];
+        let mut ned_all = [0.0; MAX_DIRECTIONS];
+        let mut r_all = [0.0; MAX_DIRECTIONS];
+        let mut eta_mic = [0.0; MAX_DIRECTIONS];
+        let (mut eta, mut i_max) = (f64::NEG_INFINITY, 0);
+        let mut eta_mean = 0.0;
+        for (i, dir) in self.dirs.iter().enumerate() {
+            let (ed, ned) = project(&dir.n, &e, ev);
+            let ed2 = ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2];
+            let r = (a_vol * a_vol + 1.5 * k2 * ed2).sqrt();
+            let em = a_vol + r;
+            ed_all[i] = ed;
+            ned_all[i] = ned;
+            r_all[i] = r;
+            eta_mic[i] = em;
+            eta_mean += dir.w6 / 3.0 * em;
+            if em > eta {
+                eta = em;
+                i_max = i;
+            }
+        }
+        // d eta_mic,I / dE = alpha_I I + beta_I Dev^T . E_D,I
+        let grad_coeffs = |i: usize| -> (f64, f64) {
+            let r = r_all[i];
+            if r > R_TINY {
+                (k1 * (1.0 + a_vol / r), 1.5 * k2 / r)
+            } else if a_vol > 0.0 {
+                (2.0 * k1, 0.0)
+            } else {
+                (0.0, 0.0)
+            }
+        };
+        let grad_eta_mic = |i: usize| -> Sym6 {
+            let (ga, gb) = grad_coeffs(i);
+            let t = dev_t(&self.dirs[i].n, &ed_all[i], ned_all[i]);
+            [
+                ga + gb * t[0],
+                ga + gb * t[1],
+                ga + gb * t[2],
+                gb * t[3],
+                gb * t[4],
+                gb * t[5],
+            ]
+        };
+        let mut g_eta: Sym6 = [0.0; 6];
+        match self.params.eta_mode {
+            EtaMode::Max => g_eta = grad_eta_mic(i_max),
+            EtaMode::Mean => {
+                eta = eta_mean;
+                for (i, dir) in self.dirs.iter().enumerate() {
+                    let g = grad_eta_mic(i);
+                    for a in 0..6 {
+                        g_eta[a] += dir.w6 / 3.0 * g[a];
+                    }
+                }
+            }
+        }
+        let ratio_mode = eta > ETA_TINY;
+        let q = if ratio_mode { eta_bar / eta } else { 0.0 };
+
+        // Pass 2: history, damage, stress, tangent.
+        let mut s_tot: Sym6 = [0.0; 6];
+        let mut d_tot = [[0.0; 6]; 6];
+        let (mut m0, mut mm) = (0.0, [0.0; 6]); // sum w6 (1 - d) and sum w6 (1 - d) n (x) n
+        let mut v: Sym6 = [0.0; 6]; // coefficient of the rank-one term v (x) d eta/dE
+        let mut ds_deb: Sym6 = [0.0; 6];
+        let (mut psi, mut psi0, mut d_mean) = (0.0, 0.0, 0.0);
+        for (i, dir) in self.dirs.iter().enumerate() {
+            let eb_mic = if ratio_mode { q * eta_mic[i] } else { eta_bar };
+            let g_n = h_n[i];
+            let loading = eb_mic > g_n && eb_mic > gamma_0;
+            let gamma = gamma_0.max(g_n).max(eb_mic);
+            h_trial[i] = gamma;
+            let (omd, dd) = if gamma > gamma_0 {
+                self.integrity(gamma)
+            } else {
+                (1.0, 0.0)
+            };
+            let d = 1.0 - omd;
+            let ed = &ed_all[i];
+            let ned = ned_all[i];
+            let t = dev_t(&dir.n, ed, ned);
+            let vol = k_mic * ev / 3.0;
+            let s = [
+                vol + 2.0 * g_mic * t[0],
+                vol + 2.0 * g_mic * t[1],
+                vol + 2.0 * g_mic * t[2],
+                2.0 * g_mic * t[3],
+                2.0 * g_mic * t[4],
+                2.0 * g_mic * t[5],
+            ];
+            let p0 =
+                0.5 * k_mic * ev * ev + g_mic * (ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2]);
+            let wd = dir.w6 * omd;
+            psi += wd * p0;
+            psi0 += dir.w6 * p0;
+            d_mean += dir.w6 / 3.0 * d;
+            m0 += wd;
+            for a in 0..6 {
+                s_tot[a] += wd * s[a];
+                mm[a] += wd * dir.nn[a];
+            }
+            if loading {
+                let coef = dir.w6 * dd;
+                if ratio_mode {
+                    // d eta_bar_mic/dE = q (d eta_mic/dE - (eta_mic/eta) d eta/dE)
+                    let (ga, gb) = grad_coeffs(i);
+                    let cq = coef * q;
+                    let rel = eta_mic[i] / eta;
+                    for a in 0..6 {
+                        let sa = cq * s[a];
+                        for b in 0..3 {
+                            d_tot[a][b] -= sa * (ga + gb * t[b]);
+                        }
+                        for b in 3..6 {
+                            d_tot[a][b] -= sa * gb * t[b];
+                        }
+                        v[a] += sa * rel;
+                        ds_deb[a] -= coef * rel * s[a];
+                    }
+                } else {
+                    for a in 0..6 {
+                        ds_deb[a] -= coef * s[a];
+                    }
+                }
+            }
+        }
+        self.add_elastic_tangent(m0, &mm, &mut d_tot);
+        if ratio_mode {
+            for a in 0..6 {
+                for b in 0..6 {
+                    d_tot[a][b] += v[a] * g_eta[b];
+                }
+            }
+        }
+
+        first_piola_from_pk2(f, &s_tot, &d_tot, &mut out.p, &mut out.a);
+        out.dp_deta_bar = f * super::sym_to_matrix(&ds_deb);
+        out.eta = eta;
+        out.deta_df = f * super::sym_to_matrix(&g_eta);
+        out.energy = psi;
+        out.damage = if psi0 > 0.0 { 1.0 - psi / psi0 } else { d_mean };
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::fdcheck::{eval, generic_f, rel_err, rotation, tangent_errors};
+    use crate::material::sym_to_matrix;
+
+    fn paper() -> Microplane {
+        Microplane::new(Preset::Paper.params()).unwrap()
+    }
+
+    fn fresh(m: &Microplane) -> Vec<f64> {
+        let mut h = vec![0.0; m.history_len()];
+        m.init_history(&mut h);
+        h
+    }
+
+    #[test]
+    fn undamaged_stress_is_isotropic_hooke_in_green_strain() {
+        for q in [
+            Quadrature::Bo21,
+            Quadrature::Bo28,
+            Quadrature::Bo33,
+            Quadrature::Bo61,
+        ] {
+            let m = Microplane::new(MicroplaneParams {
+                quadrature: q,
+                ..Preset::Paper.params()
+            })
+            .unwrap();
+            let (kk, gg) = (18750.0, 15254.0);
+            for scale in [1e-4, 0.2] {
+                let f = generic_f(scale);
+                // eta_bar = 0 keeps every plane undamaged whatever the strain.
+                let (r, h) = eval(&m, &f, 0.0, &fresh(&m));
+                let e = sym_to_matrix(&green_lagrange(&f));
+                let s_exact = Matrix3::identity() * (kk * e.trace())
+                    + (e - Matrix3::identity() * (e.trace() / 3.0)) * (2.0 * gg);
+                let s = f.try_inverse().unwrap() * r.p;
+                assert!(
+                    (s - s_exact).norm() <= 1e-10 * s_exact.norm(),
+                    "{q:?}: S = {s} vs {s_exact}"
+                );
+                let psi = 0.5 * kk * e.trace().powi(2)
+                    + gg * (e - Matrix3::identity() * (e.trace() / 3.0)).norm_squared();
+                assert!((r.energy - psi).abs() <= 1e-10 * psi, "{q:?}");
+                assert_eq!(r.damage, 0.0);
+                assert!(h.iter().all(|&g| g == m.params().gamma_0));
+            }
+        }
+    }
+
+    #[test]
+    fn micro_parameters_follow_the_paper() {
+        let m = paper();
+        let (k1, k2) = m.k1_k2();
+        assert!((k1 - 13.0 / (28.0 * 0.64)).abs() < 1e-14);
+        assert!((k2 - 3.0 / (14.0 * 1.18 * 1.18)).abs() < 1e-14);
+        assert_eq!(m.micro_moduli(), (56250.0, 15254.0));
+        // Uniaxial stress, small strain: the plane normal to the load sees eta_mic = 1.063 eps.
+        let (eps, nu) = (1e-6, 0.18);
+        let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(
+            1.0 + eps,
+            1.0 - nu * eps,
+            1.0 - nu * eps,
+        ));
+        let (r, _) = eval(&m, &f, 0.0, &fresh(&m));
+        assert!(
+            (r.eta / eps - 1.063).abs() < 5e-4,
+            "eta/eps = {}",
+            r.eta / eps
+        );
+    }
+
+    #[test]
+    fn damage_law_limits() {
+        let m = paper();
+        let g0 = m.params().gamma_0;
+        assert_eq!(m.damage_law(g0).0, 0.0);
+        let mut prev = 0.0;
+        for k in 1..200 {
+            let gamma = g0 * (1.0 + 0.1 * k as f64);
+            let (d, dd) = m.damage_law(gamma);
+            assert!(d > prev && d < 1.0 && dd > 0.0);
+            // residual microplane stress (1 - d) gamma >= (1 - alpha) gamma_0
+            assert!((1.0 - d) * gamma >= (1.0 - m.params().alpha) * g0 * (1.0 - 1e-12));
+            let h = 1e-7 * gamma;
+            let fd = (m.damage_law(gamma + h).0 - m.damage_law(gamma - h).0) / (2.0 * h);
+            assert!((fd - dd).abs() < 1e-6 * dd, "d' at {gamma}: {dd} vs {fd}");
+            prev = d;
+        }
+    }
+
+    /// The states of the tangent test: (label, F, eta_bar, committed history).
+    fn states(m: &Microplane, scale: f64) -> Vec<(String, Matrix3<f64>, f64, Vec<f64>)> {
+        let h0 = fresh(m);
+        let f_load = generic_f(scale);
+        let (r_load, h_load) = eval(m, &f_load, 0.0, &h0);
+        let mut v = Vec::new();
+        // eta_bar below gamma_0: undamaged, elastic.
+        v.push((
+            "undamaged".into(),
+            f_load,
+            0.5 * m.params().gamma_0,
+            h0.clone(),
+        ));
+        // loading: local (eta_bar = eta) and nonlocal (eta_bar != eta) from a virgin state.
+        v.push(("loading local".into(), f_load, r_load.eta, h0.clone()));
+        v.push((
+            "loading nonlocal".into(),
+            f_load,
+            1.3 * r_load.eta,
+            h0.clone(),
+        ));
+        // committed history from the loaded state
+        let (_, h_peak) = eval(m, &f_load, r_load.eta, &h0);
+        assert!(h_load.iter().all(|&g| g == m.params().gamma_0));
+        let f_unload = generic_f(0.6 * scale);
+        let (r_un, _) = eval(m, &f_unload, 0.0, &h_peak);
+        v.push(("unloading".into(), f_unload, r_un.eta, h_peak.clone()));
+        let f_reload = generic_f(1.4 * scale);
+        let (r_re, _) = eval(m, &f_reload, 0.0, &h_peak);
+        v.push(("reloading".into(), f_reload, r_re.eta, h_peak.clone()));
+        v.push((
+            "reloading nonlocal".into(),
+            f_reload,
+            0.8 * r_re.eta,
+            h_peak,
+        ));
+        v
+    }
+
+    #[test]
+    fn tangents_match_finite_differences_in_all_states() {
+        for mode in [EtaMode::Max, EtaMode::Mean] {
+            let m = Microplane::new(MicroplaneParams {
+                eta_mode: mode,
+                ..Preset::Paper.params()
+            })
+            .unwrap();
+            for scale in [2.5e-3, 0.1] {
+                let mut n_loading_states = 0;
+                for (label, f, eb, h) in states(&m, scale) {
+                    let (r, ht) = eval(&m, &f, eb, &h);
+                    let n_loading = ht.iter().zip(&h).filter(|(a, b)| a > b).count();
+                    if label.starts_with("loading") || label.starts_with("reloading") {
+                        assert!(n_loading > 0, "{mode:?} {scale} {label}: no plane loads");
+                        n_loading_states += 1;
+                    }
+                    if label == "unloading" || label == "undamaged" {
+                        assert_eq!(n_loading, 0, "{mode:?} {scale} {label}");
+                        assert_eq!(r.dp_deta_bar, Matrix3::zeros());
+                    }
+                    let (ea, ep, ee) = tangent_errors(&m, &f, eb, &h);
+                    let tag = format!("{mode:?} scale {scale} {label}");
+                    assert!(ea < 1e-6, "{tag}: A rel err {ea}");
+                    assert!(ep < 1e-6, "{tag}: dP/d eta_bar rel err {ep}");
+                    assert!(ee < 1e-6, "{tag}: d eta/dF rel err {ee}");
+                }
+                assert_eq!(n_loading_states, 4);
+            }
+        }
+    }
+
+    #[test]
+    fn tangent_at_tiny_eta_and_pure_dilatation() {
+        let m = paper();
+        let h0 = fresh(&m);
+        // Pure dilatation: E_D = 0 on every plane, r_I = k1 tr E > 0 (limit branch of d eta_mic/dE).
+        let f = Matrix3::identity() * 1.002;
+        let (ea, ep, ee) = tangent_errors(&m, &f, 0.0, &h0);
+        assert!(ea < 1e-6 && ep < 1e-6 && ee < 1e-6, "{ea} {ep} {ee}");
+        // Undeformed point with eta_bar > gamma_0 from its neighbours: every plane damages uniformly.
+        let (r, h) = eval(&m, &Matrix3::identity(), 2e-3, &h0);
+        assert!(r.eta == 0.0 && h.iter().all(|&g| g == 2e-3));
+        assert!(r.p.norm() < 1e-9);
+        assert!(r.dp_deta_bar.norm() < 1e-9);
+        let (d, _) = m.damage_law(2e-3);
+        assert!((r.damage - d).abs() < 1e-14);
+    }
+
+    #[test]
+    fn frame_invariance() {
+        let m = paper();
+        let h0 = fresh(&m);
+        let q = rotation([0.4, 1.1, -0.6]);
+        for scale in [2.5e-3, 0.1] {
+            let f = generic_f(scale);
+            let (r, h) = eval(&m, &f, 0.0, &h0);
+            let (r_l, h_l) = eval(&m, &f, r.eta, &h0);
+            let (rq, hq) = eval(&m, &(q * f), r.eta, &h0);
+            assert!(rel_err(&rq.p, &(q * r_l.p)) < 1e-12, "P(QF) != Q P(F)");
+            assert!((rq.eta - r.eta).abs() <= 1e-12 * r.eta);
+            assert!(rel_err(&rq.deta_df, &(q * r_l.deta_df)) < 1e-12);
+            assert!(rel_err(&rq.dp_deta_bar, &(q * r_l.dp_deta_bar)) < 1e-12);
+            assert!(hq.iter().zip(&h_l).all(|(a, b)| (a - b).abs() <= 1e-12 * b));
+            assert!((rq.energy - r_l.energy).abs() <= 1e-12 * r_l.energy);
+            assert!(h.iter().all(|&g| g == m.params().gamma_0));
+        }
+    }
+
+    /// Symmetric stretch `U = sqrt(I + 2 E)` with a given Green strain.
+    fn stretch_with_green_strain(e: &Matrix3<f64>) -> Matrix3<f64> {
+        let c = Matrix3::identity() + e * 2.0;
+        let eig = c.symmetric_eigen();
+        eig.eigenvectors
+            * Matrix3::from_diagonal(&eig.eigenvalues.map(f64::sqrt))
+            * eig.eigenvectors.transpose()
+    }
+
+    #[test]
+    fn damage_is_monotone_and_unloading_is_secant() {
+        let m = paper();
+        let mut h = fresh(&m);
+        let f_peak = generic_f(5e-3);
+        let e_peak = sym_to_matrix(&green_lagrange(&f_peak));
+        // load - unload to zero strain - reload beyond: E = lambda E_peak, local eta_bar = eta
+        let path: Vec<f64> = (0..=20)
+            .map(|k| k as f64 / 20.0)
+            .chain((0..=20).map(|k| 1.0 - k as f64 / 20.0))
+            .chain((0..=30).map(|k| k as f64 / 20.0))
+            .collect();
+        let mut prev_damage_planes = h.clone();
+        let mut s_at_peak = None;
+        for (step, &lam) in path.iter().enumerate() {
+            let f = stretch_with_green_strain(&(e_peak * lam));
+            let (r0, _) = eval(&m, &f, 0.0, &h);
+            let (r, ht) = eval(&m, &f, r0.eta, &h);
+            assert!(
+                ht.iter().zip(&prev_damage_planes).all(|(a, b)| a >= b),
+                "history decreased at {step}"
+            );
+            assert!(r.damage < 1.0 && r.damage >= 0.0);
+            let s = f.try_inverse().unwrap() * r.p;
+            if (21..=41).contains(&step) {
+                // unloading: history frozen, S linear in E along the ray (secant stiffness)
+                assert_eq!(ht, h, "history changed while unloading at step {step}");
+                let s_peak: Matrix3<f64> = s_at_peak.unwrap();
+                assert!(
+                    (s - s_peak * lam).norm() <= 1e-9 * s_peak.norm(),
+                    "not secant at {lam}"
+                );
+            }
+            if step == 20 {
+                s_at_peak = Some(s);
+                assert!(r.damage > 0.5, "path must damage: {}", r.damage);
+            }
+            if step == 41 {
+                assert!(
+                    s.norm() < 1e-9 * s_at_peak.unwrap().norm(),
+                    "stress at zero strain: {s}"
+                );
+            }
+            prev_damage_planes = ht.clone();
+            h = ht;
+        }
+    }
+}

@@ -1,0 +1,225 @@
+//! Builds a run ([`Setup`]) from a configuration: seeds the bodies, the rigid bodies and the background
+//! grid, and the compact tension (CT) specimen of the source paper.
+
+use crate::config::{ConstraintSection, MotionSpec, RigidBodySection, RunConfig};
+use crate::grid::{Grid, GridError};
+use crate::material::{Material, MaterialError};
+use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
+use crate::solver::{NodeBox, RigidBody, Setup, TimeIntegration};
+use nalgebra::Vector2;
+
+/// Failure to build a run from a valid configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// Seeding failed (e.g. a geometry with no material).
+    #[error("{what}: {source}")]
+    Seeding {
+        /// Which body.
+        what: String,
+        /// Cause.
+        source: ParticleError,
+    },
+    /// A body's geometry holds no grid cell centre: no material point.
+    #[error(
+        "{what}: the geometry contains no material point at cell size {h} mm with {ppc}x{ppc} points per cell"
+    )]
+    NoMaterial {
+        /// Which body.
+        what: String,
+        /// Cell size (mm).
+        h: f64,
+        /// Points per cell and direction.
+        ppc: usize,
+    },
+    /// Invalid material.
+    #[error("{what}: {source}")]
+    Material {
+        /// Which body.
+        what: String,
+        /// Cause.
+        source: MaterialError,
+    },
+    /// Grid construction failed.
+    #[error(transparent)]
+    Grid(#[from] GridError),
+}
+
+/// A deformable body before seeding.
+struct BodyDef {
+    name: String,
+    geometry: Geometry,
+    density: f64,
+    material: Material,
+    velocity: Vector2<f64>,
+}
+
+/// The run described by `cfg` (options prefix: none, so plain `-snes_*` options apply).
+pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
+    let h = cfg.grid.cell_size;
+    let ppc = cfg.shape.points_per_cell;
+    let mut bodies = Vec::new();
+    let mut constraints: Vec<ConstraintSection> = cfg.constraint.clone();
+    let mut rigid_defs: Vec<RigidBodySection> = cfg.rigid_body.clone();
+    if let Some(ct) = &cfg.ct {
+        let (mid, half) = (0.5 * ct.height, 0.5 * ct.notch_width);
+        let (lower, upper) = (mid - half, mid + half);
+        bodies.push(BodyDef {
+            name: "concrete".into(),
+            geometry: Geometry {
+                include: vec![Region::Rect {
+                    min: [0.0, 0.0],
+                    max: [ct.width, ct.height],
+                }],
+                exclude: vec![Region::Rect {
+                    min: [-1.0, lower],
+                    max: [ct.notch_length, upper],
+                }],
+            },
+            density: ct.density,
+            material: ct
+                .material
+                .build()
+                .map_err(|source| ScenarioError::Material {
+                    what: "ct.material".into(),
+                    source,
+                })?,
+            velocity: Vector2::zeros(),
+        });
+        let [a, b] = ct.load_zone;
+        let t = ct.plate_thickness;
+        let (down, up) = if ct.symmetric {
+            (-0.5 * ct.loading_rate, 0.5 * ct.loading_rate)
+        } else {
+            (-ct.loading_rate, 0.0)
+        };
+        rigid_defs.push(RigidBodySection {
+            name: "loading_plate".into(),
+            geometry: Geometry {
+                include: vec![Region::Rect {
+                    min: [a, lower],
+                    max: [b, lower + t],
+                }],
+                exclude: vec![],
+            },
+            x: MotionSpec::Keyword(crate::config::Keyword::Free),
+            y: MotionSpec::Velocity { velocity: down },
+            rise_time: ct.rise_time,
+        });
+        rigid_defs.push(RigidBodySection {
+            name: "support_plate".into(),
+            geometry: Geometry {
+                include: vec![Region::Rect {
+                    min: [a, upper - t],
+                    max: [b, upper],
+                }],
+                exclude: vec![],
+            },
+            x: MotionSpec::Keyword(crate::config::Keyword::Fixed),
+            y: MotionSpec::Velocity { velocity: up },
+            rise_time: ct.rise_time,
+        });
+    }
+    for (i, b) in cfg.body.iter().enumerate() {
+        bodies.push(BodyDef {
+            name: b.name.clone(),
+            geometry: b.geometry.clone(),
+            density: b.density,
+            material: b
+                .material
+                .build()
+                .map_err(|source| ScenarioError::Material {
+                    what: format!("body[{i}] ({})", b.name),
+                    source,
+                })?,
+            velocity: Vector2::new(b.initial_velocity[0], b.initial_velocity[1]),
+        });
+    }
+    let mut particles = Particles::new();
+    let mut materials = Vec::new();
+    for (tag, body) in bodies.into_iter().enumerate() {
+        let what = format!("body `{}`", body.name);
+        let seeding = Seeding {
+            h,
+            points_per_cell: ppc,
+            density: body.density,
+            body: tag as u16,
+        };
+        let mut p =
+            Particles::seed(&body.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
+                what: what.clone(),
+                source,
+            })?;
+        if p.is_empty() {
+            return Err(ScenarioError::NoMaterial { what, h, ppc });
+        }
+        p.v.iter_mut().for_each(|v| *v = body.velocity);
+        particles
+            .append(&p)
+            .map_err(|source| ScenarioError::Seeding { what, source })?;
+        materials.push(body.material);
+    }
+    let mut rigid = Vec::new();
+    for r in &rigid_defs {
+        let what = format!("rigid body `{}`", r.name);
+        let seeding = Seeding {
+            h,
+            points_per_cell: ppc,
+            density: 1.0,
+            body: 0,
+        };
+        let p =
+            Particles::seed(&r.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
+                what: what.clone(),
+                source,
+            })?;
+        if p.is_empty() {
+            return Err(ScenarioError::NoMaterial { what, h, ppc });
+        }
+        rigid.push(RigidBody {
+            name: r.name.clone(),
+            particles: p,
+            motion: [r.x.motion(), r.y.motion()],
+            rise_time: r.rise_time,
+        });
+    }
+    let mut lo = Vector2::repeat(f64::INFINITY);
+    let mut hi = Vector2::repeat(f64::NEG_INFINITY);
+    for x in particles
+        .x
+        .iter()
+        .chain(rigid.iter().flat_map(|r| r.particles.x.iter()))
+    {
+        lo = lo.inf(x);
+        hi = hi.sup(x);
+    }
+    let grid = Grid::covering(lo, hi, h, cfg.grid.margin_cells.max(1))?;
+    let boxes = constraints
+        .drain(..)
+        .map(|c| NodeBox {
+            name: c.name,
+            min: Vector2::new(c.min[0], c.min[1]),
+            max: Vector2::new(c.max[0], c.max[1]),
+            motion: [c.x.motion(), c.y.motion()],
+            rise_time: c.rise_time,
+        })
+        .collect();
+    let t = &cfg.time;
+    Ok(Setup {
+        grid,
+        particles,
+        materials,
+        shape: cfg.shape.kind,
+        time: TimeIntegration {
+            dt: t.dt,
+            dt_min: t.dt_min.unwrap_or(t.dt / 64.0),
+            beta: t.beta,
+            gamma: t.gamma,
+            quasi_static: t.quasi_static,
+        },
+        body_force: Vector2::new(cfg.body_force[0], cfg.body_force[1]),
+        body_force_ramp: cfg.body_force_ramp,
+        boxes,
+        rigid,
+        options_prefix: None,
+    })
+}

@@ -1,0 +1,649 @@
+//! The implicit MPM time step (spec Sec. 1): shape functions at `t_n`, P2G, unknown numbering and
+//! constraints, Newton on the coupled (du, eta_bar) system through PETSc SNES, G2P and commit; with
+//! time-step halving when a step fails.
+//!
+//! Committed state (particles, time) is only modified after SNES converges: a failed attempt leaves the
+//! simulation exactly as it was, so it can be retried with a smaller time step.
+
+use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
+use crate::dofs::DofMap;
+use crate::grid::Grid;
+use crate::material::{Constitutive, Material};
+use crate::particles::Particles;
+use crate::petsc::{
+    self, CallbackError, IndexSet, Matrix, NonlinearProblem, SessionGuard, Snes, SolveInfo, Vector,
+};
+use crate::shape::{ShapeError, ShapeKind, ShapeTable};
+use crate::transfer::{self, GridState, StepSolution, TransferError};
+use nalgebra::{Matrix2, Vector2};
+use std::time::Instant;
+
+/// Time integration settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeIntegration {
+    /// Nominal time step (s).
+    pub dt: f64,
+    /// Smallest time step the halving may reach before the run stops (s).
+    pub dt_min: f64,
+    /// Newmark beta (> 0; 1/4 = trapezoidal rule).
+    pub beta: f64,
+    /// Newmark gamma (1/2: no numerical damping).
+    pub gamma: f64,
+    /// Drop inertia (static equilibrium each step, loads ramped with time).
+    pub quasi_static: bool,
+}
+
+impl Default for TimeIntegration {
+    fn default() -> Self {
+        Self {
+            dt: 1e-6,
+            dt_min: 1e-6 / 64.0,
+            beta: 0.25,
+            gamma: 0.5,
+            quasi_static: false,
+        }
+    }
+}
+
+/// Which velocity a constrained component follows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Motion {
+    /// Not constrained.
+    Free,
+    /// Prescribed velocity (mm/s); 0 = fixed.
+    Velocity(f64),
+}
+
+/// Grid nodes inside an axis-aligned box (mm), constrained per component.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeBox {
+    /// Name used in reports (reaction force columns).
+    pub name: String,
+    /// Lower-left corner (mm).
+    pub min: Vector2<f64>,
+    /// Upper-right corner (mm).
+    pub max: Vector2<f64>,
+    /// Motion of the x and y components.
+    pub motion: [Motion; 2],
+    /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
+    pub rise_time: f64,
+}
+
+/// A rigid body of particles (e.g. a steel loading plate) moving with a prescribed velocity; every grid
+/// node in the support of its particles follows it in the constrained components each step.
+#[derive(Debug, Clone)]
+pub struct RigidBody {
+    /// Name used in reports.
+    pub name: String,
+    /// Its particles (only positions and domains are used).
+    pub particles: Particles,
+    /// Motion of the x and y components.
+    pub motion: [Motion; 2],
+    /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
+    pub rise_time: f64,
+}
+
+/// Displacement of a component moving with velocity `v` that rises linearly over `rise` from 0, between
+/// `t` and `t + dt`: `v (g(t + dt) - g(t))` with `g(t) = t^2/(2 rise)` for `t < rise`, else `t - rise/2`.
+pub fn prescribed_increment(v: f64, rise: f64, t: f64, dt: f64) -> f64 {
+    let g = |t: f64| {
+        if rise > 0.0 && t < rise {
+            t * t / (2.0 * rise)
+        } else {
+            t - 0.5 * rise.max(0.0)
+        }
+    };
+    v * (g(t + dt) - g(t))
+}
+
+/// Per-component prescribed increments of a constraint set in the step `[t, t + dt]`.
+fn increments(motion: &[Motion; 2], rise: f64, t: f64, dt: f64) -> [Option<f64>; 2] {
+    motion.map(|m| match m {
+        Motion::Free => None,
+        Motion::Velocity(v) => Some(prescribed_increment(v, rise, t, dt)),
+    })
+}
+
+/// Everything that defines a run.
+pub struct Setup {
+    /// Background grid.
+    pub grid: Grid,
+    /// Deformable material points (body tag = index into `materials`).
+    pub particles: Particles,
+    /// One constitutive law per body tag.
+    pub materials: Vec<Material>,
+    /// Interpolator.
+    pub shape: ShapeKind,
+    /// Time integration.
+    pub time: TimeIntegration,
+    /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
+    pub body_force: Vector2<f64>,
+    /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
+    pub body_force_ramp: f64,
+    /// Node-box constraints.
+    pub boxes: Vec<NodeBox>,
+    /// Rigid loading bodies.
+    pub rigid: Vec<RigidBody>,
+    /// Options prefix of the SNES (None: plain `-snes_*`).
+    pub options_prefix: Option<String>,
+}
+
+/// Failure of a step or a run.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// Shape functions could not be evaluated (a particle or corner left the grid).
+    #[error(transparent)]
+    Shape(#[from] ShapeError),
+    /// P2G/G2P failed.
+    #[error(transparent)]
+    Transfer(#[from] TransferError),
+    /// PETSc failed (bad options, errors in callbacks).
+    #[error(transparent)]
+    Petsc(#[from] petsc::PetscError),
+    /// Evaluation failed outside SNES.
+    #[error(transparent)]
+    Assembly(#[from] AssemblyError),
+    /// Newton did not converge even with the smallest time step.
+    #[error(
+        "step {step} at t = {time:e} s did not converge down to dt = {dt:e} s (dt_min {dt_min:e} s): {reason}"
+    )]
+    Diverged {
+        /// Step number.
+        step: usize,
+        /// Time at the start of the step (s).
+        time: f64,
+        /// Last time step tried (s).
+        dt: f64,
+        /// Configured minimum (s).
+        dt_min: f64,
+        /// SNES reason or domain error.
+        reason: String,
+    },
+    /// No material point carries mass.
+    #[error("the model has no material points")]
+    Empty,
+}
+
+/// Per-step statistics and results.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct StepReport {
+    /// Step number (1-based).
+    pub step: usize,
+    /// Time at the end of the step (s).
+    pub time: f64,
+    /// Time step used (s).
+    pub dt: f64,
+    /// Attempts (1 if the first try converged; each retry halves dt).
+    pub attempts: usize,
+    /// SNES statistics of the converged attempt.
+    pub solve: SolveInfo,
+    /// Unknowns and Jacobian nonzeros.
+    pub unknowns: usize,
+    /// Jacobian nonzeros.
+    pub nonzeros: usize,
+    /// Reaction force per constraint set, `(name, [R_x, R_y])` (N per mm thickness).
+    pub reactions: Vec<(String, [f64; 2])>,
+    /// Mean prescribed displacement of each constraint set, `(name, [u_x, u_y])` (mm).
+    pub displacements: Vec<(String, [f64; 2])>,
+    /// Kinetic energy `sum 1/2 m v^2` (N mm per mm thickness).
+    pub kinetic_energy: f64,
+    /// Stored energy `sum V^0 Psi` (N mm per mm thickness).
+    pub stored_energy: f64,
+    /// Work of the constraint reactions and body forces so far (N mm per mm thickness).
+    pub external_work: f64,
+    /// Wall time of the set-up (shape functions, P2G, pattern), of the SNES solve and in total (s).
+    pub wall_setup: f64,
+    /// Wall time of the SNES solve (s), of which `wall_assembly` was spent evaluating residuals and
+    /// Jacobians in Rust; the rest is PETSc (linear solves, line search).
+    pub wall_solve: f64,
+    /// Wall time of residual and Jacobian evaluations during the solve (s).
+    pub wall_assembly: f64,
+    /// Residual and Jacobian evaluations during the solve.
+    pub evaluations: [usize; 2],
+    /// Wall time of the whole step (s).
+    pub wall_total: f64,
+}
+
+/// A running simulation: the committed state and the reusable per-step workspace.
+pub struct Simulation {
+    /// Run definition; `particles` in it is the committed state.
+    pub setup: Setup,
+    /// Time reached (s).
+    pub time: f64,
+    /// Steps completed.
+    pub step: usize,
+    /// Time step to try next (s).
+    pub dt: f64,
+    /// Work of reactions and body forces so far (N mm per mm thickness).
+    pub external_work: f64,
+    /// Accumulated prescribed displacement per constraint set (mm), in report order.
+    accumulated: Vec<[f64; 2]>,
+    /// Last reactions (for the trapezoidal work increment).
+    last_reactions: Vec<[f64; 2]>,
+    table: ShapeTable,
+    rigid_tables: Vec<ShapeTable>,
+    grid_state: GridState,
+    dofs: DofMap,
+    assembler: Assembler,
+}
+
+/// The nonlinear problem of one step, handed to SNES.
+struct StepProblem<'a, 'b> {
+    input: &'a StepInput<'b>,
+    assembler: &'a mut Assembler,
+    /// Wall time spent in residual and Jacobian evaluations (s).
+    assembly_time: f64,
+    /// Residual and Jacobian evaluations.
+    residuals: usize,
+    jacobians: usize,
+}
+
+impl NonlinearProblem for StepProblem<'_, '_> {
+    fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
+        let t = Instant::now();
+        let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
+        let (asm, input) = (&mut *self.assembler, self.input);
+        let r = x
+            .read(|xs| asm.evaluate(input, xs))
+            .map_err(fatal)?
+            .map_err(|e| CallbackError::Domain(e.to_string()))
+            .and_then(|()| {
+                x.read(|xs| f.write(|out| asm.residual(input, xs, out, false)))
+                    .map_err(fatal)?
+                    .map_err(fatal)?
+                    .map_err(|e| CallbackError::Domain(e.to_string()))
+            });
+        self.assembly_time += t.elapsed().as_secs_f64();
+        self.residuals += 1;
+        r
+    }
+
+    fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
+        let t = Instant::now();
+        let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
+        let (asm, input) = (&mut *self.assembler, self.input);
+        x.read(|xs| asm.evaluate(input, xs))
+            .map_err(fatal)?
+            .map_err(|e| CallbackError::Domain(e.to_string()))?;
+        let r = jac.set_values_coo(asm.jacobian(input)).map_err(fatal);
+        self.assembly_time += t.elapsed().as_secs_f64();
+        self.jacobians += 1;
+        r
+    }
+}
+
+impl Simulation {
+    /// A simulation at t = 0 with virgin material history.
+    pub fn new(mut setup: Setup) -> Result<Self, StepError> {
+        if setup.particles.is_empty() {
+            return Err(StepError::Empty);
+        }
+        let stride = setup
+            .materials
+            .iter()
+            .map(|m| m.history_len())
+            .max()
+            .unwrap_or(0);
+        setup.particles.resize_history(stride, 0.0);
+        for p in 0..setup.particles.len() {
+            let m = &setup.materials[setup.particles.body[p] as usize];
+            let h = setup.particles.history_mut(p);
+            m.init_history(&mut h[..m.history_len()]);
+        }
+        let nsets = setup.boxes.len() + setup.rigid.len();
+        let dt = setup.time.dt;
+        Ok(Self {
+            rigid_tables: setup.rigid.iter().map(|_| ShapeTable::new()).collect(),
+            setup,
+            time: 0.0,
+            step: 0,
+            dt,
+            external_work: 0.0,
+            accumulated: vec![[0.0; 2]; nsets],
+            last_reactions: vec![[0.0; 2]; nsets],
+            table: ShapeTable::new(),
+            grid_state: GridState::new(),
+            dofs: DofMap::default(),
+            assembler: Assembler::new(),
+        })
+    }
+
+    /// Unknowns per node: 3 if any material is gradient-enhanced, else 2.
+    pub fn fields(&self) -> usize {
+        if self.setup.materials.iter().any(Material::is_nonlocal) {
+            3
+        } else {
+            2
+        }
+    }
+
+    /// Advances one step of (at most) `self.dt`, halving the step on failure down to `dt_min`; after a
+    /// reduced step the next one tries twice as long again, up to the nominal `dt`.
+    pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
+        let mut dt = self.dt;
+        let mut attempts = 0;
+        loop {
+            attempts += 1;
+            match self.try_step(session, dt)? {
+                Ok(mut report) => {
+                    report.attempts = attempts;
+                    self.dt = (dt * 2.0).min(self.setup.time.dt);
+                    return Ok(report);
+                }
+                Err(reason) => {
+                    let next = dt / 2.0;
+                    if next < self.setup.time.dt_min {
+                        return Err(StepError::Diverged {
+                            step: self.step + 1,
+                            time: self.time,
+                            dt,
+                            dt_min: self.setup.time.dt_min,
+                            reason,
+                        });
+                    }
+                    tracing::warn!(
+                        "step {} at t = {:.6e} s: {reason}; retrying with dt = {next:.3e} s",
+                        self.step + 1,
+                        self.time
+                    );
+                    dt = next;
+                }
+            }
+        }
+    }
+
+    /// One attempt: `Ok(Ok(report))` converged and committed, `Ok(Err(reason))` did not converge
+    /// (nothing changed), `Err` a failure that a smaller step cannot fix.
+    fn try_step(
+        &mut self,
+        session: &SessionGuard,
+        dt: f64,
+    ) -> Result<Result<StepReport, String>, StepError> {
+        let t0 = Instant::now();
+        let s = &self.setup;
+        let grid = &s.grid;
+        self.table.compute(s.shape, grid, &s.particles)?;
+        transfer::particles_to_grid(
+            &self.table,
+            &s.particles,
+            grid,
+            transfer::DEFAULT_RELATIVE_MASS_TOLERANCE,
+            &mut self.grid_state,
+        )?;
+        let nf = self.fields();
+        self.dofs.rebuild(&self.grid_state.active, nf);
+        // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
+        let set_du: Vec<[Option<f64>; 2]> = s
+            .boxes
+            .iter()
+            .map(|b| increments(&b.motion, b.rise_time, self.time, dt))
+            .chain(
+                s.rigid
+                    .iter()
+                    .map(|r| increments(&r.motion, r.rise_time, self.time, dt)),
+            )
+            .collect();
+        let mut sets: Vec<Vec<usize>> = Vec::new();
+        for (b, du) in s.boxes.iter().zip(&set_du) {
+            let mut dofs_of_set = Vec::new();
+            for node in 0..grid.num_nodes() {
+                let x = grid.node_position(node);
+                let inside = (0..2).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
+                if let (true, Some(a)) = (inside, self.dofs.active_index(node)) {
+                    for (c, d) in du.iter().enumerate() {
+                        if let Some(d) = d {
+                            self.dofs.constrain(node, c, *d);
+                            dofs_of_set.push(a * nf + c);
+                        }
+                    }
+                }
+            }
+            sets.push(dofs_of_set);
+        }
+        for ((rb, rt), du) in s
+            .rigid
+            .iter()
+            .zip(self.rigid_tables.iter_mut())
+            .zip(&set_du[s.boxes.len()..])
+        {
+            rt.compute(s.shape, grid, &rb.particles)?;
+            let mut dofs_of_set = Vec::new();
+            for p in 0..rb.particles.len() {
+                for w in rt.weights(p) {
+                    if w.value <= 0.0 {
+                        continue;
+                    }
+                    if let Some(a) = self.dofs.active_index(w.node as usize) {
+                        for (c, d) in du.iter().enumerate() {
+                            if let Some(d) = d {
+                                self.dofs.constrain(w.node as usize, c, *d);
+                                dofs_of_set.push(a * nf + c);
+                            }
+                        }
+                    }
+                }
+            }
+            dofs_of_set.sort_unstable();
+            dofs_of_set.dedup();
+            sets.push(dofs_of_set);
+        }
+        let newmark = (!s.time.quasi_static).then_some(Newmark {
+            beta: s.time.beta,
+            gamma: s.time.gamma,
+            dt,
+        });
+        let t_new = self.time + dt;
+        let load_factor = if s.time.quasi_static && s.body_force_ramp > 0.0 {
+            (t_new / s.body_force_ramp).min(1.0)
+        } else {
+            1.0
+        };
+        let row_scale = s
+            .materials
+            .iter()
+            .map(|m| {
+                let e = m.elastic_moduli();
+                e.bulk + 4.0 * e.shear / 3.0
+            })
+            .fold(0.0, f64::max);
+        let input = StepInput {
+            table: &self.table,
+            particles: &s.particles,
+            materials: &s.materials,
+            dofs: &self.dofs,
+            mass: &self.grid_state.mass,
+            velocity: &self.grid_state.velocity,
+            acceleration: &self.grid_state.acceleration,
+            newmark,
+            body_force: s.body_force * load_factor,
+            row_scale,
+        };
+        self.assembler.begin_step(&input);
+        // PETSc objects of this step (the unknowns change every step: the grid is reset).
+        let n = self.dofs.len();
+        let mut x = Vector::new(session, n, nf)?;
+        let first = x.ownership_range()?.start;
+        let mut jac = Matrix::new(session, n, nf)?;
+        let (rows, cols) = self.assembler.pattern(first);
+        jac.set_pattern_coo(&rows, &cols)?;
+        drop((rows, cols));
+        // Initial guess: du = dt v_I (+ dt^2/2 a_I) for dynamics, 0 quasi-statically; eta_bar from the
+        // particles (mass-weighted projection); prescribed values on constrained components.
+        let mut eb_nodes = vec![0.0; grid.num_nodes()];
+        if nf == 3 {
+            for p in 0..s.particles.len() {
+                for w in self.table.weights(p) {
+                    eb_nodes[w.node as usize] +=
+                        w.value * s.particles.mass[p] * s.particles.eta_bar[p];
+                }
+            }
+        }
+        x.write(|xs| {
+            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+                let node = node as usize;
+                let du = match newmark {
+                    Some(_) => {
+                        dt * self.grid_state.velocity[node]
+                            + 0.5 * dt * dt * self.grid_state.acceleration[node]
+                    }
+                    None => Vector2::zeros(),
+                };
+                xs[a * nf] = du.x;
+                xs[a * nf + 1] = du.y;
+                if nf == 3 {
+                    xs[a * nf + 2] = eb_nodes[node] / self.grid_state.mass[node];
+                }
+                for c in 0..nf {
+                    if let Some(v) = self.dofs.prescribed(a * nf + c) {
+                        xs[a * nf + c] = v;
+                    }
+                }
+            }
+        })?;
+        let setup_time = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let mut snes = Snes::new(session, s.options_prefix.as_deref())?;
+        snes.set_from_options()?;
+        if nf == 3 {
+            // Field index sets for `-pc_type fieldsplit` (names: `-fieldsplit_u_*`, `-fieldsplit_eta_bar_*`).
+            let (u, eb): (Vec<i32>, Vec<i32>) = (0..n)
+                .map(|i| (first + i) as i32)
+                .partition(|i| (*i as usize - first) % nf != 2);
+            let is_u = IndexSet::new(session, &u)?;
+            let is_eb = IndexSet::new(session, &eb)?;
+            snes.set_fieldsplit(&[("u", &is_u), ("eta_bar", &is_eb)])?;
+        }
+        let (info, assembly_time, evaluations) = {
+            let mut problem = StepProblem {
+                input: &input,
+                assembler: &mut self.assembler,
+                assembly_time: 0.0,
+                residuals: 0,
+                jacobians: 0,
+            };
+            let info = snes.solve(&mut problem, &mut x, &mut jac)?;
+            (
+                info,
+                problem.assembly_time,
+                [problem.residuals, problem.jacobians],
+            )
+        };
+        let solve_time = t1.elapsed().as_secs_f64();
+        if !info.converged() {
+            let why = info.domain_errors.last().cloned().unwrap_or_default();
+            return Ok(Err(format!(
+                "SNES {} after {} iterations {why}",
+                info.reason_name, info.iterations
+            )));
+        }
+        // Converged: reactions from the unconstrained residual, then G2P and commit.
+        let xs = x.read(|v| v.to_vec())?;
+        self.assembler.evaluate(&input, &xs)?;
+        let mut phys = vec![0.0; n];
+        self.assembler.residual(&input, &xs, &mut phys, true)?;
+        let reactions: Vec<[f64; 2]> = sets
+            .iter()
+            .map(|dofs| {
+                let mut r = [0.0; 2];
+                for &d in dofs {
+                    r[d % nf] += phys[d];
+                }
+                r
+            })
+            .collect();
+        let nodes = grid.num_nodes();
+        let du_nodes = self.assembler.nodal_du().to_vec();
+        let mut acc_nodes = vec![Vector2::zeros(); nodes];
+        if let Some(nm) = newmark {
+            for &node in self.dofs.active_nodes() {
+                let node = node as usize;
+                acc_nodes[node] = nm.acceleration(
+                    du_nodes[node],
+                    self.grid_state.velocity[node],
+                    self.grid_state.acceleration[node],
+                );
+            }
+        }
+        // Work of the constraints (trapezoidal in the set's reaction; every node of a set moves by the same
+        // prescribed du) and of the body force (b . du weighted by nodal mass).
+        let mut work = 0.0;
+        let bf = s.body_force * load_factor;
+        for &node in self.dofs.active_nodes() {
+            let node = node as usize;
+            work += self.grid_state.mass[node] * bf.dot(&du_nodes[node]);
+        }
+        let gamma = if newmark.is_some() { s.time.gamma } else { 0.0 };
+        let sol = StepSolution {
+            du: &du_nodes,
+            acceleration: &acc_nodes,
+            gamma,
+            dt,
+        };
+        let displacements: Vec<[f64; 2]> =
+            set_du.iter().map(|d| d.map(|v| v.unwrap_or(0.0))).collect();
+        for (k, (r, du)) in reactions.iter().zip(&displacements).enumerate() {
+            for c in 0..2 {
+                work += 0.5 * (r[c] + self.last_reactions[k][c]) * du[c];
+            }
+        }
+        let s = &mut self.setup;
+        transfer::grid_to_particles(&self.table, &s.grid, &sol, &mut s.particles)?;
+        if s.time.quasi_static {
+            s.particles.v.iter_mut().for_each(|v| *v = Vector2::zeros());
+            s.particles.a.iter_mut().for_each(|a| *a = Vector2::zeros());
+        }
+        let new_f: Vec<Matrix2<f64>> = s.particles.f.clone();
+        let stored = self.assembler.commit(&mut s.particles, &new_f);
+        for (rb, du) in s.rigid.iter_mut().zip(&displacements[s.boxes.len()..]) {
+            let dx = Vector2::new(du[0], du[1]);
+            rb.particles.x.iter_mut().for_each(|x| *x += dx);
+            rb.particles
+                .corners
+                .iter_mut()
+                .for_each(|cs| cs.iter_mut().for_each(|c| *c += dx));
+        }
+        for (acc, du) in self.accumulated.iter_mut().zip(&displacements) {
+            acc[0] += du[0];
+            acc[1] += du[1];
+        }
+        self.last_reactions = reactions.clone();
+        self.external_work += work;
+        self.time = t_new;
+        self.step += 1;
+        let kinetic = (0..s.particles.len())
+            .map(|p| 0.5 * s.particles.mass[p] * s.particles.v[p].norm_squared())
+            .sum();
+        let names: Vec<String> = s
+            .boxes
+            .iter()
+            .map(|b| b.name.clone())
+            .chain(s.rigid.iter().map(|r| r.name.clone()))
+            .collect();
+        Ok(Ok(StepReport {
+            step: self.step,
+            time: self.time,
+            dt,
+            attempts: 1,
+            solve: info,
+            unknowns: n,
+            nonzeros: self.assembler.nonzeros(),
+            reactions: names
+                .iter()
+                .cloned()
+                .zip(reactions.iter().copied())
+                .collect(),
+            displacements: names
+                .into_iter()
+                .zip(self.accumulated.iter().copied())
+                .collect(),
+            kinetic_energy: kinetic,
+            stored_energy: stored,
+            external_work: self.external_work,
+            wall_setup: setup_time,
+            wall_solve: solve_time,
+            wall_assembly: assembly_time,
+            evaluations,
+            wall_total: t0.elapsed().as_secs_f64(),
+        }))
+    }
+}
