@@ -588,21 +588,14 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
             }
         }
     }
-    // Inertia on the diagonal block, then constraints: identity rows, zero columns.
+    // Inertia on the diagonal block, then constraints: identity rows. The columns of constrained unknowns
+    // are kept: they are the exact derivative of the free rows, so a Newton step from a guess that does
+    // not yet satisfy the constraints carries the prescribed motion into the interior (linear predictor).
     let diag = cols.binary_search(&(a as u32)).ok();
     if let (Some(nm), Some(d)) = (input.newmark, diag) {
         let mf = input.mass[node] * nm.mass_factor();
         row[d * bs2] += mf;
         row[d * bs2 + nf + 1] += mf;
-    }
-    for (pos, &b) in cols.iter().enumerate() {
-        for kk in 0..nf {
-            if dofs.is_constrained(b as usize * nf + kk) {
-                for i in 0..nf {
-                    row[pos * bs2 + i * nf + kk] = 0.0;
-                }
-            }
-        }
     }
     for i in 0..nf {
         if dofs.is_constrained(a * nf + i) {

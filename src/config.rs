@@ -159,6 +159,14 @@ pub struct GridSection {
     /// Empty cells around the bodies' bounding box.
     #[serde(default = "default_margin")]
     pub margin_cells: usize,
+    /// Nodes whose mass is at most this fraction of the largest nodal mass carry no unknowns (they
+    /// only touch the fringe of a particle domain and would make the system nearly singular).
+    #[serde(default = "default_mass_tolerance")]
+    pub mass_tolerance: f64,
+}
+
+fn default_mass_tolerance() -> f64 {
+    1e-6
 }
 
 fn default_margin() -> usize {
@@ -409,6 +417,13 @@ impl RunConfig {
                 "grid.cell_size",
                 self.grid.cell_size.to_string(),
                 "a cell size > 0 (mm)",
+            ));
+        }
+        if !(0.0..1e-2).contains(&self.grid.mass_tolerance) {
+            return Err(bad(
+                "grid.mass_tolerance",
+                self.grid.mass_tolerance.to_string(),
+                "a fraction in [0, 0.01)",
             ));
         }
         if self.shape.points_per_cell == 0 || self.shape.points_per_cell > 8 {

@@ -3,8 +3,8 @@
 //! The grid is reset every step, so the map is rebuilt every step from the nodal masses of P2G: only
 //! nodes with `m_I` above a relative tolerance carry unknowns. Each active node carries `fields`
 //! interleaved unknowns, `(du_x, du_y)` or `(du_x, du_y, eta_bar)` (block size 2 or 3), numbered in node
-//! order. Constrained components stay in the system as identity rows (so the block structure is kept)
-//! with their prescribed value in the initial guess; their columns are zeroed in the Jacobian.
+//! order. Constrained components stay in the system as scaled identity rows `s (x - prescribed)` (so the
+//! block structure is kept); their columns are kept in the Jacobian.
 
 /// Marker for a node without unknowns.
 pub const INACTIVE: u32 = u32::MAX;

@@ -221,5 +221,6 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         boxes,
         rigid,
         options_prefix: None,
+        mass_tolerance: cfg.grid.mass_tolerance,
     })
 }

@@ -126,6 +126,8 @@ pub struct Setup {
     pub rigid: Vec<RigidBody>,
     /// Options prefix of the SNES (None: plain `-snes_*`).
     pub options_prefix: Option<String>,
+    /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
+    pub mass_tolerance: f64,
 }
 
 /// Failure of a step or a run.
@@ -367,7 +369,7 @@ impl Simulation {
             &self.table,
             &s.particles,
             grid,
-            transfer::DEFAULT_RELATIVE_MASS_TOLERANCE,
+            s.mass_tolerance,
             &mut self.grid_state,
         )?;
         let nf = self.fields();
@@ -467,8 +469,9 @@ impl Simulation {
         let (rows, cols) = self.assembler.pattern(first);
         jac.set_pattern_coo(&rows, &cols)?;
         drop((rows, cols));
-        // Initial guess: du = dt v_I (+ dt^2/2 a_I) for dynamics, 0 quasi-statically; eta_bar from the
-        // particles (mass-weighted projection); prescribed values on constrained components.
+        // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
+        // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
+        // increments into the body); eta_bar from the particles (mass-weighted projection).
         let mut eb_nodes = vec![0.0; grid.num_nodes()];
         if nf == 3 {
             for p in 0..s.particles.len() {
@@ -494,7 +497,7 @@ impl Simulation {
                     xs[a * nf + 2] = eb_nodes[node] / self.grid_state.mass[node];
                 }
                 for c in 0..nf {
-                    if let Some(v) = self.dofs.prescribed(a * nf + c) {
+                    if let (Some(v), Some(_)) = (self.dofs.prescribed(a * nf + c), newmark) {
                         xs[a * nf + c] = v;
                     }
                 }
