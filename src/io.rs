@@ -5,8 +5,10 @@
 //!   constraint set, energies (header states the units);
 //! * `fields_NNNNNN.h5` + `fields.xdmf`: point fields at output steps (position, displacement, velocity,
 //!   Cauchy stress, damage, eta_bar, history maximum); open `fields.xdmf` in ParaView;
-//! * `damage_NNNNNN.png`: damage maps; `force_time.png`, `force_displacement.png`: reaction curves.
+//! * `damage_NNNNNN.png`: damage maps; `force_time.png`, `force_displacement.png`: reaction curves;
+//! * `crack.json`: crack metrics at every output step (see [`crate::crack`]) when a notch tip is known.
 
+use crate::crack::{self, CrackCriteria, CrackState};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::solver::{Simulation, StepReport};
 use nalgebra::Vector2;
@@ -66,6 +68,7 @@ fn tmp_name(path: &Path) -> PathBuf {
 }
 
 /// One written snapshot (for the XDMF index).
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Snapshot {
     step: usize,
     time: f64,
@@ -79,6 +82,9 @@ pub struct RunOutput {
     rows: Vec<StepReport>,
     snapshots: Vec<Snapshot>,
     initial_position: Vec<Vector2<f64>>,
+    /// Notch tip (mm) and criteria of the crack metrics, if tracked.
+    crack: Option<(Vector2<f64>, CrackCriteria)>,
+    cracks: Vec<CrackState>,
 }
 
 impl RunOutput {
@@ -97,7 +103,63 @@ impl RunOutput {
             rows: Vec::new(),
             snapshots: Vec::new(),
             initial_position: sim.setup.particles.x.clone(),
+            crack: None,
+            cracks: Vec::new(),
         })
+    }
+
+    /// Measures the crack grown from `notch_tip` (mm) at every snapshot and writes `crack.json`.
+    pub fn track_crack(&mut self, notch_tip: Vector2<f64>, criteria: CrackCriteria) {
+        self.crack = Some((notch_tip, criteria));
+    }
+
+    /// What the output has recorded (steps, snapshots, crack states), for a checkpoint.
+    pub fn records_json(&self) -> serde_json::Value {
+        serde_json::json!({ "rows": self.rows, "snapshots": self.snapshots, "cracks": self.cracks })
+    }
+
+    /// Restores the records of a checkpoint.
+    pub fn restore_records(&mut self, v: &serde_json::Value) -> Result<(), serde_json::Error> {
+        self.rows = serde_json::from_value(v["rows"].clone())?;
+        self.snapshots = serde_json::from_value(v["snapshots"].clone())?;
+        self.cracks = serde_json::from_value(v["cracks"].clone())?;
+        Ok(())
+    }
+
+    /// Crack states measured so far.
+    pub fn cracks(&self) -> &[CrackState] {
+        &self.cracks
+    }
+
+    fn write_cracks(&self) -> Result<(), OutputError> {
+        let Some((tip, criteria)) = &self.crack else {
+            return Ok(());
+        };
+        let speeds: Vec<f64> = self
+            .cracks
+            .windows(2)
+            .map(|w| {
+                if w[1].time > w[0].time {
+                    (w[1].length - w[0].length) / (w[1].time - w[0].time)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let json = serde_json::json!({
+            "units": "length mm, time s, speed mm/s, angles degrees against the notch axis (+x), counter-clockwise positive",
+            "notch_tip": [tip.x, tip.y],
+            "criteria": criteria,
+            "states": self.cracks,
+            "tip_speed_between_states": speeds,
+            "final_classification": self.cracks.last().map(|c| c.classification.clone()),
+        });
+        let path = self.dir.join("crack.json");
+        let text = serde_json::to_string_pretty(&json).map_err(|e| OutputError::Plot {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        write_atomic(&path, text.as_bytes())
     }
 
     /// Output directory.
@@ -179,6 +241,20 @@ impl RunOutput {
             file,
         });
         self.write_xdmf(sim.setup.particles.len())?;
+        if let Some((tip, criteria)) = &self.crack {
+            let p = &sim.setup.particles;
+            let state = crack::measure(
+                &p.x,
+                &p.damage,
+                *tip,
+                sim.setup.grid.cell_size(),
+                criteria,
+                sim.time,
+            );
+            self.cracks.retain(|c| c.time != state.time);
+            self.cracks.push(state);
+            self.write_cracks()?;
+        }
         self.damage_map(sim, &self.dir.join(format!("damage_{:06}.png", sim.step)))
     }
 

@@ -12,7 +12,9 @@
 //! and only `assembly`/`solver` talk to [`petsc`], the one module with `unsafe` FFI.
 
 pub mod assembly;
+pub mod checkpoint;
 pub mod config;
+pub mod crack;
 pub mod dofs;
 pub mod grid;
 pub mod io;

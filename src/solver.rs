@@ -167,7 +167,7 @@ pub enum StepError {
 }
 
 /// Per-step statistics and results.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepReport {
     /// Step number (1-based).
     pub step: usize,
@@ -204,6 +204,23 @@ pub struct StepReport {
     pub evaluations: [usize; 2],
     /// Wall time of the whole step (s).
     pub wall_total: f64,
+}
+
+/// The counters of a running simulation besides the particles (for checkpoints).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Counters {
+    /// Time reached (s).
+    pub time: f64,
+    /// Steps completed.
+    pub step: usize,
+    /// Time step to try next (s).
+    pub dt: f64,
+    /// Work of reactions and body forces so far (N mm per mm thickness).
+    pub external_work: f64,
+    /// Accumulated prescribed displacement per constraint set (mm).
+    pub accumulated: Vec<[f64; 2]>,
+    /// Last reactions per constraint set (N per mm thickness).
+    pub last_reactions: Vec<[f64; 2]>,
 }
 
 /// A running simulation: the committed state and the reusable per-step workspace.
@@ -308,6 +325,28 @@ impl Simulation {
             dofs: DofMap::default(),
             assembler: Assembler::new(),
         })
+    }
+
+    /// The counters besides the particle state.
+    pub fn counters(&self) -> Counters {
+        Counters {
+            time: self.time,
+            step: self.step,
+            dt: self.dt,
+            external_work: self.external_work,
+            accumulated: self.accumulated.clone(),
+            last_reactions: self.last_reactions.clone(),
+        }
+    }
+
+    /// Restores the counters of a checkpoint (the particles are restored by the caller).
+    pub fn set_counters(&mut self, c: Counters) {
+        self.time = c.time;
+        self.step = c.step;
+        self.dt = c.dt;
+        self.external_work = c.external_work;
+        self.accumulated = c.accumulated;
+        self.last_reactions = c.last_reactions;
     }
 
     /// Unknowns per node: 3 if any material is gradient-enhanced, else 2.

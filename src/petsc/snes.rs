@@ -30,7 +30,7 @@ pub trait NonlinearProblem {
 }
 
 /// Statistics of one [`Snes::solve`].
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolveInfo {
     /// Nonlinear (Newton) iterations.
     pub iterations: usize,
