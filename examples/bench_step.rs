@@ -111,6 +111,7 @@ fn run(
         rigid: vec![],
         options_prefix: Some(format!("{solver}_")),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup)?;
     let reports: Vec<StepReport> = (0..steps)

@@ -77,6 +77,7 @@ fn setup(
         rigid: vec![],
         options_prefix: Some(prefix.into()),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     }
 }
 

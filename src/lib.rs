@@ -26,4 +26,5 @@ pub mod scenario;
 pub mod shape;
 pub mod smoke;
 pub mod solver;
+pub mod study;
 pub mod transfer;

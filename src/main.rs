@@ -12,6 +12,7 @@ use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::scenario;
 use mpm_concrete::smoke::{self, SmokeParams};
 use mpm_concrete::solver::Simulation;
+use mpm_concrete::study;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -44,6 +45,22 @@ enum Command {
         /// Continue from the checkpoint in the output directory (written at every output step and on Ctrl-C).
         #[arg(long)]
         resume: bool,
+    },
+    /// Solver-comparison study: runs a configuration for a few steps with several PETSc option sets (each in
+    /// its own process) and writes a table (Markdown, CSV) and charts.
+    Study {
+        /// Configuration file.
+        config: PathBuf,
+        /// Steps per option set.
+        #[arg(long, default_value_t = 10)]
+        steps: usize,
+        /// Option sets, one per line `name: -petsc -options` (default: MUMPS, SuperLU_dist, GMRES with ILU,
+        /// BoomerAMG, GAMG, fieldsplit on (u, eta_bar), trust-region Newton).
+        #[arg(long)]
+        sets: Option<PathBuf>,
+        /// Output directory (default runs/study-<config name>).
+        #[arg(long)]
+        output: Option<PathBuf>,
     },
     /// Material-point driver: strain or mixed paths through one constitutive law (CSV + PNG); prints the
     /// implied uniaxial strengths. No PETSc involved.
@@ -107,6 +124,32 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
             println!("{summary}");
             return Ok(());
         }
+        Command::Study {
+            config,
+            steps,
+            sets,
+            output,
+        } => {
+            anyhow::ensure!(steps > 0, "--steps must be at least 1");
+            RunConfig::from_file(&config)?;
+            let sets = match sets {
+                Some(p) => study::read_sets(&p).map_err(anyhow::Error::msg)?,
+                None => study::default_sets(),
+            };
+            let dir = output.unwrap_or_else(|| study::default_dir(&config));
+            let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
+            let results =
+                study::run(&exe, &config, steps, &sets, &dir).map_err(anyhow::Error::msg)?;
+            let failed = results.iter().filter(|r| !r.completed).count();
+            println!("{}", std::fs::read_to_string(dir.join("study.md"))?);
+            println!(
+                "{} of {} option sets completed; results in {}",
+                results.len() - failed,
+                results.len(),
+                dir.display()
+            );
+            return Ok(());
+        }
         other => other,
     };
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
@@ -127,7 +170,7 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
                 resume,
             },
         )?,
-        Command::MaterialDriver(_) => {} // handled above, without PETSc
+        Command::MaterialDriver(_) | Command::Study { .. } => {} // handled above, without PETSc
         Command::Smoke {
             n,
             load,
@@ -185,7 +228,14 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
 /// option can be overridden from the config's `run.petsc_options` or, with the final word, the command
 /// line.
 const DEFAULT_MPM_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 \
-     -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 -pc_type bjacobi -sub_pc_type ilu";
+     -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 -pc_type bjacobi -sub_pc_type ilu \
+     -sub_pc_factor_shift_type nonzero";
+
+/// The fallback solver of a step whose Newton iteration failed with the main solver: the same Newton
+/// settings with MUMPS LU (pivoting copes with the indefinite tangents of strongly softening material),
+/// tried at the same time step before it is halved. Options `-fallback_*` override it.
+const FALLBACK_OPTIONS: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -fallback_snes_max_it 25 \
+     -fallback_ksp_type preonly -fallback_pc_type lu -fallback_pc_factor_mat_solver_type mumps";
 
 /// Command-line flags of `run`.
 struct RunFlags {
@@ -213,10 +263,12 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
     // -pc_type hypre) must not be reported as unused.
     let defaults: Vec<String> = petsc::apply_default_options(session, DEFAULT_MPM_OPTIONS)?
         .into_iter()
+        .chain(petsc::apply_default_options(session, FALLBACK_OPTIONS)?)
         .map(|(name, _)| format!("-{name}"))
         .collect();
-    let setup =
+    let mut setup =
         scenario::build(&cfg).with_context(|| format!("{}: building the model", path.display()))?;
+    setup.fallback_prefix = Some("fallback_".into());
     let mut sim = Simulation::new(setup)?;
     let dir = output.unwrap_or_else(|| cfg.output_dir());
     let text = std::fs::read_to_string(path)?;

@@ -222,5 +222,6 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         rigid,
         options_prefix: None,
         mass_tolerance: cfg.grid.mass_tolerance,
+        fallback_prefix: None,
     })
 }

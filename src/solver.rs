@@ -128,6 +128,9 @@ pub struct Setup {
     pub options_prefix: Option<String>,
     /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
     pub mass_tolerance: f64,
+    /// Options prefix of a fallback SNES (e.g. with a direct solver) tried at the same time step when the
+    /// main one fails, before the time step is halved; None: halve at once.
+    pub fallback_prefix: Option<String>,
 }
 
 /// Failure of a step or a run.
@@ -363,15 +366,28 @@ impl Simulation {
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
         let mut dt = self.dt;
         let mut attempts = 0;
+        // The main solver first; after a failure the fallback solver (if any) at the same dt, then halving.
+        let mut prefix = self.setup.options_prefix.clone();
         loop {
             attempts += 1;
-            match self.try_step(session, dt)? {
+            match self.try_step(session, dt, prefix.as_deref())? {
                 Ok(mut report) => {
                     report.attempts = attempts;
                     self.dt = (dt * 2.0).min(self.setup.time.dt);
                     return Ok(report);
                 }
                 Err(reason) => {
+                    if let Some(fb) = &self.setup.fallback_prefix
+                        && prefix.as_deref() != Some(fb.as_str())
+                    {
+                        tracing::warn!(
+                            "step {} at t = {:.6e} s: {reason}; retrying with the fallback solver (-{fb}*)",
+                            self.step + 1,
+                            self.time
+                        );
+                        prefix = Some(fb.clone());
+                        continue;
+                    }
                     let next = dt / 2.0;
                     if next < self.setup.time.dt_min {
                         return Err(StepError::Diverged {
@@ -399,6 +415,7 @@ impl Simulation {
         &mut self,
         session: &SessionGuard,
         dt: f64,
+        prefix: Option<&str>,
     ) -> Result<Result<StepReport, String>, StepError> {
         let t0 = Instant::now();
         let s = &self.setup;
@@ -544,7 +561,7 @@ impl Simulation {
         })?;
         let setup_time = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let mut snes = Snes::new(session, s.options_prefix.as_deref())?;
+        let mut snes = Snes::new(session, prefix)?;
         snes.set_from_options()?;
         if nf == 3 {
             // Field index sets for `-pc_type fieldsplit` (names: `-fieldsplit_u_*`, `-fieldsplit_eta_bar_*`).

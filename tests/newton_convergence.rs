@@ -79,6 +79,7 @@ fn one_step(kind: ShapeKind, prefix: &str, extra: &str, load: f64) -> (Vec<f64>,
         rigid: vec![],
         options_prefix: Some(prefix.into()),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let r = sim.advance(&s).expect("step");

@@ -84,6 +84,7 @@ fn axial_bar(kind: ShapeKind, cells: usize, steps_per_period: usize, periods: us
         rigid: vec![],
         options_prefix: Some("v1_".into()),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let mass: f64 = sim.setup.particles.mass.iter().sum();

@@ -100,6 +100,7 @@ fn column(
         rigid: vec![],
         options_prefix: Some("v2_".into()),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     while sim.time < load_steps as f64 + 1.0 - 1e-9 {

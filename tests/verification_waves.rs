@@ -89,6 +89,7 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
         rigid: vec![],
         options_prefix: Some("v3_".into()),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     // Run until the front has crossed three quarters of the strip.
@@ -227,6 +228,7 @@ fn cantilever(
         rigid: vec![],
         options_prefix: Some("v6_".into()),
         mass_tolerance: 1e-6,
+        fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let (mut t_prev, mut u_prev) = (0.0, 0.0);
