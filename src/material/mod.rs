@@ -16,6 +16,7 @@
 
 pub mod driver;
 pub mod elastic;
+pub mod isotropic;
 pub mod microplane;
 pub mod quadrature;
 
@@ -23,6 +24,7 @@ use nalgebra::{Matrix3, SMatrix};
 use serde::{Deserialize, Serialize};
 
 pub use elastic::{ElasticConfig, ElasticModuli, LinearElastic, NeoHookean, StVenantKirchhoff};
+pub use isotropic::{EquivalentStrain, IsotropicDamage, IsotropicDamageConfig, Kinematics};
 pub use microplane::{EtaMode, Microplane, MicroplaneConfig, MicroplaneParams, Preset};
 pub use quadrature::Quadrature;
 
@@ -155,10 +157,12 @@ pub enum Material {
     StVenantKirchhoff(StVenantKirchhoff),
     NeoHookean(NeoHookean),
     Microplane(Box<Microplane>),
+    /// Isotropic gradient-enhanced damage (verification of the Helmholtz field, see [`isotropic`]).
+    IsotropicDamage(IsotropicDamage),
 }
 
 impl Material {
-    /// True for the microplane model with a gradient parameter `c > 0` (then the Helmholtz field is solved).
+    /// True for a damage model with a gradient parameter `c > 0` (then the Helmholtz field is solved).
     pub fn is_nonlocal(&self) -> bool {
         self.gradient_parameter() > 0.0
     }
@@ -167,6 +171,7 @@ impl Material {
     pub fn gradient_parameter(&self) -> f64 {
         match self {
             Material::Microplane(m) => m.params().c,
+            Material::IsotropicDamage(m) => m.config().c,
             _ => 0.0,
         }
     }
@@ -181,6 +186,7 @@ impl Material {
                 bulk: m.params().bulk_modulus,
                 shear: m.params().shear_modulus,
             },
+            Material::IsotropicDamage(m) => m.moduli(),
         }
     }
 }
@@ -192,6 +198,7 @@ impl Constitutive for Material {
             Material::StVenantKirchhoff(m) => m.history_len(),
             Material::NeoHookean(m) => m.history_len(),
             Material::Microplane(m) => m.history_len(),
+            Material::IsotropicDamage(m) => m.history_len(),
         }
     }
 
@@ -201,6 +208,7 @@ impl Constitutive for Material {
             Material::StVenantKirchhoff(m) => m.init_history(h),
             Material::NeoHookean(m) => m.init_history(h),
             Material::Microplane(m) => m.init_history(h),
+            Material::IsotropicDamage(m) => m.init_history(h),
         }
     }
 
@@ -217,6 +225,7 @@ impl Constitutive for Material {
             Material::StVenantKirchhoff(m) => m.update(f, eta_bar, h_n, h_trial, out),
             Material::NeoHookean(m) => m.update(f, eta_bar, h_n, h_trial, out),
             Material::Microplane(m) => m.update(f, eta_bar, h_n, h_trial, out),
+            Material::IsotropicDamage(m) => m.update(f, eta_bar, h_n, h_trial, out),
         }
     }
 }
@@ -244,6 +253,9 @@ pub enum MaterialConfig {
     /// Gradient-enhanced finite-strain microplane damage (spec Sec. 3).
     #[serde(rename = "microplane")]
     Microplane(MicroplaneConfig),
+    /// Isotropic gradient-enhanced damage (verification, see [`isotropic`]).
+    #[serde(rename = "isotropic_damage")]
+    IsotropicDamage(IsotropicDamageConfig),
 }
 
 impl MaterialConfig {
@@ -260,6 +272,7 @@ impl MaterialConfig {
             MaterialConfig::Microplane(c) => {
                 Material::Microplane(Box::new(Microplane::new(c.resolve()?)?))
             }
+            MaterialConfig::IsotropicDamage(c) => Material::IsotropicDamage(c.build()?),
         })
     }
 }
