@@ -317,6 +317,8 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
     );
     let started = std::time::Instant::now();
     let mut unused_checked = false;
+    // A PETSc logging stage for the time loop, so -log_view separates it from the set-up.
+    let _stage = session.push_stage(session.register_stage("MPM time steps")?)?;
     bar.set_position(sim.step as u64);
     if !resume {
         out.snapshot(&sim)?;

@@ -11,7 +11,8 @@ use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
 use crate::particles::Particles;
 use crate::petsc::{
-    self, CallbackError, IndexSet, Matrix, NonlinearProblem, SessionGuard, Snes, SolveInfo, Vector,
+    self, CallbackError, IndexSet, LogEvent, Matrix, NonlinearProblem, SessionGuard, Snes,
+    SolveInfo, Vector,
 };
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
@@ -247,11 +248,16 @@ pub struct Simulation {
     grid_state: GridState,
     dofs: DofMap,
     assembler: Assembler,
+    /// PETSc log events `MPMSetup` (shape functions, P2G, pattern) and `MPMAssembly` (residuals and
+    /// Jacobians), registered at the first step.
+    events: Option<[LogEvent; 2]>,
 }
 
 /// The nonlinear problem of one step, handed to SNES.
 struct StepProblem<'a, 'b> {
     input: &'a StepInput<'b>,
+    /// PETSc log event of the residual and Jacobian evaluations (shown by `-log_view`).
+    event: LogEvent,
     assembler: &'a mut Assembler,
     /// Wall time spent in residual and Jacobian evaluations (s).
     assembly_time: f64,
@@ -262,6 +268,7 @@ struct StepProblem<'a, 'b> {
 
 impl NonlinearProblem for StepProblem<'_, '_> {
     fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
+        let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input) = (&mut *self.assembler, self.input);
@@ -281,6 +288,7 @@ impl NonlinearProblem for StepProblem<'_, '_> {
     }
 
     fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
+        let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input) = (&mut *self.assembler, self.input);
@@ -327,6 +335,7 @@ impl Simulation {
             grid_state: GridState::new(),
             dofs: DofMap::default(),
             assembler: Assembler::new(),
+            events: None,
         })
     }
 
@@ -418,6 +427,17 @@ impl Simulation {
         prefix: Option<&str>,
     ) -> Result<Result<StepReport, String>, StepError> {
         let t0 = Instant::now();
+        let [setup_event, assembly_event] = match self.events {
+            Some(e) => e,
+            None => {
+                let e = [
+                    LogEvent::register(session, "MPMSetup")?,
+                    LogEvent::register(session, "MPMAssembly")?,
+                ];
+                *self.events.insert(e)
+            }
+        };
+        let setup_guard = setup_event.begin();
         let s = &self.setup;
         let grid = &s.grid;
         self.table.compute(s.shape, grid, &s.particles)?;
@@ -559,6 +579,7 @@ impl Simulation {
                 }
             }
         })?;
+        drop(setup_guard);
         let setup_time = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         let mut snes = Snes::new(session, prefix)?;
@@ -575,6 +596,7 @@ impl Simulation {
         let (info, assembly_time, evaluations) = {
             let mut problem = StepProblem {
                 input: &input,
+                event: assembly_event,
                 assembler: &mut self.assembler,
                 assembly_time: 0.0,
                 residuals: 0,

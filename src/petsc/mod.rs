@@ -280,15 +280,22 @@ pub struct LogEvent(sys::PetscLogEvent);
 impl LogEvent {
     /// Registers an event under PETSc's generic object class.
     pub fn register(_session: &Session, name: &str) -> Result<Self> {
+        static CLASS: OnceLock<sys::PetscClassId> = OnceLock::new();
+        let class = match CLASS.get() {
+            Some(c) => *c,
+            None => {
+                let mut class = 0;
+                // SAFETY: PETSc copies the name.
+                check(
+                    unsafe { sys::PetscClassIdRegister(c"mpm_concrete".as_ptr(), &mut class) },
+                    "PetscClassIdRegister",
+                )?;
+                *CLASS.get_or_init(|| class)
+            }
+        };
         let c = cstring(name)?;
-        let mut class = 0;
         let mut event = 0;
-        let class_name = c"mpm_concrete";
-        // SAFETY: PETSc copies both names.
-        check(
-            unsafe { sys::PetscClassIdRegister(class_name.as_ptr(), &mut class) },
-            "PetscClassIdRegister",
-        )?;
+        // SAFETY: PETSc copies the name.
         check(
             unsafe { sys::PetscLogEventRegister(c.as_ptr(), class, &mut event) },
             "PetscLogEventRegister",
