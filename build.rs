@@ -51,7 +51,7 @@ fn main() {
         "PetscOptions(SetValue|ClearValue|HasName|GetString|GetReal|GetInt|GetBool|Left|LeftGet|LeftRestore|InsertString|Used)",
         "PetscObject(SetName|SetOptionsPrefix|GetComm)",
         "PetscLog(DefaultBegin|StageRegister|StagePush|StagePop|View|EventRegister|EventBegin|EventEnd)",
-        "PetscMemory(GetCurrentUsage|GetMaximumUsage|SetGetMaximumUsage)|PetscTime|PetscClassIdRegister",
+        "PetscClassIdRegister",
         "PetscViewer(ASCIIGetStdout|Destroy)",
         "Vec(Create|CreateMPI|CreateSeq|SetSizes|SetBlockSize|SetFromOptions|SetUp|Destroy|Duplicate|Copy|Set|SetValues)",
         "Vec(AssemblyBegin|AssemblyEnd|GetArray|RestoreArray|GetArrayRead|RestoreArrayRead|GetLocalSize|GetSize)",

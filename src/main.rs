@@ -394,7 +394,7 @@ fn summary(out: &RunOutput, wall: f64) {
     let peak = peak_rss_mb();
     println!("\n| quantity | value |\n|---|---|");
     println!(
-        "| steps | {} ({} retried with a smaller dt) |",
+        "| steps | {} ({} retried with the fallback solver or a smaller dt) |",
         rows.len(),
         retries
     );

@@ -545,6 +545,29 @@ impl Simulation {
         let (rows, cols) = self.assembler.pattern(first);
         jac.set_pattern_coo(&rows, &cols)?;
         drop((rows, cols));
+        // Near-null space of the displacement block (two translations and the in-plane rotation) for
+        // algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
+        let mut modes = [
+            Vector::new(session, n, nf)?,
+            Vector::new(session, n, nf)?,
+            Vector::new(session, n, nf)?,
+        ];
+        for (k, mode) in modes.iter_mut().enumerate() {
+            mode.write(|m| {
+                m.fill(0.0);
+                for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+                    let x = grid.node_position(node as usize);
+                    let (ux, uy) = match k {
+                        0 => (1.0, 0.0),
+                        1 => (0.0, 1.0),
+                        _ => (-x.y, x.x),
+                    };
+                    m[a * nf] = ux;
+                    m[a * nf + 1] = uy;
+                }
+            })?;
+        }
+        jac.set_near_null_space(&mut modes)?;
         // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
         // increments into the body); eta_bar from the particles (mass-weighted projection).

@@ -137,40 +137,6 @@ impl Session {
         unsafe { sys::mpmc_world_size() as usize }
     }
 
-    /// PETSc's version, e.g. "3.18.5".
-    pub fn version(&self) -> String {
-        // SAFETY: returns a pointer to a static string literal.
-        unsafe { CStr::from_ptr(sys::mpmc_petsc_version()) }
-            .to_string_lossy()
-            .into_owned()
-    }
-
-    /// Peak resident memory of this process in bytes, as PETSc measures it (needs
-    /// `-memory_view` or [`Session::track_peak_memory`] before the work).
-    pub fn peak_memory(&self) -> f64 {
-        let mut mem = 0.0;
-        // SAFETY: plain out-parameter.
-        unsafe { sys::PetscMemoryGetMaximumUsage(&mut mem) };
-        mem
-    }
-
-    /// Current resident memory of this process in bytes.
-    pub fn current_memory(&self) -> f64 {
-        let mut mem = 0.0;
-        // SAFETY: plain out-parameter.
-        unsafe { sys::PetscMemoryGetCurrentUsage(&mut mem) };
-        mem
-    }
-
-    /// Asks PETSc to track the peak memory from now on (sampled at object destruction and logging).
-    pub fn track_peak_memory(&self) -> Result<()> {
-        // SAFETY: no pointers involved.
-        check(
-            unsafe { sys::PetscMemorySetGetMaximumUsage() },
-            "PetscMemorySetGetMaximumUsage",
-        )
-    }
-
     /// Registers a logging stage (shown by `-log_view`).
     pub fn register_stage(&self, name: &str) -> Result<sys::PetscLogStage> {
         let c = cstring(name)?;

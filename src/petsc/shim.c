@@ -18,14 +18,5 @@ int mpmc_world_size(void)
 }
 
 PetscInt mpmc_petsc_decide(void) { return PETSC_DECIDE; }
-PetscReal mpmc_petsc_default_real(void) { return PETSC_DEFAULT; }
-
-#define MPMC_STR2(x) #x
-#define MPMC_STR(x) MPMC_STR2(x)
-const char *mpmc_petsc_version(void)
-{
-  return MPMC_STR(PETSC_VERSION_MAJOR) "." MPMC_STR(PETSC_VERSION_MINOR) "." MPMC_STR(PETSC_VERSION_SUBMINOR);
-}
-
 PetscErrorCode mpmc_log_event_begin(PetscLogEvent e) { return PetscLogEventBegin(e, 0, 0, 0, 0); }
 PetscErrorCode mpmc_log_event_end(PetscLogEvent e) { return PetscLogEventEnd(e, 0, 0, 0, 0); }

@@ -11,11 +11,8 @@ MPI_Comm mpmc_comm_self(void);
 /* Rank and size of PETSC_COMM_WORLD. */
 int mpmc_world_rank(void);
 int mpmc_world_size(void);
-/* PETSC_DEFAULT / PETSC_DETERMINE / PETSC_DECIDE as values. */
+/* PETSC_DECIDE as a value. */
 PetscInt mpmc_petsc_decide(void);
-PetscReal mpmc_petsc_default_real(void);
-/* The version PETSc was built as, "3.18.5". */
-const char *mpmc_petsc_version(void);
 /* PetscLogEventBegin/End are macros in 3.18. */
 PetscErrorCode mpmc_log_event_begin(PetscLogEvent e);
 PetscErrorCode mpmc_log_event_end(PetscLogEvent e);

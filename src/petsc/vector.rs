@@ -54,12 +54,6 @@ impl Vector {
         Ok(Self { raw, owned: true })
     }
 
-    /// Copies the values of `other` (same layout) into `self`.
-    pub fn copy_from(&mut self, other: &Vector) -> Result<()> {
-        // SAFETY: both valid.
-        check(unsafe { sys::VecCopy(other.raw, self.raw) }, "VecCopy")
-    }
-
     /// Sets every entry to `alpha`.
     pub fn set_all(&mut self, alpha: f64) -> Result<()> {
         // SAFETY: valid vector.
@@ -91,17 +85,6 @@ impl Vector {
         // SAFETY: out-parameter.
         check(
             unsafe { sys::VecNorm(self.raw, sys::NormType_NORM_2, &mut r) },
-            "VecNorm",
-        )?;
-        Ok(r)
-    }
-
-    /// Max norm.
-    pub fn norm_inf(&self) -> Result<f64> {
-        let mut r = 0.0;
-        // SAFETY: out-parameter.
-        check(
-            unsafe { sys::VecNorm(self.raw, sys::NormType_NORM_INFINITY, &mut r) },
             "VecNorm",
         )?;
         Ok(r)
