@@ -455,7 +455,8 @@ impl Assembler {
 
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
     /// `sigma = P F^T / det F`, `eta_bar_p`, damage. Returns the stored energy `sum_p V^0 Psi_p` (N mm).
-    pub fn commit(&self, particles: &mut Particles, new_f: &[Matrix2<f64>]) -> f64 {
+    /// `particles.f` must already hold the converged deformation gradients (after G2P).
+    pub fn commit(&self, particles: &mut Particles) -> f64 {
         let hs = particles.history_stride();
         if hs > 0 {
             let n = particles.len() * hs;
@@ -463,7 +464,7 @@ impl Assembler {
         }
         let mut energy = 0.0;
         for (p, ev) in self.evals.iter().enumerate() {
-            let f2 = new_f[p];
+            let f2 = particles.f[p];
             let f3 = Matrix3::new(
                 f2[(0, 0)],
                 f2[(0, 1)],

@@ -16,7 +16,7 @@ use crate::petsc::{
 };
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::Vector2;
 use std::time::Instant;
 
 /// Time integration settings.
@@ -696,8 +696,7 @@ impl Simulation {
             s.particles.v.iter_mut().for_each(|v| *v = Vector2::zeros());
             s.particles.a.iter_mut().for_each(|a| *a = Vector2::zeros());
         }
-        let new_f: Vec<Matrix2<f64>> = s.particles.f.clone();
-        let stored = self.assembler.commit(&mut s.particles, &new_f);
+        let stored = self.assembler.commit(&mut s.particles);
         for (rb, du) in s.rigid.iter_mut().zip(&displacements[s.boxes.len()..]) {
             let dx = Vector2::new(du[0], du[1]);
             rb.particles.x.iter_mut().for_each(|x| *x += dx);
