@@ -111,6 +111,8 @@ fn run(
         rigid: vec![],
         options_prefix: Some(format!("{solver}_")),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup)?;

@@ -160,6 +160,8 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
         rigid: vec![],
         options_prefix: Some(case.prefix.into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup)?;

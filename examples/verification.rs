@@ -77,6 +77,8 @@ fn setup(
         rigid: vec![],
         options_prefix: Some(prefix.into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     }
 }

@@ -77,6 +77,8 @@ pub struct StepInput<'a> {
     pub newmark: Option<Newmark>,
     /// Body force per unit mass `b` (mm/s^2), e.g. gravity times the load factor.
     pub body_force: Vector2<f64>,
+    /// External nodal forces (N per mm thickness), one per grid node, or empty for none.
+    pub nodal_force: &'a [Vector2<f64>],
     /// Scale of constrained rows and of the Helmholtz rows (MPa), about the stiffness of the body.
     pub row_scale: f64,
 }
@@ -415,6 +417,9 @@ impl Assembler {
                 ru += m * acc;
             }
             ru -= m * input.body_force;
+            if let Some(f) = input.nodal_force.get(node) {
+                ru -= f;
+            }
             r[0] = ru.x;
             r[1] = ru.y;
             if nf == 3 {

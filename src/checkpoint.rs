@@ -5,7 +5,7 @@
 //! uninterrupted one.
 
 use crate::io::{OutputError, RunOutput};
-use crate::solver::{Counters, Simulation};
+use crate::solver::{Counters, Method, Simulation};
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use std::path::Path;
 
@@ -85,6 +85,10 @@ fn write(path: &Path, sim: &Simulation, out: &RunOutput) -> hdf5_metno::Result<(
                 .flat_map(|c| flat2(c))
                 .collect::<Vec<_>>(),
         )?;
+    }
+    if let Some((v, a)) = sim.fem_nodal_state() {
+        put("fem_nodal_velocity", &flat2(v))?;
+        put("fem_nodal_acceleration", &flat2(a))?;
     }
     let counters = serde_json::to_value(sim.counters())
         .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))?;
@@ -169,6 +173,13 @@ fn read(path: &Path, sim: &mut Simulation, out: &mut RunOutput) -> hdf5_metno::R
                 [v[0], v[1], v[2], v[3]]
             })
             .collect();
+    }
+    if sim.setup.method == Method::Fem && f.link_exists("fem_nodal_velocity") {
+        let nodes = sim.setup.grid.num_nodes();
+        sim.set_fem_nodal_state(
+            unflat2(&get("fem_nodal_velocity", 2 * nodes)?),
+            unflat2(&get("fem_nodal_acceleration", 2 * nodes)?),
+        );
     }
     let counters: Counters = serde_json::from_value(meta["counters"].clone())
         .map_err(|e| bad(&format!("counters: {e}")))?;

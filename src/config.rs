@@ -17,6 +17,7 @@
 use crate::material::MaterialConfig;
 use crate::particles::Geometry;
 use crate::shape::ShapeKind;
+use crate::solver::Method;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -84,6 +85,9 @@ pub struct RunConfig {
     /// Rigid bodies.
     #[serde(default)]
     pub rigid_body: Vec<RigidBodySection>,
+    /// Loads (`[[load]]`).
+    #[serde(default)]
+    pub load: Vec<LoadSection>,
 }
 
 /// `[run]`
@@ -183,6 +187,10 @@ pub struct ShapeSection {
     /// Material points per cell and direction.
     #[serde(default = "default_ppc")]
     pub points_per_cell: usize,
+    /// Discretisation: "mpm" (default; grid reset each step) or "fem" (points fixed at the Gauss points of
+    /// the grid cells, bilinear elements, no grid reset; requires `kind = "linear"`).
+    #[serde(default)]
+    pub method: Method,
 }
 
 fn default_kind() -> ShapeKind {
@@ -197,6 +205,7 @@ impl Default for ShapeSection {
         Self {
             kind: default_kind(),
             points_per_cell: default_ppc(),
+            method: Method::default(),
         }
     }
 }
@@ -276,6 +285,23 @@ pub struct ConstraintSection {
     #[serde(default)]
     pub y: MotionSpec,
     /// Prescribed velocities rise linearly from zero over this time (s); default 0 (a step).
+    #[serde(default)]
+    pub rise_time: f64,
+}
+
+/// `[[load]]`: a force distributed over the grid nodes on a segment as a uniform traction.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSection {
+    /// Name (history columns `NAME_ux, NAME_uy, NAME_fx, NAME_fy`).
+    pub name: String,
+    /// Start of the segment (mm); the segment lies on a grid line (horizontal or vertical).
+    pub from: [f64; 2],
+    /// End of the segment (mm).
+    pub to: [f64; 2],
+    /// Resultant force (N per mm thickness).
+    pub force: [f64; 2],
+    /// The force rises linearly from zero over this time (s); default 0 (applied at once).
     #[serde(default)]
     pub rise_time: f64,
 }
@@ -372,6 +398,51 @@ impl RunConfig {
         Self::from_str_named(&text, &file)
     }
 
+    /// Reads a configuration file, applies `key=value` overrides (dotted keys into tables, values in TOML
+    /// syntax, e.g. `shape.method="fem"` or `grid.cell_size=2.5`; a bare word is taken as a string) and
+    /// validates the result.
+    pub fn from_file_with(path: &Path, overrides: &[String]) -> Result<Self, ConfigError> {
+        if overrides.is_empty() {
+            return Self::from_file(path);
+        }
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        let parse_err = |message: String| ConfigError::Parse {
+            file: file.clone(),
+            message,
+        };
+        let mut table: toml::Table = toml::from_str(&text).map_err(|e| parse_err(e.to_string()))?;
+        for o in overrides {
+            let (key, value) = o.split_once('=').ok_or_else(|| {
+                parse_err(format!(
+                    "--set {o}: expected key=value (e.g. grid.cell_size=2.5)"
+                ))
+            })?;
+            let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+                Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
+                Err(_) => toml::Value::String(value.trim().into()),
+            };
+            let keys: Vec<&str> = key.trim().split('.').collect();
+            let mut t = &mut table;
+            for k in &keys[..keys.len() - 1] {
+                t = t
+                    .entry(k.to_string())
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                    .as_table_mut()
+                    .ok_or_else(|| parse_err(format!("--set {o}: `{k}` is not a table")))?;
+            }
+            t.insert(keys[keys.len() - 1].to_string(), value);
+        }
+        let text = toml::to_string(&table).map_err(|e| parse_err(e.to_string()))?;
+        Self::from_str_named(
+            &text,
+            &format!("{file} (with --set {})", overrides.join(" ")),
+        )
+    }
+
     /// Parses and validates configuration text; `file` names it in errors.
     pub fn from_str_named(text: &str, file: &str) -> Result<Self, ConfigError> {
         let cfg: RunConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
@@ -432,6 +503,45 @@ impl RunConfig {
                 self.shape.points_per_cell.to_string(),
                 "1 to 8 points per direction",
             ));
+        }
+        if self.shape.method == Method::Fem {
+            if self.shape.kind != ShapeKind::Linear {
+                return Err(bad(
+                    "shape.kind",
+                    self.shape.kind.name().into(),
+                    "\"linear\" with method = \"fem\" (bilinear elements)",
+                ));
+            }
+            if !(1..=3).contains(&self.shape.points_per_cell) {
+                return Err(bad(
+                    "shape.points_per_cell",
+                    self.shape.points_per_cell.to_string(),
+                    "1, 2 or 3 Gauss points per direction with method = \"fem\"",
+                ));
+            }
+        }
+        for (i, l) in self.load.iter().enumerate() {
+            let finite = l
+                .from
+                .iter()
+                .chain(&l.to)
+                .chain(&l.force)
+                .all(|v| v.is_finite());
+            let axis_aligned = l.from[0] == l.to[0] || l.from[1] == l.to[1];
+            if !finite || !axis_aligned || l.from == l.to {
+                return Err(bad(
+                    &format!("load[{i}] ({}).from/to/force", l.name),
+                    format!("{:?}/{:?}/{:?}", l.from, l.to, l.force),
+                    "finite values and a horizontal or vertical segment of non-zero length (mm)",
+                ));
+            }
+            if !(l.rise_time.is_finite() && l.rise_time >= 0.0) {
+                return Err(bad(
+                    &format!("load[{i}] ({}).rise_time", l.name),
+                    l.rise_time.to_string(),
+                    "a time >= 0 (s)",
+                ));
+            }
         }
         if self.run.steps == 0 {
             return Err(bad("run.steps", "0".into(), "at least one step"));
@@ -578,5 +688,30 @@ x = { velocity = 5.0 }
             .unwrap_err()
             .to_string();
         assert!(e.contains("time.beta"), "{e}");
+    }
+
+    #[test]
+    fn overrides_and_fem_mode_are_validated() {
+        let path = std::env::temp_dir().join(format!("mpmc-cfg-{}.toml", std::process::id()));
+        std::fs::write(&path, MINIMAL).unwrap();
+        let set = |o: &[&str]| {
+            RunConfig::from_file_with(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+        };
+        let c = set(&[
+            "shape.method=fem",
+            "shape.kind=linear",
+            "grid.cell_size=2.5",
+        ])
+        .unwrap();
+        assert_eq!(c.shape.method, Method::Fem);
+        assert_eq!(c.grid.cell_size, 2.5);
+        // FEM needs the bilinear interpolator and 1-3 Gauss points.
+        let e = set(&["shape.method=fem"]).unwrap_err().to_string();
+        assert!(e.contains("shape.kind") && e.contains("linear"), "{e}");
+        let e = set(&["shape.method=\"fe\""]).unwrap_err().to_string();
+        assert!(e.contains("--set") && e.contains("method"), "{e}");
+        let e = set(&["grid.cell_size"]).unwrap_err().to_string();
+        assert!(e.contains("key=value"), "{e}");
+        std::fs::remove_file(&path).ok();
     }
 }

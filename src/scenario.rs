@@ -5,7 +5,7 @@ use crate::config::{ConstraintSection, MotionSpec, RigidBodySection, RunConfig};
 use crate::grid::{Grid, GridError};
 use crate::material::{Material, MaterialError};
 use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
-use crate::solver::{NodeBox, RigidBody, Setup, TimeIntegration};
+use crate::solver::{Method, NodalLoad, NodeBox, RigidBody, Setup, TimeIntegration};
 use nalgebra::Vector2;
 
 /// Failure to build a run from a valid configuration.
@@ -57,6 +57,10 @@ struct BodyDef {
 pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     let h = cfg.grid.cell_size;
     let ppc = cfg.shape.points_per_cell;
+    let seed = match cfg.shape.method {
+        Method::Mpm => Particles::seed,
+        Method::Fem => Particles::seed_gauss,
+    };
     let mut bodies = Vec::new();
     let mut constraints: Vec<ConstraintSection> = cfg.constraint.clone();
     let mut rigid_defs: Vec<RigidBodySection> = cfg.rigid_body.clone();
@@ -144,11 +148,10 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             density: body.density,
             body: tag as u16,
         };
-        let mut p =
-            Particles::seed(&body.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
-                what: what.clone(),
-                source,
-            })?;
+        let mut p = seed(&body.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
+            what: what.clone(),
+            source,
+        })?;
         if p.is_empty() {
             return Err(ScenarioError::NoMaterial { what, h, ppc });
         }
@@ -167,11 +170,10 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             density: 1.0,
             body: 0,
         };
-        let p =
-            Particles::seed(&r.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
-                what: what.clone(),
-                source,
-            })?;
+        let p = seed(&r.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
+            what: what.clone(),
+            source,
+        })?;
         if p.is_empty() {
             return Err(ScenarioError::NoMaterial { what, h, ppc });
         }
@@ -220,6 +222,18 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         body_force_ramp: cfg.body_force_ramp,
         boxes,
         rigid,
+        loads: cfg
+            .load
+            .iter()
+            .map(|l| NodalLoad {
+                name: l.name.clone(),
+                from: Vector2::from(l.from),
+                to: Vector2::from(l.to),
+                force: Vector2::from(l.force),
+                rise_time: l.rise_time,
+            })
+            .collect(),
+        method: cfg.shape.method,
         options_prefix: None,
         mass_tolerance: cfg.grid.mass_tolerance,
         fallback_prefix: None,

@@ -46,6 +46,106 @@ impl Default for TimeIntegration {
     }
 }
 
+/// How the material points and the grid relate.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Material point method: shape functions at the current point positions on a grid that is reset to
+    /// its reference position every step (updated Lagrangian).
+    #[default]
+    Mpm,
+    /// Finite elements on the grid cells: points fixed at the cells' Gauss points, bilinear shape functions
+    /// of the reference configuration, gradients pushed forward with `F_n` (so `F = I + sum_I u_I (x)
+    /// grad_X N_I`, total Lagrangian) and nodal velocity and acceleration carried from step to step
+    /// (no grid reset).
+    Fem,
+}
+
+/// A force on the grid nodes of a segment, distributed as a uniform traction (consistent nodal forces of
+/// the bilinear shape functions along the grid line).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodalLoad {
+    /// Name (history columns).
+    pub name: String,
+    /// Segment end points (mm), on one grid line.
+    pub from: Vector2<f64>,
+    /// See `from`.
+    pub to: Vector2<f64>,
+    /// Resultant force (N per mm thickness).
+    pub force: Vector2<f64>,
+    /// Linear rise from zero over this time (s); 0 = applied at once.
+    pub rise_time: f64,
+}
+
+impl NodalLoad {
+    /// The load factor in [0, 1] at time `t` (s).
+    pub fn factor(&self, t: f64) -> f64 {
+        if self.rise_time > 0.0 {
+            (t / self.rise_time).clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// Share of the resultant carried by each grid node on the segment: the integral of the node's hat
+    /// function along the segment divided by the segment length. Grid nodes only (the shares of nodes
+    /// without unknowns are redistributed by the caller).
+    pub fn shares(&self, grid: &Grid) -> Result<Vec<(usize, f64)>, String> {
+        let h = grid.cell_size();
+        let o = grid.origin();
+        let d = self.to - self.from;
+        let (along, across) = if d.y == 0.0 { (0, 1) } else { (1, 0) };
+        let line = (self.from[across] - o[across]) / h;
+        if d[across] != 0.0 || (line - line.round()).abs() > 1e-6 {
+            return Err(format!(
+                "load `{}`: the segment from {:?} to {:?} must lie on a grid line (a coordinate that is \
+                 a multiple of h = {h} mm from the grid origin)",
+                self.name,
+                [self.from.x, self.from.y],
+                [self.to.x, self.to.y]
+            ));
+        }
+        let (a, b) = (
+            self.from[along].min(self.to[along]),
+            self.from[along].max(self.to[along]),
+        );
+        let line = line.round() as i64;
+        let count = [grid.nx() as i64, grid.ny() as i64];
+        if line < 0 || line > count[across] {
+            return Err(format!(
+                "load `{}`: the segment lies outside the grid",
+                self.name
+            ));
+        }
+        let first = (((a - o[along]) / h).floor() as i64).max(0);
+        let last = (((b - o[along]) / h).ceil() as i64).min(count[along]);
+        let mut shares = Vec::new();
+        for k in first..=last {
+            let c = o[along] + k as f64 * h;
+            let w = hat_integral(a, b, c, h) / (b - a);
+            if w > 0.0 {
+                let (i, j) = if along == 0 { (k, line) } else { (line, k) };
+                shares.push((grid.node_index(i as usize, j as usize), w));
+            }
+        }
+        Ok(shares)
+    }
+}
+
+/// `int_a^b max(0, 1 - |s - c| / h) ds`.
+fn hat_integral(a: f64, b: f64, c: f64, h: f64) -> f64 {
+    // Antiderivative of the hat, G(s) = int_{c-h}^{s} hat, for s clamped to [c - h, c + h].
+    let g = |s: f64| {
+        let t = ((s - c) / h).clamp(-1.0, 1.0);
+        if t <= 0.0 {
+            0.5 * h * (1.0 + t) * (1.0 + t)
+        } else {
+            h - 0.5 * h * (1.0 - t) * (1.0 - t)
+        }
+    };
+    g(b) - g(a)
+}
+
 /// Which velocity a constrained component follows.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Motion {
@@ -125,6 +225,10 @@ pub struct Setup {
     pub boxes: Vec<NodeBox>,
     /// Rigid loading bodies.
     pub rigid: Vec<RigidBody>,
+    /// Applied forces.
+    pub loads: Vec<NodalLoad>,
+    /// MPM or FEM on the grid cells.
+    pub method: Method,
     /// Options prefix of the SNES (None: plain `-snes_*`).
     pub options_prefix: Option<String>,
     /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
@@ -168,6 +272,10 @@ pub enum StepError {
     /// No material point carries mass.
     #[error("the model has no material points")]
     Empty,
+    /// The run definition is inconsistent (e.g. a load off the grid lines, FEM with a non-linear
+    /// interpolator).
+    #[error("{0}")]
+    Setup(String),
 }
 
 /// Per-step statistics and results.
@@ -245,12 +353,29 @@ pub struct Simulation {
     last_reactions: Vec<[f64; 2]>,
     table: ShapeTable,
     rigid_tables: Vec<ShapeTable>,
+    /// Node shares of every load (see [`NodalLoad::shares`]).
+    load_shares: Vec<Vec<(usize, f64)>>,
+    /// FEM mode: reference shape functions and the carried nodal state.
+    fem: Option<FemState>,
     grid_state: GridState,
     dofs: DofMap,
     assembler: Assembler,
     /// PETSc log events `MPMSetup` (shape functions, P2G, pattern) and `MPMAssembly` (residuals and
     /// Jacobians), registered at the first step.
     events: Option<[LogEvent; 2]>,
+}
+
+/// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
+pub type NodalState = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+
+/// State of the FEM mode kept between steps (the grid is not reset).
+#[derive(Debug, Clone)]
+struct FemState {
+    /// Shape functions `N_I(X_p)` and `grad_X N_I(X_p)` at the reference Gauss points.
+    reference: ShapeTable,
+    /// Nodal velocity (mm/s) and acceleration (mm/s^2) at the end of the last step; `None` before the
+    /// first step (the initial state is projected from the points).
+    nodal: Option<NodalState>,
 }
 
 /// The nonlinear problem of one step, handed to SNES.
@@ -320,10 +445,42 @@ impl Simulation {
             let h = setup.particles.history_mut(p);
             m.init_history(&mut h[..m.history_len()]);
         }
-        let nsets = setup.boxes.len() + setup.rigid.len();
+        let nsets = setup.boxes.len() + setup.rigid.len() + setup.loads.len();
         let dt = setup.time.dt;
+        let load_shares = setup
+            .loads
+            .iter()
+            .map(|l| l.shares(&setup.grid))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(StepError::Setup)?;
+        let mut rigid_tables: Vec<ShapeTable> =
+            setup.rigid.iter().map(|_| ShapeTable::new()).collect();
+        let fem = match setup.method {
+            Method::Mpm => None,
+            Method::Fem => {
+                if setup.shape != ShapeKind::Linear {
+                    return Err(StepError::Setup(format!(
+                        "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
+                        setup.shape.name()
+                    )));
+                }
+                // The reference configuration is the configuration at construction; the rigid bodies'
+                // nodes are fixed there too.
+                let mut reference = ShapeTable::new();
+                reference.compute(ShapeKind::Linear, &setup.grid, &setup.particles)?;
+                for (rt, rb) in rigid_tables.iter_mut().zip(&setup.rigid) {
+                    rt.compute(ShapeKind::Linear, &setup.grid, &rb.particles)?;
+                }
+                Some(FemState {
+                    reference,
+                    nodal: None,
+                })
+            }
+        };
         Ok(Self {
-            rigid_tables: setup.rigid.iter().map(|_| ShapeTable::new()).collect(),
+            rigid_tables,
+            load_shares,
+            fem,
             setup,
             time: 0.0,
             step: 0,
@@ -359,6 +516,23 @@ impl Simulation {
         self.external_work = c.external_work;
         self.accumulated = c.accumulated;
         self.last_reactions = c.last_reactions;
+    }
+
+    /// FEM mode: the nodal velocity (mm/s) and acceleration (mm/s^2) carried to the next step (None in
+    /// MPM mode and before the first step).
+    pub fn fem_nodal_state(&self) -> Option<&NodalState> {
+        self.fem.as_ref().and_then(|f| f.nodal.as_ref())
+    }
+
+    /// FEM mode: restores the carried nodal state (from a checkpoint); ignored in MPM mode.
+    pub fn set_fem_nodal_state(
+        &mut self,
+        velocity: Vec<Vector2<f64>>,
+        acceleration: Vec<Vector2<f64>>,
+    ) {
+        if let Some(fem) = &mut self.fem {
+            fem.nodal = Some((velocity, acceleration));
+        }
     }
 
     /// Unknowns per node: 3 if any material is gradient-enhanced, else 2.
@@ -440,7 +614,10 @@ impl Simulation {
         let setup_guard = setup_event.begin();
         let s = &self.setup;
         let grid = &s.grid;
-        self.table.compute(s.shape, grid, &s.particles)?;
+        match &self.fem {
+            None => self.table.compute(s.shape, grid, &s.particles)?,
+            Some(fem) => self.table.push_forward(&fem.reference, &s.particles.f)?,
+        }
         transfer::particles_to_grid(
             &self.table,
             &s.particles,
@@ -448,6 +625,11 @@ impl Simulation {
             s.mass_tolerance,
             &mut self.grid_state,
         )?;
+        if let Some((v, a)) = self.fem.as_ref().and_then(|f| f.nodal.as_ref()) {
+            // FEM: the nodal state carries over (the same nodes are active in every step).
+            self.grid_state.velocity.copy_from_slice(v);
+            self.grid_state.acceleration.copy_from_slice(a);
+        }
         let nf = self.fields();
         self.dofs.rebuild(&self.grid_state.active, nf);
         // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
@@ -484,7 +666,9 @@ impl Simulation {
             .zip(self.rigid_tables.iter_mut())
             .zip(&set_du[s.boxes.len()..])
         {
-            rt.compute(s.shape, grid, &rb.particles)?;
+            if self.fem.is_none() {
+                rt.compute(s.shape, grid, &rb.particles)?;
+            }
             let mut dofs_of_set = Vec::new();
             for p in 0..rb.particles.len() {
                 for w in rt.weights(p) {
@@ -516,6 +700,34 @@ impl Simulation {
         } else {
             1.0
         };
+        // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
+        let mut nodal_force = Vec::new();
+        let mut load_nodes: Vec<Vec<(usize, f64)>> = Vec::with_capacity(s.loads.len());
+        for (load, shares) in s.loads.iter().zip(&self.load_shares) {
+            let active: Vec<(usize, f64)> = shares
+                .iter()
+                .copied()
+                .filter(|&(node, _)| self.grid_state.active[node])
+                .collect();
+            let total: f64 = active.iter().map(|(_, w)| w).sum();
+            if total <= 0.0 {
+                return Err(StepError::Setup(format!(
+                    "load `{}`: no node of its segment carries mass (is the segment on the body's \
+                     boundary?)",
+                    load.name
+                )));
+            }
+            if nodal_force.is_empty() {
+                nodal_force = vec![Vector2::zeros(); grid.num_nodes()];
+            }
+            let f = load.force * load.factor(self.time + dt);
+            let active: Vec<(usize, f64)> =
+                active.into_iter().map(|(n, w)| (n, w / total)).collect();
+            for &(node, w) in &active {
+                nodal_force[node] += w * f;
+            }
+            load_nodes.push(active);
+        }
         let row_scale = s
             .materials
             .iter()
@@ -534,6 +746,7 @@ impl Simulation {
             acceleration: &self.grid_state.acceleration,
             newmark,
             body_force: s.body_force * load_factor,
+            nodal_force: &nodal_force,
             row_scale,
         };
         self.assembler.begin_step(&input);
@@ -683,8 +896,16 @@ impl Simulation {
             gamma,
             dt,
         };
-        let displacements: Vec<[f64; 2]> =
+        let mut displacements: Vec<[f64; 2]> =
             set_du.iter().map(|d| d.map(|v| v.unwrap_or(0.0))).collect();
+        let mut reactions = reactions;
+        for (load, nodes) in s.loads.iter().zip(&load_nodes) {
+            // A load reports its resultant and the share-weighted mean displacement of its nodes.
+            let f = load.force * load.factor(t_new);
+            let du: Vector2<f64> = nodes.iter().map(|&(n, w)| w * du_nodes[n]).sum();
+            reactions.push([f.x, f.y]);
+            displacements.push([du.x, du.y]);
+        }
         for (k, (r, du)) in reactions.iter().zip(&displacements).enumerate() {
             for c in 0..2 {
                 work += 0.5 * (r[c] + self.last_reactions[k][c]) * du[c];
@@ -692,6 +913,20 @@ impl Simulation {
         }
         let s = &mut self.setup;
         transfer::grid_to_particles(&self.table, &s.grid, &sol, &mut s.particles)?;
+        if let Some(fem) = &mut self.fem {
+            let (mut v, a) = (self.grid_state.velocity.clone(), acc_nodes.clone());
+            if let Some(nm) = newmark {
+                for &node in self.dofs.active_nodes() {
+                    let node = node as usize;
+                    v[node] += nm.dt
+                        * ((1.0 - nm.gamma) * self.grid_state.acceleration[node]
+                            + nm.gamma * a[node]);
+                }
+            } else {
+                v.iter_mut().for_each(|v| *v = Vector2::zeros());
+            }
+            fem.nodal = Some((v, a));
+        }
         if s.time.quasi_static {
             s.particles.v.iter_mut().for_each(|v| *v = Vector2::zeros());
             s.particles.a.iter_mut().for_each(|a| *a = Vector2::zeros());
@@ -721,6 +956,7 @@ impl Simulation {
             .iter()
             .map(|b| b.name.clone())
             .chain(s.rigid.iter().map(|r| r.name.clone()))
+            .chain(s.loads.iter().map(|l| l.name.clone()))
             .collect();
         Ok(Ok(StepReport {
             step: self.step,
@@ -748,5 +984,97 @@ impl Simulation {
             evaluations,
             wall_total: t0.elapsed().as_secs_f64(),
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hat_integral_matches_quadrature() {
+        let h = 2.0;
+        for &(a, b, c) in &[
+            (0.0, 10.0, 4.0),
+            (0.0, 10.0, 0.0),
+            (0.0, 10.0, 10.0),
+            (0.5, 3.0, 2.0),
+            (3.1, 3.3, 2.0),
+            (0.0, 1.0, 5.0),
+        ] {
+            let n = 200_000;
+            let ds = (b - a) / n as f64;
+            let q: f64 = (0..n)
+                .map(|k| {
+                    let s = a + (k as f64 + 0.5) * ds;
+                    (1.0 - (s - c).abs() / h).max(0.0) * ds
+                })
+                .sum();
+            assert!((hat_integral(a, b, c, h) - q).abs() < 1e-6, "{a} {b} {c}");
+        }
+    }
+
+    #[test]
+    fn load_shares_are_the_consistent_nodal_forces() {
+        let grid = Grid::new(Vector2::new(-2.0, -2.0), 1.0, 14, 8).unwrap();
+        let load = |from: [f64; 2], to: [f64; 2]| NodalLoad {
+            name: "tip".into(),
+            from: Vector2::from(from),
+            to: Vector2::from(to),
+            force: Vector2::new(0.0, -1.0),
+            rise_time: 0.0,
+        };
+        // A vertical edge of 4 cells: end nodes 1/8, inner nodes 1/4.
+        let shares = load([10.0, 0.0], [10.0, 4.0]).shares(&grid).unwrap();
+        assert_eq!(shares.len(), 5);
+        let sum: f64 = shares.iter().map(|s| s.1).sum();
+        assert!((sum - 1.0).abs() < 1e-14);
+        for &(node, w) in &shares {
+            let x = grid.node_position(node);
+            assert_eq!(x.x, 10.0);
+            let end = x.y == 0.0 || x.y == 4.0;
+            assert!(
+                (w - if end { 0.125 } else { 0.25 }).abs() < 1e-14,
+                "{x:?} {w}"
+            );
+        }
+        // Reversed end points, horizontal: the same shares.
+        let h = load([4.0, 2.0], [0.0, 2.0]).shares(&grid).unwrap();
+        assert_eq!(h.len(), 5);
+        // Off a grid line: an error naming the load.
+        let e = load([10.5, 0.0], [10.5, 4.0]).shares(&grid).unwrap_err();
+        assert!(e.contains("tip") && e.contains("grid line"), "{e}");
+    }
+
+    #[test]
+    fn pushed_forward_gradients_reproduce_the_deformed_configuration() {
+        // FEM mode: with nodes at x_I = F X_I, sum_I x_I (x) grad_{X_n} S_Ip = I.
+        let grid = Grid::new(Vector2::zeros(), 1.0, 4, 4).unwrap();
+        let mut p = Particles::new();
+        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
+        for x in [Vector2::new(1.3, 2.2), Vector2::new(0.4, 0.7)] {
+            p.push(x, 0.25, 0.25, r1, r2, 0);
+        }
+        let mut reference = ShapeTable::new();
+        reference.compute(ShapeKind::Linear, &grid, &p).unwrap();
+        let f = nalgebra::Matrix2::new(1.2, 0.3, -0.1, 0.9);
+        let mut table = ShapeTable::new();
+        table.push_forward(&reference, &[f, f]).unwrap();
+        for q in 0..2 {
+            let mut m = nalgebra::Matrix2::zeros();
+            let mut sum = 0.0;
+            for (w, w0) in table.weights(q).iter().zip(reference.weights(q)) {
+                assert_eq!(w.value, w0.value);
+                m += (f * grid.node_position(w.node as usize)) * w.grad.transpose();
+                sum += w.value;
+            }
+            assert!((m - nalgebra::Matrix2::identity()).norm() < 1e-13, "{m}");
+            assert!((sum - 1.0).abs() < 1e-14);
+        }
+        let inverted = nalgebra::Matrix2::new(-1.0, 0.0, 0.0, 1.0);
+        assert!(matches!(
+            table.push_forward(&reference, &[f, inverted]),
+            Err(ShapeError::InvertedElement { particle: 1, .. })
+        ));
     }
 }

@@ -87,6 +87,7 @@ fn fd_error(kind: ShapeKind, mat: Material, strain: f64, eta_bar: f64, fields: u
             dt: 1e-6,
         }),
         body_force: Vector2::new(0.0, -9810.0),
+        nodal_force: &[],
         row_scale: 3e4,
     };
     let mut asm = Assembler::new();

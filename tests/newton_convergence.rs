@@ -79,6 +79,8 @@ fn one_step(kind: ShapeKind, prefix: &str, extra: &str, load: f64) -> (Vec<f64>,
         rigid: vec![],
         options_prefix: Some(prefix.into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");

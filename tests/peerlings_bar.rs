@@ -125,6 +125,8 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
         rigid: vec![],
         options_prefix: Some(prefix.into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");

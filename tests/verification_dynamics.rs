@@ -84,6 +84,8 @@ fn axial_bar(kind: ShapeKind, cells: usize, steps_per_period: usize, periods: us
         rigid: vec![],
         options_prefix: Some("v1_".into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");

@@ -100,6 +100,8 @@ fn column(
         rigid: vec![],
         options_prefix: Some("v2_".into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");

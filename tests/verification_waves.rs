@@ -89,6 +89,8 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
         rigid: vec![],
         options_prefix: Some("v3_".into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");
@@ -228,6 +230,8 @@ fn cantilever(
         rigid: vec![],
         options_prefix: Some("v6_".into()),
         mass_tolerance: 1e-6,
+        loads: Vec::new(),
+        method: mpm_concrete::solver::Method::Mpm,
         fallback_prefix: None,
     };
     let mut sim = Simulation::new(setup).expect("simulation");

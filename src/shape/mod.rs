@@ -27,7 +27,7 @@ mod cpdi;
 mod gimp;
 mod linear;
 
-use nalgebra::Vector2;
+use nalgebra::{Matrix2, Vector2};
 use rayon::prelude::*;
 use serde::Deserialize;
 use thiserror::Error;
@@ -117,6 +117,14 @@ pub enum ShapeError {
         /// Signed area of the domain (mm^2).
         area: f64,
     },
+    /// FEM mode: an element inverted at a Gauss point.
+    #[error("material point {particle}: det F = {det:e} <= 0 (inverted element)")]
+    InvertedElement {
+        /// Material point index.
+        particle: usize,
+        /// `det F` of the point.
+        det: f64,
+    },
     /// A uGIMP half-width outside `(0, h/2]`, for which the support is no longer 3 x 3 nodes.
     #[error(
         "material point {particle}: uGIMP half-width {half_width} mm must lie in (0, h/2 = {half_h}] mm"
@@ -137,6 +145,7 @@ impl ShapeError {
         match *self {
             ShapeError::Grid(GridError::OutsideGrid { particle, .. })
             | ShapeError::DegenerateDomain { particle, .. }
+            | ShapeError::InvertedElement { particle, .. }
             | ShapeError::GimpWidth { particle, .. } => particle,
             ShapeError::Grid(_) => 0,
         }
@@ -312,6 +321,48 @@ impl ShapeTable {
             }
         }
         result
+    }
+
+    /// FEM mode: the shape functions of `reference` (evaluated at the reference positions `X_p`) with the
+    /// gradients pushed forward to the start-of-step configuration, `grad_{X_n} S_Ip = F_p^-T grad_X S_Ip`
+    /// (`f` holds `F_p`, one per point). An error names the first point with `det F_p <= 0`.
+    pub fn push_forward(
+        &mut self,
+        reference: &ShapeTable,
+        f: &[Matrix2<f64>],
+    ) -> Result<(), ShapeError> {
+        if let Some(particle) = f
+            .iter()
+            .position(|f| f.determinant().is_nan() || f.determinant() <= 0.0)
+        {
+            return Err(ShapeError::InvertedElement {
+                particle,
+                det: f[particle].determinant(),
+            });
+        }
+        self.kind = reference.kind;
+        self.stride = reference.stride;
+        self.counts.clone_from(&reference.counts);
+        self.weights
+            .resize(reference.weights.len(), Weight::default());
+        let stride = self.stride.max(1);
+        self.weights
+            .par_chunks_mut(stride)
+            .zip(reference.weights.par_chunks(stride))
+            .zip(f.par_iter())
+            .for_each(|((out, w0), f)| {
+                let f_inv_t = f
+                    .try_inverse()
+                    .unwrap_or_else(Matrix2::identity)
+                    .transpose();
+                for (o, w) in out.iter_mut().zip(w0) {
+                    *o = Weight {
+                        grad: f_inv_t * w.grad,
+                        ..*w
+                    };
+                }
+            });
+        Ok(())
     }
 
     fn fill<I: Interpolator>(
