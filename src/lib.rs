@@ -13,6 +13,7 @@
 
 pub mod assembly;
 pub mod checkpoint;
+pub mod compare;
 pub mod config;
 pub mod crack;
 pub mod dofs;

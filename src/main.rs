@@ -45,6 +45,10 @@ enum Command {
         /// Continue from the checkpoint in the output directory (written at every output step and on Ctrl-C).
         #[arg(long)]
         resume: bool,
+        /// Override a config value, `key=value` with a dotted key and a TOML value (repeatable), e.g.
+        /// `--set shape.method=fem --set shape.kind=linear --set grid.cell_size=2.5`.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
     /// Solver-comparison study: runs a configuration for a few steps with several PETSc option sets (each in
     /// its own process) and writes a table (Markdown, CSV) and charts.
@@ -62,6 +66,10 @@ enum Command {
         #[arg(long)]
         output: Option<PathBuf>,
     },
+    /// Cross-check a finished run against reference CSV files (history columns or point values): prints
+    /// relative errors; exit code 0 when all are within --tolerance, 1 when one exceeds it, 2 on bad
+    /// input (docs/cross-check.md).
+    Compare(mpm_concrete::compare::CompareArgs),
     /// Material-point driver: strain or mixed paths through one constitutive law (CSV + PNG); prints the
     /// implied uniaxial strengths. No PETSc involved.
     MaterialDriver(mpm_concrete::material::driver::DriverArgs),
@@ -108,6 +116,12 @@ fn main() -> std::process::ExitCode {
         .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
     let cli = Cli::parse_from(own);
+    if let Command::Compare(args) = &cli.command {
+        return std::process::ExitCode::from(mpm_concrete::compare::run_cli(
+            args,
+            &petsc_args[1..],
+        ));
+    }
     match run(cli, &petsc_args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
@@ -160,6 +174,7 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
             output,
             quiet,
             resume,
+            set,
         } => run_simulation(
             &session,
             &config,
@@ -168,9 +183,11 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
                 output,
                 quiet,
                 resume,
+                set,
             },
         )?,
-        Command::MaterialDriver(_) | Command::Study { .. } => {} // handled above, without PETSc
+        // handled above, without PETSc
+        Command::MaterialDriver(_) | Command::Study { .. } | Command::Compare(_) => {}
         Command::Smoke {
             n,
             load,
@@ -231,6 +248,11 @@ const DEFAULT_MPM_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 
      -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 -pc_type bjacobi -sub_pc_type ilu \
      -sub_pc_factor_shift_type nonzero";
 
+/// Default solver of quasi-static runs (no inertia term, so ILU-preconditioned GMRES converges slowly):
+/// Newton with MUMPS LU.
+const DEFAULT_QUASI_STATIC_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 \
+     -ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
+
 /// The fallback solver of a step whose Newton iteration failed with the main solver: the same Newton
 /// settings with MUMPS LU (pivoting copes with the indefinite tangents of strongly softening material),
 /// tried at the same time step before it is halved. Options `-fallback_*` override it.
@@ -243,6 +265,7 @@ struct RunFlags {
     output: Option<PathBuf>,
     quiet: bool,
     resume: bool,
+    set: Vec<String>,
 }
 
 fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlags) -> Result<()> {
@@ -251,8 +274,9 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
         output,
         quiet,
         resume,
+        set,
     } = flags;
-    let mut cfg = RunConfig::from_file(path)?;
+    let mut cfg = RunConfig::from_file_with(path, &set)?;
     if let Some(n) = steps {
         anyhow::ensure!(n > 0, "--steps must be at least 1");
         cfg.run.steps = n;
@@ -261,7 +285,12 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
         .with_context(|| format!("{}: run.petsc_options", path.display()))?;
     // Built-in defaults that a user's solver choice makes irrelevant (e.g. the MUMPS option under
     // -pc_type hypre) must not be reported as unused.
-    let defaults: Vec<String> = petsc::apply_default_options(session, DEFAULT_MPM_OPTIONS)?
+    let main_defaults = if cfg.time.quasi_static {
+        DEFAULT_QUASI_STATIC_OPTIONS
+    } else {
+        DEFAULT_MPM_OPTIONS
+    };
+    let defaults: Vec<String> = petsc::apply_default_options(session, main_defaults)?
         .into_iter()
         .chain(petsc::apply_default_options(session, FALLBACK_OPTIONS)?)
         .map(|(name, _)| format!("-{name}"))
