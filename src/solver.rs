@@ -948,9 +948,19 @@ impl Simulation {
         self.external_work += work;
         self.time = t_new;
         self.step += 1;
-        let kinetic = (0..s.particles.len())
-            .map(|p| 0.5 * s.particles.mass[p] * s.particles.v[p].norm_squared())
-            .sum();
+        // Kinetic energy: of the points in MPM (the grid is discarded); of the lumped nodal masses in FEM
+        // mode, the energy the Newmark scheme conserves there.
+        let kinetic = match self.fem.as_ref().and_then(|f| f.nodal.as_ref()) {
+            Some((v, _)) => self
+                .dofs
+                .active_nodes()
+                .iter()
+                .map(|&n| 0.5 * self.grid_state.mass[n as usize] * v[n as usize].norm_squared())
+                .sum(),
+            None => (0..s.particles.len())
+                .map(|p| 0.5 * s.particles.mass[p] * s.particles.v[p].norm_squared())
+                .sum(),
+        };
         let names: Vec<String> = s
             .boxes
             .iter()
