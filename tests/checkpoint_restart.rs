@@ -53,28 +53,42 @@ fn physics(rows: &[StepReport]) -> Vec<StepReport> {
 
 #[test]
 fn resumed_run_matches_the_uninterrupted_one_bit_for_bit() {
+    check_restart(CONFIG, "mpm");
+}
+
+/// FEM mode carries the nodal velocity and acceleration from step to step: the checkpoint must too.
+#[test]
+fn resumed_fem_mode_run_matches_the_uninterrupted_one_bit_for_bit() {
+    let fem = CONFIG.replace(
+        "[grid]",
+        "[shape]\nmethod = \"fem\"\nkind = \"linear\"\n[grid]",
+    );
+    check_restart(&fem, "fem");
+}
+
+fn check_restart(config: &str, tag: &str) {
     let s = Session::get().expect("PETSc");
     petsc::apply_default_options(
         &s,
         "-ck_ksp_type preonly -ck_pc_type lu -ck_pc_factor_mat_solver_type mumps",
     )
     .expect("options");
-    let cfg = RunConfig::from_str_named(CONFIG, "restart").expect("config");
-    let base = std::env::temp_dir().join(format!("mpmc-restart-{}", std::process::id()));
+    let cfg = RunConfig::from_str_named(config, "restart").expect("config");
+    let base = std::env::temp_dir().join(format!("mpmc-restart-{tag}-{}", std::process::id()));
     let (dir_a, dir_b) = (base.join("a"), base.join("b"));
 
     let mut a = simulation(&cfg);
-    let mut out_a = RunOutput::create(&dir_a, "a", CONFIG, &a).expect("output");
+    let mut out_a = RunOutput::create(&dir_a, "a", config, &a).expect("output");
     advance(&s, &mut a, &mut out_a, cfg.run.steps);
 
     let mut b = simulation(&cfg);
-    let mut out_b = RunOutput::create(&dir_b, "b", CONFIG, &b).expect("output");
+    let mut out_b = RunOutput::create(&dir_b, "b", config, &b).expect("output");
     advance(&s, &mut b, &mut out_b, cfg.run.steps / 2);
     checkpoint::save(&dir_b, &b, &out_b).expect("checkpoint");
     drop((b, out_b));
 
     let mut c = simulation(&cfg);
-    let mut out_c = RunOutput::create(&dir_b, "b", CONFIG, &c).expect("output");
+    let mut out_c = RunOutput::create(&dir_b, "b", config, &c).expect("output");
     checkpoint::load(&dir_b, &mut c, &mut out_c).expect("restore");
     assert_eq!(c.step, cfg.run.steps / 2);
     advance(&s, &mut c, &mut out_c, cfg.run.steps - cfg.run.steps / 2);
