@@ -372,35 +372,13 @@ impl Particles {
     /// points within a cell row by row), which keeps the P2G scatter local. History stride 0; set it with
     /// [`Particles::resize_history`].
     pub fn seed(geometry: &Geometry, seeding: &Seeding) -> Result<Self, ParticleError> {
-        geometry.validate()?;
         let Seeding {
             h,
             points_per_cell: n,
             density,
             body,
         } = *seeding;
-        let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
-        if !(h.is_finite() && h > 0.0) {
-            return bad(format!("cell size h = {h} mm must be positive"));
-        }
-        if n == 0 {
-            return bad("points_per_cell must be at least 1".into());
-        }
-        if !(density.is_finite() && density > 0.0) {
-            return bad(format!("density = {density} t/mm^3 must be positive"));
-        }
-        let (lo, hi) = geometry
-            .bounding_box()
-            .ok_or(ParticleError::EmptyGeometry)?;
-        let (i0, j0) = ((lo.x / h).floor(), (lo.y / h).floor());
-        let (ni, nj) = ((hi.x / h).ceil() - i0, (hi.y / h).ceil() - j0);
-        let candidates = ni * nj * (n * n) as f64;
-        if candidates.is_nan() || candidates > u32::MAX as f64 {
-            return bad(format!(
-                "{candidates} candidate points: cell size too small for the geometry"
-            ));
-        }
-        let (ni, nj) = (ni as usize, nj as usize);
+        let (i0, j0, ni, nj) = cell_lattice(geometry, seeding)?;
         let nf = n as f64;
         let vol0 = h * h / (nf * nf);
         let half = Vector2::new(h / (2.0 * nf), h / (2.0 * nf));
@@ -432,17 +410,13 @@ impl Particles {
     /// in 1..=3) with volume `w_a w_b h^2 / 4` (the Gauss weights on [-1, 1]). Same ordering and domains
     /// (`r_i` = half the point's share of the cell) as [`Particles::seed`].
     pub fn seed_gauss(geometry: &Geometry, seeding: &Seeding) -> Result<Self, ParticleError> {
-        geometry.validate()?;
         let Seeding {
             h,
             points_per_cell: n,
             density,
             body,
         } = *seeding;
-        let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
-        if !(h.is_finite() && h > 0.0) {
-            return bad(format!("cell size h = {h} mm must be positive"));
-        }
+        let (i0, j0, ni, nj) = cell_lattice(geometry, seeding)?;
         let g = 1.0 / 3.0_f64.sqrt();
         let q = 0.6_f64.sqrt();
         let rule: &[(f64, f64)] = match n {
@@ -450,30 +424,19 @@ impl Particles {
             2 => &[(-g, 1.0), (g, 1.0)],
             3 => &[(-q, 5.0 / 9.0), (0.0, 8.0 / 9.0), (q, 5.0 / 9.0)],
             _ => {
-                return bad(format!(
-                    "{n} Gauss points per direction: 1, 2 or 3 are available"
-                ));
+                return Err(ParticleError::InvalidSeeding {
+                    reason: format!("{n} Gauss points per direction: 1, 2 or 3 are available"),
+                });
             }
         };
-        if !(density.is_finite() && density > 0.0) {
-            return bad(format!("density = {density} t/mm^3 must be positive"));
-        }
-        let (lo, hi) = geometry
-            .bounding_box()
-            .ok_or(ParticleError::EmptyGeometry)?;
-        let (i0, j0) = ((lo.x / h).floor(), (lo.y / h).floor());
-        let (ni, nj) = ((hi.x / h).ceil() - i0, (hi.y / h).ceil() - j0);
-        if (ni * nj).is_nan() || ni * nj * (n * n) as f64 > u32::MAX as f64 {
-            return bad("cell size too small for the geometry".into());
-        }
         let nf = n as f64;
         let (r1, r2) = (
             Vector2::new(h / (2.0 * nf), 0.0),
             Vector2::new(0.0, h / (2.0 * nf)),
         );
         let mut particles = Particles::new();
-        for j in 0..nj as usize {
-            for i in 0..ni as usize {
+        for j in 0..nj {
+            for i in 0..ni {
                 let centre = Vector2::new((i0 + i as f64 + 0.5) * h, (j0 + j as f64 + 0.5) * h);
                 if !geometry.contains(centre) {
                     continue;
@@ -534,6 +497,43 @@ impl Particles {
             .map(|&x| (x, x))
             .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
     }
+}
+
+/// Validates the seeding parameters and returns the lattice of cells (aligned with the origin) covering
+/// the geometry's bounding box: the index of its first cell in x and y and the number of cells.
+fn cell_lattice(
+    geometry: &Geometry,
+    seeding: &Seeding,
+) -> Result<(f64, f64, usize, usize), ParticleError> {
+    geometry.validate()?;
+    let Seeding {
+        h,
+        points_per_cell: n,
+        density,
+        ..
+    } = *seeding;
+    let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
+    if !(h.is_finite() && h > 0.0) {
+        return bad(format!("cell size h = {h} mm must be positive"));
+    }
+    if n == 0 {
+        return bad("points_per_cell must be at least 1".into());
+    }
+    if !(density.is_finite() && density > 0.0) {
+        return bad(format!("density = {density} t/mm^3 must be positive"));
+    }
+    let (lo, hi) = geometry
+        .bounding_box()
+        .ok_or(ParticleError::EmptyGeometry)?;
+    let (i0, j0) = ((lo.x / h).floor(), (lo.y / h).floor());
+    let (ni, nj) = ((hi.x / h).ceil() - i0, (hi.y / h).ceil() - j0);
+    let candidates = ni * nj * (n * n) as f64;
+    if candidates.is_nan() || candidates > u32::MAX as f64 {
+        return bad(format!(
+            "{candidates} candidate points: cell size too small for the geometry"
+        ));
+    }
+    Ok((i0, j0, ni as usize, nj as usize))
 }
 
 /// Corners `x_p - r1 - r2, x_p + r1 - r2, x_p + r1 + r2, x_p - r1 + r2` of a parallelogram domain (mm).
