@@ -29,6 +29,7 @@
 use crate::dofs::DofMap;
 use crate::material::{Constitutive, Material, MaterialError, Response};
 use crate::particles::Particles;
+use crate::petsc::{BlockCsr, BlockLayout};
 use crate::shape::ShapeTable;
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use rayon::prelude::*;
@@ -168,7 +169,6 @@ pub struct Assembler {
     eb: Vec<f64>,
     evals: Vec<PointEval>,
     trial_history: Vec<f64>,
-    values: Vec<f64>,
     /// The iterate the cache was computed at.
     key: Vec<f64>,
     key_valid: bool,
@@ -257,8 +257,6 @@ impl Assembler {
         self.trial_history.resize(np * hs.max(1), 0.0);
         self.du.resize(nodes, Vector2::zeros());
         self.eb.resize(nodes, 0.0);
-        self.values
-            .resize(self.cols.len() * self.fields * self.fields, 0.0);
         self.key_valid = false;
     }
 
@@ -267,18 +265,31 @@ impl Assembler {
         self.cols.len() * self.fields * self.fields
     }
 
-    /// The COO pattern of the Jacobian with global indices offset by `first` (the first unknown owned by
-    /// this process), in the order of [`Assembler::jacobian`]'s values.
-    pub fn pattern(&self, first: usize) -> (Vec<i32>, Vec<i32>) {
+    /// The block pattern of the Jacobian (block rows = active nodes, global block columns offset by
+    /// `first`, the first block row owned by this process): the layout of [`Assembler::jacobian_into`].
+    pub fn block_pattern(&self, first: usize) -> BlockCsr<'_> {
+        debug_assert_eq!(first, 0, "block columns are numbered from 0 on one process");
+        BlockCsr {
+            first,
+            bs: self.fields,
+            row_ptr: &self.row_ptr,
+            cols: &self.cols,
+        }
+    }
+
+    /// The pattern as (row, column) pairs in the order of [`Assembler::jacobian_into`]'s values (for
+    /// tests and dense checks).
+    pub fn pattern(&self) -> (Vec<usize>, Vec<usize>) {
         let nf = self.fields;
         let n = self.nonzeros();
         let (mut rows, mut cols) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for a in 0..self.row_ptr.len() - 1 {
-            for &b in &self.cols[self.row_ptr[a]..self.row_ptr[a + 1]] {
-                for i in 0..nf {
+            let bc = &self.cols[self.row_ptr[a]..self.row_ptr[a + 1]];
+            for i in 0..nf {
+                for &b in bc {
                     for k in 0..nf {
-                        rows.push((first + a * nf + i) as i32);
-                        cols.push((first + b as usize * nf + k) as i32);
+                        rows.push(a * nf + i);
+                        cols.push(b as usize * nf + k);
                     }
                 }
             }
@@ -439,11 +450,12 @@ impl Assembler {
         }
     }
 
-    /// Fills and returns the Jacobian values at the last evaluated iterate, in the order of
-    /// [`Assembler::pattern`].
-    pub fn jacobian(&mut self, input: &StepInput<'_>) -> &[f64] {
+    /// Writes the Jacobian at the last evaluated iterate into `values` (length [`Assembler::nonzeros`]),
+    /// ordered by `layout` for [`Assembler::block_pattern`]: in parallel, block rows owning disjoint
+    /// ranges.
+    pub fn jacobian_into(&self, input: &StepInput<'_>, values: &mut [f64], layout: BlockLayout) {
         let nf = self.fields;
-        let bs2 = nf * nf;
+        assert_eq!(values.len(), self.nonzeros(), "Jacobian value array length");
         let rows = self.row_ptr.len() - 1;
         let asm = AssemblerView {
             inc_offsets: &self.inc_offsets,
@@ -453,9 +465,13 @@ impl Assembler {
             g0: &self.g0,
             evals: &self.evals,
         };
-        let ctx = JacobianRows { asm, input, nf };
-        fill_rows(&ctx, 0..rows, &mut self.values, 0, bs2);
-        &self.values
+        let ctx = JacobianRows {
+            asm,
+            input,
+            nf,
+            layout,
+        };
+        fill_rows(&ctx, 0..rows, values, 0, nf * nf);
     }
 
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
@@ -509,6 +525,7 @@ struct JacobianRows<'a> {
     asm: AssemblerView<'a>,
     input: &'a StepInput<'a>,
     nf: usize,
+    layout: BlockLayout,
 }
 
 /// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
@@ -538,14 +555,15 @@ fn fill_rows(
     );
 }
 
-/// One block row of the Jacobian (active node `a`).
+/// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
 fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
-    let bs2 = nf * nf;
     let (table, particles, dofs) = (input.table, input.particles, input.dofs);
     let stride = table.stride();
     let s = input.row_scale;
     let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
+    let (ncols, layout) = (cols.len(), ctx.layout);
+    let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
     row.fill(0.0);
     let node = dofs.node(a);
     for &(p, k) in &asm.inc_entries[asm.inc_offsets[node]..asm.inc_offsets[node + 1]] {
@@ -576,21 +594,20 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
             let Ok(pos) = cols.binary_search(&b) else {
                 continue;
             };
-            let blk = &mut row[pos * bs2..(pos + 1) * bs2];
             let gj0 = asm.g0[p * stride + kj];
             for i in 0..2 {
                 for kk in 0..2 {
-                    blk[i * nf + kk] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
+                    row[at(i, pos, kk)] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
                 }
             }
             if nf == 3 {
                 let (sj, gj) = (wj.value, wj.grad);
-                blk[2] += v0 * q.x * sj;
-                blk[nf + 2] += v0 * q.y * sj;
+                row[at(0, pos, 2)] += v0 * q.x * sj;
+                row[at(1, pos, 2)] += v0 * q.y * sj;
                 let h = ev.deta_dx * gj;
-                blk[2 * nf] -= s * vn * si * h.x;
-                blk[2 * nf + 1] -= s * vn * si * h.y;
-                blk[2 * nf + 2] += s * vn * (si * sj + c * gi.dot(&gj));
+                row[at(2, pos, 0)] -= s * vn * si * h.x;
+                row[at(2, pos, 1)] -= s * vn * si * h.y;
+                row[at(2, pos, 2)] += s * vn * (si * sj + c * gi.dot(&gj));
             }
         }
     }
@@ -600,18 +617,18 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     let diag = cols.binary_search(&(a as u32)).ok();
     if let (Some(nm), Some(d)) = (input.newmark, diag) {
         let mf = input.mass[node] * nm.mass_factor();
-        row[d * bs2] += mf;
-        row[d * bs2 + nf + 1] += mf;
+        row[at(0, d, 0)] += mf;
+        row[at(1, d, 1)] += mf;
     }
     for i in 0..nf {
         if dofs.is_constrained(a * nf + i) {
-            for pos in 0..cols.len() {
-                for kk in 0..nf {
-                    row[pos * bs2 + i * nf + kk] = 0.0;
+            for pos in 0..ncols {
+                for k in 0..nf {
+                    row[at(i, pos, k)] = 0.0;
                 }
             }
             if let Some(d) = diag {
-                row[d * bs2 + i * nf + i] = s;
+                row[at(i, d, i)] = s;
             }
         }
     }

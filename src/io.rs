@@ -187,7 +187,7 @@ impl RunOutput {
                 let _ = write!(s, ",{name}_ux,{name}_uy,{name}_fx,{name}_fy");
             }
         }
-        s.push_str(",kinetic_energy,stored_energy,external_work,dissipated_energy,wall_setup,wall_assembly,wall_solve,wall_total\n");
+        s.push_str(",kinetic_energy,stored_energy,external_work,dissipated_energy,wall_setup,wall_assembly,wall_solve,wall_total,new_pattern\n");
         for r in &self.rows {
             let norms = &r.solve.residual_norms;
             let _ = write!(
@@ -210,7 +210,7 @@ impl RunOutput {
             let dissipated = r.external_work - r.kinetic_energy - r.stored_energy;
             let _ = writeln!(
                 s,
-                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{:.4e}",
+                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{:.4e},{}",
                 r.kinetic_energy,
                 r.stored_energy,
                 r.external_work,
@@ -218,7 +218,8 @@ impl RunOutput {
                 r.wall_setup,
                 r.wall_assembly,
                 r.wall_solve,
-                r.wall_total
+                r.wall_total,
+                u8::from(r.new_pattern)
             );
         }
         write_atomic(&self.dir.join("history.csv"), s.as_bytes())
