@@ -12,6 +12,7 @@ use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::scenario;
 use mpm_concrete::smoke::{self, SmokeParams};
 use mpm_concrete::solver::Simulation;
+use mpm_concrete::solver_defaults;
 use mpm_concrete::study;
 use std::path::PathBuf;
 
@@ -65,6 +66,22 @@ enum Command {
         /// Output directory (default runs/study-<config name>).
         #[arg(long)]
         output: Option<PathBuf>,
+    },
+    /// Performance benchmark: the paper-size CT, the elastic cantilever at 40,960 and 163,840 points and
+    /// the CT demo, each for a fixed number of steps in its own process, plus the microplane update's
+    /// throughput; writes bench.json and bench.md (docs/benchmarks.md). PETSc options after the arguments
+    /// go to every case.
+    Bench {
+        /// Only these cases (comma-separated names: ct-paper-4.3mps, cantilever-41k, cantilever-164k,
+        /// ct-demo).
+        #[arg(long, value_delimiter = ',')]
+        cases: Vec<String>,
+        /// Steps per case instead of each case's default.
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Output directory.
+        #[arg(long, default_value = "runs/bench")]
+        output: PathBuf,
     },
     /// Cross-check a finished run against reference CSV files (history columns or point values): prints
     /// relative errors; exit code 0 when all are within --tolerance, 1 when one exceeds it, 2 on bad
@@ -138,6 +155,40 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
             println!("{summary}");
             return Ok(());
         }
+        Command::Bench {
+            cases,
+            steps,
+            output,
+        } => {
+            let mut all = mpm_concrete::bench::default_cases();
+            if !cases.is_empty() {
+                let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
+                if let Some(bad) = cases.iter().find(|c| !names.contains(c)) {
+                    anyhow::bail!(
+                        "--cases: unknown case `{bad}` (allowed: {})",
+                        names.join(", ")
+                    );
+                }
+                all.retain(|c| cases.contains(&c.name));
+            }
+            if let Some(n) = steps {
+                anyhow::ensure!(n > 0, "--steps must be at least 1");
+                all.iter_mut().for_each(|c| c.steps = n);
+            }
+            if let Some(c) = all.iter().find(|c| !c.config.is_file()) {
+                anyhow::bail!(
+                    "bench: {} not found (the cases' configs are relative to the repository root: run \
+                     the command there)",
+                    c.config.display()
+                );
+            }
+            let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
+            let report = mpm_concrete::bench::run(&exe, &all, &petsc_args[1..].join(" "), &output)
+                .map_err(anyhow::Error::msg)?;
+            println!("{}", mpm_concrete::bench::markdown(&report));
+            println!("results in {}", output.display());
+            return Ok(());
+        }
         Command::Study {
             config,
             steps,
@@ -187,7 +238,10 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
             },
         )?,
         // handled above, without PETSc
-        Command::MaterialDriver(_) | Command::Study { .. } | Command::Compare(_) => {}
+        Command::MaterialDriver(_)
+        | Command::Study { .. }
+        | Command::Bench { .. }
+        | Command::Compare(_) => {}
         Command::Smoke {
             n,
             load,
@@ -238,27 +292,6 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// Default solver of MPM runs: Newton with line search; GMRES preconditioned by ILU(0) (block Jacobi
-/// over processes), which at 1 us steps is about 3x faster than a direct solve at the paper's size
-/// (the inertia term M/(beta dt^2) keeps the system well conditioned; docs/benchmarks.md). MUMPS LU
-/// (`-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps`) is the robust alternative. Every
-/// option can be overridden from the config's `run.petsc_options` or, with the final word, the command
-/// line.
-const DEFAULT_MPM_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 \
-     -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 -pc_type bjacobi -sub_pc_type ilu \
-     -sub_pc_factor_shift_type nonzero";
-
-/// Default solver of quasi-static runs (no inertia term, so ILU-preconditioned GMRES converges slowly):
-/// Newton with MUMPS LU.
-const DEFAULT_QUASI_STATIC_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 \
-     -ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
-
-/// The fallback solver of a step whose Newton iteration failed with the main solver: the same Newton
-/// settings with MUMPS LU (pivoting copes with the indefinite tangents of strongly softening material),
-/// tried at the same time step before it is halved. Options `-fallback_*` override it.
-const FALLBACK_OPTIONS: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -fallback_snes_max_it 25 \
-     -fallback_ksp_type preonly -fallback_pc_type lu -fallback_pc_factor_mat_solver_type mumps";
-
 /// Command-line flags of `run`.
 struct RunFlags {
     steps: Option<usize>,
@@ -283,20 +316,10 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
     }
     petsc::apply_default_options(session, &cfg.run.petsc_options)
         .with_context(|| format!("{}: run.petsc_options", path.display()))?;
-    // Built-in defaults that a user's solver choice makes irrelevant (e.g. the MUMPS option under
-    // -pc_type hypre) must not be reported as unused.
-    let main_defaults = if cfg.time.quasi_static {
-        DEFAULT_QUASI_STATIC_OPTIONS
-    } else {
-        DEFAULT_MPM_OPTIONS
-    };
-    let defaults: Vec<String> = petsc::apply_default_options(session, main_defaults)?
-        .into_iter()
-        .chain(petsc::apply_default_options(session, FALLBACK_OPTIONS)?)
-        .map(|(name, _)| format!("-{name}"))
-        .collect();
     let mut setup =
         scenario::build(&cfg).with_context(|| format!("{}: building the model", path.display()))?;
+    // The solver defaults follow the kind of step (docs/solvers.md).
+    let (_, defaults) = solver_defaults::apply(session, &setup)?;
     setup.fallback_prefix = Some("fallback_".into());
     let mut sim = Simulation::new(setup)?;
     let dir = output.unwrap_or_else(|| cfg.output_dir());
