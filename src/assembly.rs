@@ -111,6 +111,9 @@ pub enum AssemblyError {
     },
 }
 
+/// Marks a support node without unknowns in [`Assembler`]'s position table.
+const NO_COLUMN: u16 = u16::MAX;
+
 /// Cached constitutive evaluation of one particle at the current iterate.
 #[derive(Debug, Clone, Copy)]
 struct PointEval {
@@ -159,6 +162,9 @@ pub struct Assembler {
     /// Node -> (particle, slot in its weight list), CSR over grid nodes.
     inc_offsets: Vec<usize>,
     inc_entries: Vec<(u32, u8)>,
+    /// Per incidence entry and support slot of its particle: the position of the support node in the
+    /// entry's Jacobian row ([`NO_COLUMN`] for a node without unknowns); `stride` slots per entry.
+    inc_pos: Vec<u16>,
     /// Block pattern: for active node a, its column active nodes `cols[row_ptr[a]..row_ptr[a+1]]` (sorted).
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
@@ -208,18 +214,19 @@ impl Assembler {
                 *slot += 1;
             }
         }
-        // Block pattern: per active node, the sorted union of the supports of its particles.
+        // Block pattern: per active node, the sorted union of the supports of its particles; and for every
+        // incidence entry (node I, particle p) the position in I's row of each support node J of p, so
+        // that the Jacobian fill needs no search.
         let node_index = dofs.node_indices();
-        let rows: Vec<Vec<u32>> = dofs
+        let stride = table.stride();
+        let rows: Vec<(Vec<u32>, Vec<u16>)> = dofs
             .active_nodes()
             .par_iter()
             .map_init(Vec::new, |scratch: &mut Vec<u32>, &node| {
                 scratch.clear();
-                let (lo, hi) = (
-                    self.inc_offsets[node as usize],
-                    self.inc_offsets[node as usize + 1],
-                );
-                for &(p, _) in &self.inc_entries[lo..hi] {
+                let entries = &self.inc_entries
+                    [self.inc_offsets[node as usize]..self.inc_offsets[node as usize + 1]];
+                for &(p, _) in entries {
                     for w in table.weights(p as usize) {
                         let b = node_index[w.node as usize];
                         if b != crate::dofs::INACTIVE {
@@ -229,18 +236,36 @@ impl Assembler {
                 }
                 scratch.sort_unstable();
                 scratch.dedup();
-                scratch.clone()
+                let mut pos = vec![NO_COLUMN; entries.len() * stride];
+                for (e, &(p, _)) in entries.iter().enumerate() {
+                    for (kj, w) in table.weights(p as usize).iter().enumerate() {
+                        let b = node_index[w.node as usize];
+                        if let Ok(c) = scratch.binary_search(&b) {
+                            pos[e * stride + kj] = c as u16;
+                        }
+                    }
+                }
+                (scratch.clone(), pos)
             })
             .collect();
         self.row_ptr.clear();
         self.row_ptr.push(0);
         self.cols.clear();
-        for r in &rows {
+        self.inc_pos.clear();
+        self.inc_pos
+            .resize(self.inc_entries.len() * stride, NO_COLUMN);
+        for ((r, pos), &node) in rows.iter().zip(dofs.active_nodes()) {
+            assert!(
+                r.len() < NO_COLUMN as usize,
+                "a Jacobian row with {} block columns",
+                r.len()
+            );
             self.cols.extend_from_slice(r);
             self.row_ptr.push(self.cols.len());
+            let lo = self.inc_offsets[node as usize] * stride;
+            self.inc_pos[lo..lo + pos.len()].copy_from_slice(pos);
         }
         // G = F_n^T g per slot.
-        let stride = table.stride();
         self.g0.resize(np * stride, Vector2::zeros());
         self.g0
             .par_chunks_mut(stride.max(1))
@@ -460,6 +485,7 @@ impl Assembler {
         let asm = AssemblerView {
             inc_offsets: &self.inc_offsets,
             inc_entries: &self.inc_entries,
+            inc_pos: &self.inc_pos,
             row_ptr: &self.row_ptr,
             cols: &self.cols,
             g0: &self.g0,
@@ -515,6 +541,7 @@ impl Assembler {
 struct AssemblerView<'a> {
     inc_offsets: &'a [usize],
     inc_entries: &'a [(u32, u8)],
+    inc_pos: &'a [u16],
     row_ptr: &'a [usize],
     cols: &'a [u32],
     g0: &'a [Vector2<f64>],
@@ -566,10 +593,15 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
     row.fill(0.0);
     let node = dofs.node(a);
-    for &(p, k) in &asm.inc_entries[asm.inc_offsets[node]..asm.inc_offsets[node + 1]] {
+    let first = asm.inc_offsets[node];
+    for (e, &(p, k)) in asm.inc_entries[first..asm.inc_offsets[node + 1]]
+        .iter()
+        .enumerate()
+    {
         let (p, k) = (p as usize, k as usize);
         let ev = &asm.evals[p];
         let ws = table.weights(p);
+        let positions = &asm.inc_pos[(first + e) * stride..(first + e + 1) * stride];
         let gi0 = asm.g0[p * stride + k];
         let (si, gi) = (ws[k].value, ws[k].grad);
         let v0 = particles.vol0[p];
@@ -586,14 +618,11 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
         }
         let q = ev.dp_deb * gi0;
         let c = input.materials[particles.body[p] as usize].gradient_parameter();
-        for (kj, wj) in ws.iter().enumerate() {
-            let b = dofs.node_indices()[wj.node as usize];
-            if b == crate::dofs::INACTIVE {
+        for (kj, (wj, &pos)) in ws.iter().zip(positions).enumerate() {
+            if pos == NO_COLUMN {
                 continue;
             }
-            let Ok(pos) = cols.binary_search(&b) else {
-                continue;
-            };
+            let pos = pos as usize;
             let gj0 = asm.g0[p * stride + kj];
             for i in 0..2 {
                 for kk in 0..2 {
