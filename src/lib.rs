@@ -23,6 +23,7 @@ pub mod material;
 pub mod particles;
 pub mod petsc;
 pub mod plot;
+pub mod preflight;
 pub mod scenario;
 pub mod shape;
 pub mod smoke;

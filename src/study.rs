@@ -58,10 +58,12 @@ pub fn default_sets() -> Vec<OptionSet> {
     ]
 }
 
-/// Reads option sets from a text file: one set per line, `name: options`; `#` starts a comment.
+/// Reads option sets from a text file: one set per line, `name: options`; `#` starts a comment. Names must
+/// be unique (each names a directory) and the values of common options are checked
+/// ([`crate::preflight::check_petsc_options`]).
 pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut sets = Vec::new();
+    let mut sets: Vec<(usize, OptionSet)> = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
@@ -86,15 +88,27 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
                 i + 1
             ));
         }
-        sets.push(OptionSet {
-            name: name.into(),
-            options: options.trim().into(),
-        });
+        if let Some((line, _)) = sets.iter().find(|(_, s)| s.name == name) {
+            return Err(format!(
+                "{}:{}: set name {name:?} is already used on line {line} (each set writes into the directory of its name)",
+                path.display(),
+                i + 1
+            ));
+        }
+        crate::preflight::check_petsc_options(options)
+            .map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?;
+        sets.push((
+            i + 1,
+            OptionSet {
+                name: name.into(),
+                options: options.trim().into(),
+            },
+        ));
     }
     if sets.is_empty() {
         return Err(format!("{}: no option sets", path.display()));
     }
-    Ok(sets)
+    Ok(sets.into_iter().map(|(_, s)| s).collect())
 }
 
 /// Result of one option set.
@@ -383,6 +397,18 @@ mod tests {
                 name: "ilu".into(),
                 options: "-pc_type ilu".into()
             }
+        );
+        std::fs::write(&p, "a: -pc_type lu\nb: -pc_type ilu\na: -pc_type jacobi\n").expect("write");
+        let e = read_sets(&p).unwrap_err();
+        assert!(
+            e.contains("sets.txt:3") && e.contains("\"a\" is already used on line 1"),
+            "{e}"
+        );
+        std::fs::write(&p, "a: -ksp_type gmres -ksp_rtol -5\n").expect("write");
+        let e = read_sets(&p).unwrap_err();
+        assert!(
+            e.contains("sets.txt:1") && e.contains("-ksp_rtol -5"),
+            "{e}"
         );
         std::fs::write(&p, "no colon here\n").expect("write");
         let e = read_sets(&p).unwrap_err();
