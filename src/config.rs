@@ -431,11 +431,10 @@ impl RunConfig {
 
     /// Reads a configuration file, applies `key=value` overrides (dotted keys into tables, values in TOML
     /// syntax, e.g. `shape.method="fem"` or `grid.cell_size=2.5`; a bare word is taken as a string) and
-    /// validates the result.
-    pub fn from_file_with(path: &Path, overrides: &[String]) -> Result<Self, ConfigError> {
-        if overrides.is_empty() {
-            return Self::from_file(path);
-        }
+    /// validates the result. Returns the configuration and its effective text: the file with the
+    /// overrides applied, in canonical TOML (sorted keys, no comments), the same for every spelling of
+    /// the same configuration.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<(Self, String), ConfigError> {
         let file = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             file: file.clone(),
@@ -445,6 +444,14 @@ impl RunConfig {
             file: file.to_owned(),
             message,
         };
+        if overrides.is_empty() {
+            // Parse the file itself first, so that errors point at its lines.
+            let cfg = Self::from_str_named(&text, &file)?;
+            let table: toml::Table = toml::from_str(&text)
+                .map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
+            let canonical = toml::to_string(&table).map_err(|e| parse_err(&file, e.to_string()))?;
+            return Ok((cfg, canonical));
+        }
         let mut table: toml::Table =
             toml::from_str(&text).map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
         for o in overrides {
@@ -472,7 +479,8 @@ impl RunConfig {
         let named = source_label(&file, overrides);
         let canonical = toml::to_string(&table).map_err(|e| parse_err(&named, e.to_string()))?;
         // Lines of the canonical text mean nothing to the user: name the table instead.
-        Self::parse(&canonical, &named, false)
+        let cfg = Self::parse(&canonical, &named, false)?;
+        Ok((cfg, canonical))
     }
 
     /// Parses and validates configuration text; `file` names it in errors.
@@ -871,7 +879,8 @@ x = { velocity = 5.0 }
         let path = std::env::temp_dir().join(format!("mpmc-cfg-{}.toml", std::process::id()));
         std::fs::write(&path, MINIMAL).unwrap();
         let set = |o: &[&str]| {
-            RunConfig::from_file_with(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+            RunConfig::load(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .map(|(c, _)| c)
         };
         let c = set(&[
             "shape.method=fem",
@@ -889,6 +898,31 @@ x = { velocity = 5.0 }
         let e = set(&["grid.cell_size"]).unwrap_err().to_string();
         assert!(e.contains("key=value"), "{e}");
         std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn effective_text_includes_the_overrides_and_ignores_formatting() {
+        let dir = std::env::temp_dir().join(format!("mpmc-cfg-eff-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a.toml"), dir.join("b.toml"));
+        std::fs::write(&a, MINIMAL).unwrap();
+        let reformatted = format!(
+            "# a comment\n{}",
+            MINIMAL.replace("steps = 2", "steps   =   2 # two")
+        );
+        std::fs::write(&b, reformatted).unwrap();
+        let (_, ta) = RunConfig::load(&a, &[]).unwrap();
+        let (_, tb) = RunConfig::load(&b, &[]).unwrap();
+        assert_eq!(
+            ta, tb,
+            "comments and spacing do not change the effective text"
+        );
+        let (c, tc) = RunConfig::load(&a, &["grid.cell_size=0.5".to_string()]).unwrap();
+        assert_eq!(c.grid.cell_size, 0.5);
+        assert!(tc.contains("cell_size = 0.5"), "{tc}");
+        let again = RunConfig::from_str_named(&tc, "effective").unwrap();
+        assert_eq!(again.grid.cell_size, 0.5);
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -11,6 +11,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// The study's report in its output directory.
+pub const REPORT: &str = "study.md";
+
 /// A named PETSc option set.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OptionSet {
@@ -142,7 +145,8 @@ pub struct SetResult {
     pub error: Option<String>,
 }
 
-/// Runs every set for `steps` steps of `config`, results under `dir`.
+/// Runs every set for `steps` steps of `config`, results under `dir/<set name>` (replacing an earlier
+/// study's there).
 pub fn run(
     exe: &Path,
     config: &Path,
@@ -161,7 +165,13 @@ pub fn run(
         let output = Command::new(exe)
             .arg("run")
             .arg(config)
-            .args(["--steps", &steps.to_string(), "--quiet", "--output"])
+            .args([
+                "--steps",
+                &steps.to_string(),
+                "--quiet",
+                "--overwrite",
+                "--output",
+            ])
             .arg(&out)
             .args(set.options.split_whitespace())
             .arg("-log_view")
@@ -326,7 +336,7 @@ fn write_report(
         );
     }
     let io = |e: crate::io::OutputError| e.to_string();
-    write_atomic(&dir.join("study.md"), md.as_bytes()).map_err(io)?;
+    write_atomic(&dir.join(REPORT), md.as_bytes()).map_err(io)?;
     write_atomic(&dir.join("study.csv"), csv.as_bytes()).map_err(io)?;
     let series = |f: &dyn Fn(&SetResult) -> &Vec<f64>| -> Vec<Series> {
         results
