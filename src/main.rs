@@ -861,6 +861,10 @@ fn simulate(
         let stop = interrupted.load(std::sync::atomic::Ordering::SeqCst);
         if (every > 0 && sim.step % every == 0) || sim.step == cfg.run.steps || stop {
             save_state(&mut out, &sim, &dir, &identity)?;
+            // run.json follows the checkpoint, so a run killed outright shows how far it got.
+            record.steps_done = sim.step;
+            record.time_reached = sim.time;
+            record.write(&dir)?;
         }
         if stop && sim.step < cfg.run.steps {
             bar.abandon();

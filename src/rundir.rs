@@ -229,7 +229,7 @@ pub struct RunRecord {
     pub resumed_from_step: Option<usize>,
     /// `running`, `finished`, `interrupted` or `failed`.
     pub status: String,
-    /// Steps completed.
+    /// Steps completed (while running: at the last checkpoint).
     pub steps_done: usize,
     /// Steps requested.
     pub steps_requested: usize,
