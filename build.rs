@@ -59,7 +59,8 @@ fn main() {
         "Vec(GetOwnershipRange|Norm|AXPY|WAXPY|Scale|Dot|ScatterCreateToAll|ScatterBegin|ScatterEnd|ScatterDestroy)",
         "Mat(Create|SetSizes|SetType|SetBlockSize|SetFromOptions|SetUp|Destroy|SetPreallocationCOO|SetValuesCOO)",
         "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|SetOption)",
-        "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation)",
+        "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation|SetValuesBlocked)",
+        "MatSeq(AIJ|BAIJ)(SetPreallocationCSR|GetArray|RestoreArray)",
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix)",
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType)",
@@ -73,7 +74,7 @@ fn main() {
     let mut builder = bindgen::Builder::default()
         .header("wrapper.h")
         .allowlist_function(functions.join("|"))
-        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType)")
+        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType)")
         .blocklist_item("FP_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .layout_tests(false)

@@ -29,6 +29,7 @@
 use crate::dofs::DofMap;
 use crate::material::{Constitutive, Material, MaterialError, Response};
 use crate::particles::Particles;
+use crate::petsc::{BlockCsr, BlockLayout};
 use crate::shape::ShapeTable;
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use rayon::prelude::*;
@@ -110,6 +111,9 @@ pub enum AssemblyError {
     },
 }
 
+/// Marks a support node without unknowns in [`Assembler`]'s position table.
+const NO_COLUMN: u16 = u16::MAX;
+
 /// Cached constitutive evaluation of one particle at the current iterate.
 #[derive(Debug, Clone, Copy)]
 struct PointEval {
@@ -158,6 +162,9 @@ pub struct Assembler {
     /// Node -> (particle, slot in its weight list), CSR over grid nodes.
     inc_offsets: Vec<usize>,
     inc_entries: Vec<(u32, u8)>,
+    /// Per incidence entry and support slot of its particle: the position of the support node in the
+    /// entry's Jacobian row ([`NO_COLUMN`] for a node without unknowns); `stride` slots per entry.
+    inc_pos: Vec<u16>,
     /// Block pattern: for active node a, its column active nodes `cols[row_ptr[a]..row_ptr[a+1]]` (sorted).
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
@@ -168,7 +175,6 @@ pub struct Assembler {
     eb: Vec<f64>,
     evals: Vec<PointEval>,
     trial_history: Vec<f64>,
-    values: Vec<f64>,
     /// The iterate the cache was computed at.
     key: Vec<f64>,
     key_valid: bool,
@@ -208,18 +214,19 @@ impl Assembler {
                 *slot += 1;
             }
         }
-        // Block pattern: per active node, the sorted union of the supports of its particles.
+        // Block pattern: per active node, the sorted union of the supports of its particles; and for every
+        // incidence entry (node I, particle p) the position in I's row of each support node J of p, so
+        // that the Jacobian fill needs no search.
         let node_index = dofs.node_indices();
-        let rows: Vec<Vec<u32>> = dofs
+        let stride = table.stride();
+        let rows: Vec<(Vec<u32>, Vec<u16>)> = dofs
             .active_nodes()
             .par_iter()
             .map_init(Vec::new, |scratch: &mut Vec<u32>, &node| {
                 scratch.clear();
-                let (lo, hi) = (
-                    self.inc_offsets[node as usize],
-                    self.inc_offsets[node as usize + 1],
-                );
-                for &(p, _) in &self.inc_entries[lo..hi] {
+                let entries = &self.inc_entries
+                    [self.inc_offsets[node as usize]..self.inc_offsets[node as usize + 1]];
+                for &(p, _) in entries {
                     for w in table.weights(p as usize) {
                         let b = node_index[w.node as usize];
                         if b != crate::dofs::INACTIVE {
@@ -229,18 +236,36 @@ impl Assembler {
                 }
                 scratch.sort_unstable();
                 scratch.dedup();
-                scratch.clone()
+                let mut pos = vec![NO_COLUMN; entries.len() * stride];
+                for (e, &(p, _)) in entries.iter().enumerate() {
+                    for (kj, w) in table.weights(p as usize).iter().enumerate() {
+                        let b = node_index[w.node as usize];
+                        if let Ok(c) = scratch.binary_search(&b) {
+                            pos[e * stride + kj] = c as u16;
+                        }
+                    }
+                }
+                (scratch.clone(), pos)
             })
             .collect();
         self.row_ptr.clear();
         self.row_ptr.push(0);
         self.cols.clear();
-        for r in &rows {
+        self.inc_pos.clear();
+        self.inc_pos
+            .resize(self.inc_entries.len() * stride, NO_COLUMN);
+        for ((r, pos), &node) in rows.iter().zip(dofs.active_nodes()) {
+            assert!(
+                r.len() < NO_COLUMN as usize,
+                "a Jacobian row with {} block columns",
+                r.len()
+            );
             self.cols.extend_from_slice(r);
             self.row_ptr.push(self.cols.len());
+            let lo = self.inc_offsets[node as usize] * stride;
+            self.inc_pos[lo..lo + pos.len()].copy_from_slice(pos);
         }
         // G = F_n^T g per slot.
-        let stride = table.stride();
         self.g0.resize(np * stride, Vector2::zeros());
         self.g0
             .par_chunks_mut(stride.max(1))
@@ -257,8 +282,6 @@ impl Assembler {
         self.trial_history.resize(np * hs.max(1), 0.0);
         self.du.resize(nodes, Vector2::zeros());
         self.eb.resize(nodes, 0.0);
-        self.values
-            .resize(self.cols.len() * self.fields * self.fields, 0.0);
         self.key_valid = false;
     }
 
@@ -267,18 +290,31 @@ impl Assembler {
         self.cols.len() * self.fields * self.fields
     }
 
-    /// The COO pattern of the Jacobian with global indices offset by `first` (the first unknown owned by
-    /// this process), in the order of [`Assembler::jacobian`]'s values.
-    pub fn pattern(&self, first: usize) -> (Vec<i32>, Vec<i32>) {
+    /// The block pattern of the Jacobian (block rows = active nodes, global block columns offset by
+    /// `first`, the first block row owned by this process): the layout of [`Assembler::jacobian_into`].
+    pub fn block_pattern(&self, first: usize) -> BlockCsr<'_> {
+        debug_assert_eq!(first, 0, "block columns are numbered from 0 on one process");
+        BlockCsr {
+            first,
+            bs: self.fields,
+            row_ptr: &self.row_ptr,
+            cols: &self.cols,
+        }
+    }
+
+    /// The pattern as (row, column) pairs in the order of [`Assembler::jacobian_into`]'s values (for
+    /// tests and dense checks).
+    pub fn pattern(&self) -> (Vec<usize>, Vec<usize>) {
         let nf = self.fields;
         let n = self.nonzeros();
         let (mut rows, mut cols) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for a in 0..self.row_ptr.len() - 1 {
-            for &b in &self.cols[self.row_ptr[a]..self.row_ptr[a + 1]] {
-                for i in 0..nf {
+            let bc = &self.cols[self.row_ptr[a]..self.row_ptr[a + 1]];
+            for i in 0..nf {
+                for &b in bc {
                     for k in 0..nf {
-                        rows.push((first + a * nf + i) as i32);
-                        cols.push((first + b as usize * nf + k) as i32);
+                        rows.push(a * nf + i);
+                        cols.push(b as usize * nf + k);
                     }
                 }
             }
@@ -439,23 +475,29 @@ impl Assembler {
         }
     }
 
-    /// Fills and returns the Jacobian values at the last evaluated iterate, in the order of
-    /// [`Assembler::pattern`].
-    pub fn jacobian(&mut self, input: &StepInput<'_>) -> &[f64] {
+    /// Writes the Jacobian at the last evaluated iterate into `values` (length [`Assembler::nonzeros`]),
+    /// ordered by `layout` for [`Assembler::block_pattern`]: in parallel, block rows owning disjoint
+    /// ranges.
+    pub fn jacobian_into(&self, input: &StepInput<'_>, values: &mut [f64], layout: BlockLayout) {
         let nf = self.fields;
-        let bs2 = nf * nf;
+        assert_eq!(values.len(), self.nonzeros(), "Jacobian value array length");
         let rows = self.row_ptr.len() - 1;
         let asm = AssemblerView {
             inc_offsets: &self.inc_offsets,
             inc_entries: &self.inc_entries,
+            inc_pos: &self.inc_pos,
             row_ptr: &self.row_ptr,
             cols: &self.cols,
             g0: &self.g0,
             evals: &self.evals,
         };
-        let ctx = JacobianRows { asm, input, nf };
-        fill_rows(&ctx, 0..rows, &mut self.values, 0, bs2);
-        &self.values
+        let ctx = JacobianRows {
+            asm,
+            input,
+            nf,
+            layout,
+        };
+        fill_rows(&ctx, 0..rows, values, 0, nf * nf);
     }
 
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
@@ -499,6 +541,7 @@ impl Assembler {
 struct AssemblerView<'a> {
     inc_offsets: &'a [usize],
     inc_entries: &'a [(u32, u8)],
+    inc_pos: &'a [u16],
     row_ptr: &'a [usize],
     cols: &'a [u32],
     g0: &'a [Vector2<f64>],
@@ -509,6 +552,7 @@ struct JacobianRows<'a> {
     asm: AssemblerView<'a>,
     input: &'a StepInput<'a>,
     nf: usize,
+    layout: BlockLayout,
 }
 
 /// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
@@ -538,20 +582,26 @@ fn fill_rows(
     );
 }
 
-/// One block row of the Jacobian (active node `a`).
+/// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
 fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
-    let bs2 = nf * nf;
     let (table, particles, dofs) = (input.table, input.particles, input.dofs);
     let stride = table.stride();
     let s = input.row_scale;
     let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
+    let (ncols, layout) = (cols.len(), ctx.layout);
+    let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
     row.fill(0.0);
     let node = dofs.node(a);
-    for &(p, k) in &asm.inc_entries[asm.inc_offsets[node]..asm.inc_offsets[node + 1]] {
+    let first = asm.inc_offsets[node];
+    for (e, &(p, k)) in asm.inc_entries[first..asm.inc_offsets[node + 1]]
+        .iter()
+        .enumerate()
+    {
         let (p, k) = (p as usize, k as usize);
         let ev = &asm.evals[p];
         let ws = table.weights(p);
+        let positions = &asm.inc_pos[(first + e) * stride..(first + e + 1) * stride];
         let gi0 = asm.g0[p * stride + k];
         let (si, gi) = (ws[k].value, ws[k].grad);
         let v0 = particles.vol0[p];
@@ -568,29 +618,25 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
         }
         let q = ev.dp_deb * gi0;
         let c = input.materials[particles.body[p] as usize].gradient_parameter();
-        for (kj, wj) in ws.iter().enumerate() {
-            let b = dofs.node_indices()[wj.node as usize];
-            if b == crate::dofs::INACTIVE {
+        for (kj, (wj, &pos)) in ws.iter().zip(positions).enumerate() {
+            if pos == NO_COLUMN {
                 continue;
             }
-            let Ok(pos) = cols.binary_search(&b) else {
-                continue;
-            };
-            let blk = &mut row[pos * bs2..(pos + 1) * bs2];
+            let pos = pos as usize;
             let gj0 = asm.g0[p * stride + kj];
             for i in 0..2 {
                 for kk in 0..2 {
-                    blk[i * nf + kk] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
+                    row[at(i, pos, kk)] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
                 }
             }
             if nf == 3 {
                 let (sj, gj) = (wj.value, wj.grad);
-                blk[2] += v0 * q.x * sj;
-                blk[nf + 2] += v0 * q.y * sj;
+                row[at(0, pos, 2)] += v0 * q.x * sj;
+                row[at(1, pos, 2)] += v0 * q.y * sj;
                 let h = ev.deta_dx * gj;
-                blk[2 * nf] -= s * vn * si * h.x;
-                blk[2 * nf + 1] -= s * vn * si * h.y;
-                blk[2 * nf + 2] += s * vn * (si * sj + c * gi.dot(&gj));
+                row[at(2, pos, 0)] -= s * vn * si * h.x;
+                row[at(2, pos, 1)] -= s * vn * si * h.y;
+                row[at(2, pos, 2)] += s * vn * (si * sj + c * gi.dot(&gj));
             }
         }
     }
@@ -600,18 +646,18 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     let diag = cols.binary_search(&(a as u32)).ok();
     if let (Some(nm), Some(d)) = (input.newmark, diag) {
         let mf = input.mass[node] * nm.mass_factor();
-        row[d * bs2] += mf;
-        row[d * bs2 + nf + 1] += mf;
+        row[at(0, d, 0)] += mf;
+        row[at(1, d, 1)] += mf;
     }
     for i in 0..nf {
         if dofs.is_constrained(a * nf + i) {
-            for pos in 0..cols.len() {
-                for kk in 0..nf {
-                    row[pos * bs2 + i * nf + kk] = 0.0;
+            for pos in 0..ncols {
+                for k in 0..nf {
+                    row[at(i, pos, k)] = 0.0;
                 }
             }
             if let Some(d) = diag {
-                row[d * bs2 + i * nf + i] = s;
+                row[at(i, d, i)] = s;
             }
         }
     }

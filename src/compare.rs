@@ -566,29 +566,44 @@ struct Snapshot {
     values: Vec<Option<Vec<f64>>>,
 }
 
-fn read_dataset(path: &Path, name: &str, n: Option<usize>, comps: usize) -> Result<Vec<f64>> {
+/// Reads the dataset `name` of a snapshot with `n` rows (any number when `None`): a scalar of shape (N),
+/// or with `vector` a vector of shape (N, 3) (runs written before the 3-component output: (N, 2)),
+/// returned as x, y pairs.
+fn read_dataset(path: &Path, name: &str, n: Option<usize>, vector: bool) -> Result<Vec<f64>> {
     let file = hdf5_metno::File::open(path).map_err(h5_err(path, "open"))?;
-    let data: Vec<f64> = file
-        .dataset(name)
-        .and_then(|d| d.read_raw())
-        .map_err(h5_err(path, &format!("dataset `{name}`")))?;
-    let ok = data.len() % comps == 0 && n.is_none_or(|n| data.len() == n * comps);
-    if !ok {
+    let what = format!("dataset `{name}`");
+    let err = h5_err(path, &what);
+    let dataset = file.dataset(name).map_err(&err)?;
+    let shape = dataset.shape();
+    let width = match (vector, shape.as_slice()) {
+        (false, [_]) => Some(1),
+        (true, [_, w @ (2 | 3)]) => Some(*w),
+        _ => None,
+    };
+    let rows_ok = n.is_none_or(|n| shape.first() == Some(&n));
+    let Some(width) = width.filter(|_| rows_ok) else {
+        let rows = n.map_or("N".to_owned(), |n| n.to_string());
         return Err(bad(format!(
-            "{}: dataset `{name}` holds {} values, expected {} per point",
+            "{}: dataset `{name}` has shape {shape:?}, expected ({rows}{})",
             path.display(),
-            data.len(),
-            comps
+            if vector { ", 3" } else { "" }
         )));
-    }
-    Ok(data)
+    };
+    let data: Vec<f64> = dataset.read_raw().map_err(&err)?;
+    Ok(match width {
+        1 | 2 => data,
+        _ => data
+            .chunks_exact(width)
+            .flat_map(|c| [c[0], c[1]])
+            .collect(),
+    })
 }
 
 impl Snapshot {
     fn load(file: &SnapshotFile) -> Result<Self> {
-        let pos = read_dataset(&file.path, "position", None, 2)?;
+        let pos = read_dataset(&file.path, "position", None, true)?;
         let n = pos.len() / 2;
-        let disp = read_dataset(&file.path, "displacement", Some(n), 2)?;
+        let disp = read_dataset(&file.path, "displacement", Some(n), true)?;
         let reference: Vec<[f64; 2]> = (0..n)
             .map(|i| [pos[2 * i] - disp[2 * i], pos[2 * i + 1] - disp[2 * i + 1]])
             .collect();
@@ -603,11 +618,11 @@ impl Snapshot {
             let n = self.index.points().len();
             let (_, dataset, comp) = QUANTITIES[q];
             let v = match comp {
-                Some(c) => read_dataset(&file.path, dataset, Some(n), 2)?
+                Some(c) => read_dataset(&file.path, dataset, Some(n), true)?
                     .chunks_exact(2)
                     .map(|p| p[c])
                     .collect(),
-                None => read_dataset(&file.path, dataset, Some(n), 1)?,
+                None => read_dataset(&file.path, dataset, Some(n), false)?,
             };
             self.values[q] = Some(v);
         }
@@ -1324,6 +1339,41 @@ mod tests {
             }
         }
         pts
+    }
+
+    #[test]
+    fn vectors_are_read_as_xy_pairs_from_3_and_2_component_snapshots() {
+        let dir = std::env::temp_dir().join(format!("mpmc-compare-read-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("fields.h5");
+        {
+            let f = hdf5_metno::File::create(&path).expect("create");
+            let put = |name: &str, data: ndarray::ArrayD<f64>| {
+                f.new_dataset_builder()
+                    .with_data(&data)
+                    .create(name)
+                    .expect("dataset");
+            };
+            let xyz = ndarray::arr2(&[[1.0, 2.0, 0.0], [3.0, 4.0, 0.0]]);
+            put("xyz", xyz.into_dyn());
+            put("xy", ndarray::arr2(&[[1.0, 2.0], [3.0, 4.0]]).into_dyn());
+            put("scalar", ndarray::arr1(&[5.0, 6.0]).into_dyn());
+        }
+        for name in ["xyz", "xy"] {
+            let v = read_dataset(&path, name, Some(2), true).expect(name);
+            assert_eq!(v, [1.0, 2.0, 3.0, 4.0], "{name}");
+        }
+        let s = read_dataset(&path, "scalar", None, false).expect("scalar");
+        assert_eq!(s, [5.0, 6.0]);
+        let e = read_dataset(&path, "xyz", Some(3), true)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("shape [2, 3], expected (3, 3)"), "{e}");
+        let e = read_dataset(&path, "scalar", None, true)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("shape [2], expected (N, 3)"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

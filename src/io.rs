@@ -3,14 +3,16 @@
 //!
 //! * `history.csv`: per step time, solver statistics, reactions and prescribed displacements of every
 //!   constraint set, energies (header states the units);
-//! * `fields_NNNNNN.h5` + `fields.xdmf`: point fields at output steps (position, displacement, velocity,
-//!   Cauchy stress, damage, eta_bar, history maximum); open `fields.xdmf` in ParaView;
+//! * `fields_NNNNNN.h5` + `fields.xdmf`: point fields at output steps ([`FIELDS`]: position,
+//!   displacement, velocity, Cauchy stress, damage, eta_bar, history maximum), each dataset with `units`
+//!   and `description` attributes; open `fields.xdmf` in ParaView (`docs/paraview.md`);
 //! * `damage_NNNNNN.png`: damage maps; `force_time.png`, `force_displacement.png`: reaction curves;
 //! * `crack.json`: crack metrics at every output step (see [`crate::crack`]) when a notch tip is known.
 
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::solver::{Simulation, StepReport};
+use hdf5_metno::types::VarLenUnicode;
 use nalgebra::Vector2;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -67,6 +69,160 @@ fn tmp_name(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// Units system of the output files (attribute `units` of every `fields_NNNNNN.h5`).
+pub const UNITS: &str = "mm, s, N, MPa, t";
+
+/// How a point field is stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// One value per point: a dataset of shape (N).
+    Scalar,
+    /// x, y, z per point: a dataset of shape (N, 3), z = 0 in the plane problems.
+    Vector,
+}
+
+/// A dataset of the snapshot files `fields_NNNNNN.h5`, with its `units` and `description` attributes.
+#[derive(Debug, Clone, Copy)]
+pub struct Field {
+    /// Dataset name, also the array name in ParaView.
+    pub name: &'static str,
+    /// Scalar or vector.
+    pub kind: Kind,
+    /// Units (`-` for dimensionless).
+    pub units: &'static str,
+    /// Meaning.
+    pub description: &'static str,
+}
+
+/// The point indices 0..N-1 (int64, shape (N)): the XDMF topology, one vertex cell per material point,
+/// without which ParaView's default reader makes no cells and its Surface representation draws nothing.
+pub const CONNECTIVITY: Field = Field {
+    name: "connectivity",
+    kind: Kind::Scalar,
+    units: "-",
+    description: "point indices 0..N-1: the XDMF Polyvertex topology, one vertex cell per material point",
+};
+
+/// The point fields of a snapshot (float64); `position` is the XDMF geometry, the others its attributes.
+pub const FIELDS: [Field; 10] = [
+    Field {
+        name: "position",
+        kind: Kind::Vector,
+        units: "mm",
+        description: "current position of the material point (z = 0)",
+    },
+    Field {
+        name: "displacement",
+        kind: Kind::Vector,
+        units: "mm",
+        description: "displacement from the position at the start of the run (z = 0)",
+    },
+    Field {
+        name: "velocity",
+        kind: Kind::Vector,
+        units: "mm/s",
+        description: "velocity of the material point (z = 0)",
+    },
+    Field {
+        name: "sigma_xx",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "Cauchy stress, xx component",
+    },
+    Field {
+        name: "sigma_yy",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "Cauchy stress, yy component",
+    },
+    Field {
+        name: "sigma_xy",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "Cauchy stress, xy component",
+    },
+    Field {
+        name: "sigma_zz",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "Cauchy stress, zz component (out of plane, plane strain)",
+    },
+    Field {
+        name: "damage",
+        kind: Kind::Scalar,
+        units: "-",
+        description: "scalar damage, 0 intact to 1 fully damaged",
+    },
+    Field {
+        name: "eta_bar",
+        kind: Kind::Scalar,
+        units: "-",
+        description: "nonlocal equivalent strain interpolated from the grid",
+    },
+    Field {
+        name: "history_max",
+        kind: Kind::Scalar,
+        units: "-",
+        description: "largest history variable of the material law (microplane: max over the \
+                      microplanes of the history strain gamma_I; 0 for history-free laws)",
+    },
+];
+
+/// The XDMF index of the snapshots of `n` points: a temporal collection of point clouds, one vertex cell
+/// per point (explicit connectivity), vectors with 3 components.
+fn xdmf(snapshots: &[Snapshot], n: usize) -> String {
+    let mut s = String::from("<?xml version=\"1.0\" ?>\n<!-- units: ");
+    s.push_str(UNITS);
+    for f in [&CONNECTIVITY].into_iter().chain(&FIELDS) {
+        let _ = write!(s, "; {} {}", f.name, f.units);
+    }
+    s.push_str(" -->\n<Xdmf Version=\"3.0\">\n <Domain>\n  <Grid Name=\"material_points\" GridType=\"Collection\" CollectionType=\"Temporal\">\n");
+    let item = |file: &str, name: &str, dims: &str, number: &str| {
+        format!(
+            "<DataItem Dimensions=\"{dims}\" NumberType=\"{number}\" Precision=\"8\" Format=\"HDF\">{file}:/{name}</DataItem>"
+        )
+    };
+    let float = |file: &str, field: &Field| match field.kind {
+        Kind::Scalar => item(file, field.name, &n.to_string(), "Float"),
+        Kind::Vector => item(file, field.name, &format!("{n} 3"), "Float"),
+    };
+    let (geometry, attributes) = FIELDS.split_first().expect("position first");
+    for snap in snapshots {
+        let f = &snap.file;
+        let _ = writeln!(
+            s,
+            "   <Grid Name=\"step_{:06}\" GridType=\"Uniform\">",
+            snap.step
+        );
+        let _ = writeln!(s, "    <Time Value=\"{:.9e}\"/>", snap.time);
+        let _ = writeln!(
+            s,
+            "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"{n}\" NodesPerElement=\"1\">{}</Topology>",
+            item(f, CONNECTIVITY.name, &n.to_string(), "Int")
+        );
+        let _ = writeln!(
+            s,
+            "    <Geometry GeometryType=\"XYZ\">{}</Geometry>",
+            float(f, geometry)
+        );
+        for a in attributes {
+            let kind = match a.kind {
+                Kind::Scalar => "Scalar",
+                Kind::Vector => "Vector",
+            };
+            let _ = writeln!(
+                s,
+                "    <Attribute Name=\"{}\" AttributeType=\"{kind}\" Center=\"Node\">{}</Attribute>",
+                a.name,
+                float(f, a)
+            );
+        }
+        s.push_str("   </Grid>\n");
+    }
+    s.push_str("  </Grid>\n </Domain>\n</Xdmf>\n");
+    s
+}
+
 /// One written snapshot (for the XDMF index).
 #[derive(serde::Serialize, serde::Deserialize)]
 struct Snapshot {
@@ -79,6 +235,8 @@ struct Snapshot {
 pub struct RunOutput {
     dir: PathBuf,
     title: String,
+    /// The configuration text (TOML), stored in every snapshot file.
+    config_text: String,
     rows: Vec<StepReport>,
     snapshots: Vec<Snapshot>,
     initial_position: Vec<Vector2<f64>>,
@@ -100,6 +258,7 @@ impl RunOutput {
         Ok(Self {
             dir: dir.to_owned(),
             title: title.to_owned(),
+            config_text: config_text.to_owned(),
             rows: Vec::new(),
             snapshots: Vec::new(),
             initial_position: sim.setup.particles.x.clone(),
@@ -187,7 +346,7 @@ impl RunOutput {
                 let _ = write!(s, ",{name}_ux,{name}_uy,{name}_fx,{name}_fy");
             }
         }
-        s.push_str(",kinetic_energy,stored_energy,external_work,dissipated_energy,wall_setup,wall_assembly,wall_solve,wall_total\n");
+        s.push_str(",kinetic_energy,stored_energy,external_work,dissipated_energy,wall_setup,wall_assembly,wall_solve,wall_total,new_pattern\n");
         for r in &self.rows {
             let norms = &r.solve.residual_norms;
             let _ = write!(
@@ -210,7 +369,7 @@ impl RunOutput {
             let dissipated = r.external_work - r.kinetic_energy - r.stored_energy;
             let _ = writeln!(
                 s,
-                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{:.4e}",
+                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{:.4e},{}",
                 r.kinetic_energy,
                 r.stored_energy,
                 r.external_work,
@@ -218,7 +377,8 @@ impl RunOutput {
                 r.wall_setup,
                 r.wall_assembly,
                 r.wall_solve,
-                r.wall_total
+                r.wall_total,
+                u8::from(r.new_pattern)
             );
         }
         write_atomic(&self.dir.join("history.csv"), s.as_bytes())
@@ -262,106 +422,82 @@ impl RunOutput {
         let p = &sim.setup.particles;
         let n = p.len();
         let f = hdf5_metno::File::create(path)?;
-        let vec2 = |v: &mut dyn Iterator<Item = Vector2<f64>>| -> ndarray::Array2<f64> {
-            let flat: Vec<f64> = v.flat_map(|x| [x.x, x.y]).collect();
-            ndarray::Array2::from_shape_vec((n, 2), flat).expect("n x 2")
+        let text = |s: &str| {
+            s.parse::<VarLenUnicode>()
+                .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))
         };
-        f.new_dataset_builder()
-            .with_data(&vec2(&mut p.x.iter().copied()))
-            .create("position")?;
-        let disp = vec2(&mut p.x.iter().zip(&self.initial_position).map(|(x, x0)| x - x0));
-        f.new_dataset_builder()
-            .with_data(&disp)
-            .create("displacement")?;
-        f.new_dataset_builder()
-            .with_data(&vec2(&mut p.v.iter().copied()))
-            .create("velocity")?;
-        let comp = |i: usize, j: usize| p.stress.iter().map(|s| s[(i, j)]).collect::<Vec<f64>>();
-        f.new_dataset_builder()
-            .with_data(&comp(0, 0))
-            .create("sigma_xx")?;
-        f.new_dataset_builder()
-            .with_data(&comp(1, 1))
-            .create("sigma_yy")?;
-        f.new_dataset_builder()
-            .with_data(&comp(0, 1))
-            .create("sigma_xy")?;
-        f.new_dataset_builder()
-            .with_data(&comp(2, 2))
-            .create("sigma_zz")?;
-        f.new_dataset_builder()
-            .with_data(&p.damage)
-            .create("damage")?;
-        f.new_dataset_builder()
-            .with_data(&p.eta_bar)
-            .create("eta_bar")?;
-        let hmax: Vec<f64> = (0..n)
-            .map(|i| p.history(i).iter().copied().fold(0.0, f64::max))
-            .collect();
-        f.new_dataset_builder()
-            .with_data(&hmax)
-            .create("history_max")?;
+        let put_text = |loc: &hdf5_metno::Location, name: &str, value: &str| {
+            loc.new_attr::<VarLenUnicode>()
+                .create(name)?
+                .write_scalar(&text(value)?)
+        };
+        put_text(
+            &f,
+            "description",
+            "mpm-concrete point fields of the material points at one output step; fields.xdmf indexes \
+             the snapshots for ParaView",
+        )?;
+        put_text(&f, "units", UNITS)?;
+        put_text(&f, "run_name", &self.title)?;
+        put_text(&f, "config", &self.config_text)?;
         f.new_attr::<f64>()
             .create("time_s")?
             .write_scalar(&sim.time)?;
         f.new_attr::<u64>()
             .create("step")?
             .write_scalar(&(sim.step as u64))?;
+        let connectivity: Vec<i64> = (0..n as i64).collect();
+        let ds = f
+            .new_dataset_builder()
+            .with_data(&connectivity)
+            .create(CONNECTIVITY.name)?;
+        put_text(&ds, "units", CONNECTIVITY.units)?;
+        put_text(&ds, "description", CONNECTIVITY.description)?;
+        for (field, values) in FIELDS.iter().zip(self.point_values(sim)) {
+            let builder = f.new_dataset_builder();
+            let ds = match field.kind {
+                Kind::Scalar => builder.with_data(&values).create(field.name)?,
+                Kind::Vector => builder
+                    .with_data(
+                        &ndarray::Array2::from_shape_vec((n, 3), values)
+                            .expect("3 values per point"),
+                    )
+                    .create(field.name)?,
+            };
+            put_text(&ds, "units", field.units)?;
+            put_text(&ds, "description", field.description)?;
+        }
         Ok(())
     }
 
-    fn write_xdmf(&self, n: usize) -> Result<(), OutputError> {
-        let mut s = String::from(
-            "<?xml version=\"1.0\" ?>\n<!-- units: mm, s, N, MPa -->\n<Xdmf Version=\"3.0\">\n <Domain>\n  <Grid Name=\"material_points\" GridType=\"Collection\" CollectionType=\"Temporal\">\n",
-        );
-        let item = |file: &str, name: &str, dims: &str| {
-            format!(
-                "<DataItem Dimensions=\"{dims}\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">{file}:/{name}</DataItem>"
-            )
+    /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0).
+    fn point_values(&self, sim: &Simulation) -> [Vec<f64>; FIELDS.len()] {
+        let p = &sim.setup.particles;
+        let vec3 = |v: &mut dyn Iterator<Item = Vector2<f64>>| -> Vec<f64> {
+            v.flat_map(|x| [x.x, x.y, 0.0]).collect()
         };
-        for snap in &self.snapshots {
-            let f = &snap.file;
-            let _ = writeln!(
-                s,
-                "   <Grid Name=\"step_{:06}\" GridType=\"Uniform\">",
-                snap.step
-            );
-            let _ = writeln!(s, "    <Time Value=\"{:.9e}\"/>", snap.time);
-            let _ = writeln!(
-                s,
-                "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"{n}\" NodesPerElement=\"1\"/>"
-            );
-            let _ = writeln!(
-                s,
-                "    <Geometry GeometryType=\"XY\">{}</Geometry>",
-                item(f, "position", &format!("{n} 2"))
-            );
-            for v in ["displacement", "velocity"] {
-                let _ = writeln!(
-                    s,
-                    "    <Attribute Name=\"{v}\" AttributeType=\"Vector\" Center=\"Node\">{}</Attribute>",
-                    item(f, v, &format!("{n} 2"))
-                );
-            }
-            for a in [
-                "sigma_xx",
-                "sigma_yy",
-                "sigma_xy",
-                "sigma_zz",
-                "damage",
-                "eta_bar",
-                "history_max",
-            ] {
-                let _ = writeln!(
-                    s,
-                    "    <Attribute Name=\"{a}\" AttributeType=\"Scalar\" Center=\"Node\">{}</Attribute>",
-                    item(f, a, &n.to_string())
-                );
-            }
-            s.push_str("   </Grid>\n");
-        }
-        s.push_str("  </Grid>\n </Domain>\n</Xdmf>\n");
-        write_atomic(&self.dir.join("fields.xdmf"), s.as_bytes())
+        let comp = |i: usize, j: usize| p.stress.iter().map(|s| s[(i, j)]).collect::<Vec<f64>>();
+        [
+            vec3(&mut p.x.iter().copied()),
+            vec3(&mut p.x.iter().zip(&self.initial_position).map(|(x, x0)| x - x0)),
+            vec3(&mut p.v.iter().copied()),
+            comp(0, 0),
+            comp(1, 1),
+            comp(0, 1),
+            comp(2, 2),
+            p.damage.clone(),
+            p.eta_bar.clone(),
+            (0..p.len())
+                .map(|i| p.history(i).iter().copied().fold(0.0, f64::max))
+                .collect(),
+        ]
+    }
+
+    fn write_xdmf(&self, n: usize) -> Result<(), OutputError> {
+        write_atomic(
+            &self.dir.join("fields.xdmf"),
+            xdmf(&self.snapshots, n).as_bytes(),
+        )
     }
 
     /// Damage map of the current state.
@@ -441,5 +577,123 @@ impl RunOutput {
             )?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::RunConfig;
+    use hdf5_metno::types::VarLenUnicode;
+
+    const CONFIG: &str = r#"
+[run]
+name = "io-block"
+steps = 1
+[grid]
+cell_size = 2.0
+[shape]
+kind = "cpdi1"
+points_per_cell = 2
+[[body]]
+name = "block"
+density = 2.4e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [6.0, 4.0] }] }
+material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
+"#;
+
+    fn text(loc: &hdf5_metno::Location, name: &str) -> String {
+        let v: VarLenUnicode = loc
+            .attr(name)
+            .and_then(|a| a.read_scalar())
+            .unwrap_or_else(|e| panic!("attribute `{name}`: {e}"));
+        v.as_str().to_owned()
+    }
+
+    /// Two snapshots of a moved block: the XDMF gives every snapshot a vertex cell per point and
+    /// 3-component vectors, and the HDF5 files hold what it points to, with units on every dataset.
+    #[test]
+    fn snapshots_have_connectivity_3_component_vectors_and_units() {
+        let cfg = RunConfig::from_str_named(CONFIG, "io-block.toml").expect("config");
+        let mut sim =
+            Simulation::new(crate::scenario::build(&cfg).expect("model")).expect("simulation");
+        let dir = std::env::temp_dir().join(format!("mpmc-io-{}", std::process::id()));
+        let mut out = RunOutput::create(&dir, "io-block", CONFIG, &sim).expect("output");
+        out.snapshot(&sim).expect("snapshot 0");
+        let n = sim.setup.particles.len();
+        let p = &mut sim.setup.particles;
+        for (i, (x, v)) in p.x.iter_mut().zip(&mut p.v).enumerate() {
+            *x += Vector2::new(0.5, -0.25 * i as f64);
+            *v = Vector2::new(1.0e3, i as f64);
+        }
+        p.damage[1] = 0.75;
+        sim.step = 7;
+        sim.time = 7.0e-6;
+        out.snapshot(&sim).expect("snapshot 7");
+
+        let xdmf = std::fs::read_to_string(dir.join("fields.xdmf")).expect("xdmf");
+        for file in ["fields_000000.h5", "fields_000007.h5"] {
+            let topology = format!(
+                "<Topology TopologyType=\"Polyvertex\" NumberOfElements=\"{n}\" NodesPerElement=\"1\"><DataItem Dimensions=\"{n}\" NumberType=\"Int\" Precision=\"8\" Format=\"HDF\">{file}:/connectivity</DataItem></Topology>"
+            );
+            assert!(xdmf.contains(&topology), "{topology}\nnot in\n{xdmf}");
+            assert!(xdmf.contains(&format!(
+                "<Geometry GeometryType=\"XYZ\"><DataItem Dimensions=\"{n} 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">{file}:/position</DataItem></Geometry>"
+            )));
+            for v in ["displacement", "velocity"] {
+                assert!(xdmf.contains(&format!(
+                    "<Attribute Name=\"{v}\" AttributeType=\"Vector\" Center=\"Node\"><DataItem Dimensions=\"{n} 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">{file}:/{v}</DataItem></Attribute>"
+                )));
+            }
+        }
+        assert!(xdmf.contains("<Time Value=\"7.000000000e-6\"/>"));
+        assert!(!xdmf.contains(&format!("Dimensions=\"{n} 2\"")));
+
+        let f = hdf5_metno::File::open(dir.join("fields_000007.h5")).expect("open");
+        assert_eq!(text(&f, "units"), "mm, s, N, MPa, t");
+        assert_eq!(text(&f, "run_name"), "io-block");
+        assert_eq!(text(&f, "config"), CONFIG);
+        let step: u64 = f.attr("step").and_then(|a| a.read_scalar()).expect("step");
+        let time: f64 = f
+            .attr("time_s")
+            .and_then(|a| a.read_scalar())
+            .expect("time");
+        assert_eq!((step, time), (7, 7.0e-6));
+        let connectivity: Vec<i64> = f
+            .dataset("connectivity")
+            .and_then(|d| d.read_raw())
+            .expect("connectivity");
+        assert_eq!(connectivity, (0..n as i64).collect::<Vec<_>>());
+        for field in [&CONNECTIVITY].into_iter().chain(&FIELDS) {
+            let ds = f.dataset(field.name).expect(field.name);
+            let shape = match field.kind {
+                Kind::Scalar => vec![n],
+                Kind::Vector => vec![n, 3],
+            };
+            assert_eq!(ds.shape(), shape, "{}", field.name);
+            assert_eq!(text(&ds, "units"), field.units, "{}", field.name);
+            assert_eq!(
+                text(&ds, "description"),
+                field.description,
+                "{}",
+                field.name
+            );
+        }
+        let read =
+            |name: &str| -> Vec<f64> { f.dataset(name).and_then(|d| d.read_raw()).expect(name) };
+        let (position, displacement, velocity) =
+            (read("position"), read("displacement"), read("velocity"));
+        let p = &sim.setup.particles;
+        for i in 0..n {
+            assert_eq!(position[3 * i..3 * i + 3], [p.x[i].x, p.x[i].y, 0.0]);
+            let d = &displacement[3 * i..3 * i + 3];
+            assert!(
+                (d[0] - 0.5).abs() < 1e-12 && (d[1] + 0.25 * i as f64).abs() < 1e-12 && d[2] == 0.0,
+                "point {i}: {d:?}"
+            );
+            assert_eq!(velocity[3 * i..3 * i + 3], [1.0e3, i as f64, 0.0]);
+        }
+        assert_eq!(read("damage")[1], 0.75);
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

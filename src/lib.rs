@@ -12,6 +12,7 @@
 //! and only `assembly`/`solver` talk to [`petsc`], the one module with `unsafe` FFI.
 
 pub mod assembly;
+pub mod bench;
 pub mod checkpoint;
 pub mod compare;
 pub mod config;
@@ -29,5 +30,6 @@ pub mod scenario;
 pub mod shape;
 pub mod smoke;
 pub mod solver;
+pub mod solver_defaults;
 pub mod study;
 pub mod transfer;

@@ -17,7 +17,8 @@ use mpm_concrete::preflight;
 use mpm_concrete::rundir::{self, RunIdentity, RunRecord};
 use mpm_concrete::scenario;
 use mpm_concrete::smoke::{self, SmokeParams};
-use mpm_concrete::solver::{Simulation, StepError};
+use mpm_concrete::solver::{Setup, Simulation, StepError};
+use mpm_concrete::solver_defaults;
 use mpm_concrete::study;
 use std::path::{Path, PathBuf};
 
@@ -83,6 +84,22 @@ enum Command {
         /// Replace the results of an earlier study in the output directory.
         #[arg(long)]
         overwrite: bool,
+    },
+    /// Performance benchmark: the paper-size CT, the elastic cantilever at 40,960 and 163,840 points and
+    /// the CT demo, each for a fixed number of steps in its own process, plus the microplane update's
+    /// throughput; writes bench.json and bench.md (docs/benchmarks.md). PETSc options after the arguments
+    /// go to every case.
+    Bench {
+        /// Only these cases (comma-separated names: ct-paper-4.3mps, cantilever-41k, cantilever-164k,
+        /// ct-demo).
+        #[arg(long, value_delimiter = ',')]
+        cases: Vec<String>,
+        /// Steps per case instead of each case's default.
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Output directory.
+        #[arg(long, default_value = "runs/bench")]
+        output: PathBuf,
     },
     /// Cross-check a finished run against reference CSV files (history columns or point values): prints
     /// relative errors; exit code 0 when all are within --tolerance, 1 when one exceeds it, 2 on bad
@@ -200,6 +217,45 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
             no_petsc_options("material-driver", "", petsc_args)?;
             let summary = mpm_concrete::material::driver::run_driver(&args)?;
             println!("{summary}");
+            Ok(())
+        }
+        Command::Bench {
+            cases,
+            steps,
+            output,
+        } => {
+            let mut all = mpm_concrete::bench::default_cases();
+            if !cases.is_empty() {
+                let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
+                if let Some(unknown) = cases.iter().find(|c| !names.contains(c)) {
+                    return Err(bad(format!(
+                        "--cases: unknown case `{unknown}` (allowed: {})",
+                        names.join(", ")
+                    )));
+                }
+                all.retain(|c| cases.contains(&c.name));
+            }
+            if let Some(n) = steps {
+                if n == 0 {
+                    return Err(bad("--steps must be at least 1"));
+                }
+                all.iter_mut().for_each(|c| c.steps = n);
+            }
+            if let Some(c) = all.iter().find(|c| !c.config.is_file()) {
+                return Err(bad(format!(
+                    "bench: {} not found (the cases' configs are relative to the repository root: run \
+                     the command there)",
+                    c.config.display()
+                )));
+            }
+            let options = petsc_args[1..].join(" ");
+            preflight::check_petsc_options(&options)
+                .map_err(|e| bad(format!("command line: {e}")))?;
+            let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
+            let report = mpm_concrete::bench::run(&exe, &all, &options, &output)
+                .map_err(anyhow::Error::msg)?;
+            println!("{}", mpm_concrete::bench::markdown(&report));
+            println!("results in {}", output.display());
             Ok(())
         }
         Command::Study {
@@ -326,29 +382,8 @@ fn smoke_test(session: &SessionGuard, n: usize, load: f64, print_solution: bool)
     Ok(())
 }
 
-/// Default solver of MPM runs: Newton with line search; GMRES preconditioned by ILU(0) (block Jacobi
-/// over processes), which at 1 us steps is about 3x faster than a direct solve at the paper's size
-/// (the inertia term M/(beta dt^2) keeps the system well conditioned; docs/benchmarks.md). MUMPS LU
-/// (`-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps`) is the robust alternative. Every
-/// option can be overridden from the config's `run.petsc_options` or, with the final word, the command
-/// line.
-const DEFAULT_MPM_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 \
-     -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 -pc_type bjacobi -sub_pc_type ilu \
-     -sub_pc_factor_shift_type nonzero";
-
-/// Default solver of quasi-static runs (no inertia term, so ILU-preconditioned GMRES converges slowly):
-/// Newton with MUMPS LU.
-const DEFAULT_QUASI_STATIC_OPTIONS: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25 \
-     -ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
-
-/// Options prefix of the fallback solver.
+/// Options prefix of the fallback solver (its defaults: [`solver_defaults::FALLBACK`]).
 const FALLBACK_PREFIX: &str = "fallback_";
-
-/// The fallback solver of a step whose Newton iteration failed with the main solver: the same Newton
-/// settings with MUMPS LU (pivoting copes with the indefinite tangents of strongly softening material),
-/// tried at the same time step before it is halved. Options `-fallback_*` override it.
-const FALLBACK_OPTIONS: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -fallback_snes_max_it 25 \
-     -fallback_ksp_type preonly -fallback_pc_type lu -fallback_pc_factor_mat_solver_type mumps";
 
 /// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
 /// range, unsupported, incompatible, unknown type).
@@ -661,24 +696,17 @@ fn simulate(
     let file = path.display().to_string();
     petsc::apply_default_options(session, &cfg.run.petsc_options)
         .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
-    // Built-in defaults that a user's solver choice makes irrelevant (e.g. the MUMPS option under
-    // -pc_type hypre) must not be reported as unused.
-    let main_defaults = if cfg.time.quasi_static {
-        DEFAULT_QUASI_STATIC_OPTIONS
-    } else {
-        DEFAULT_MPM_OPTIONS
-    };
-    let defaults: Vec<String> = petsc::apply_default_options(session, main_defaults)?
-        .into_iter()
-        .chain(petsc::apply_default_options(session, FALLBACK_OPTIONS)?)
-        .map(|(name, _)| format!("-{name}"))
-        .collect();
-    let build = || -> Result<Simulation> {
+    let model = || -> Result<Setup> {
         let mut setup = scenario::build(&cfg).map_err(|e| bad(format!("{file}: {e}")))?;
         setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
-        Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")))
+        Ok(setup)
     };
-    let mut sim = build()?;
+    let simulation = |setup: Setup| Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")));
+    let setup = model()?;
+    // The solver defaults follow the kind of step (docs/solvers.md); those a user's solver choice makes
+    // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
+    let (_, defaults) = solver_defaults::apply(session, &setup)?;
+    let mut sim = simulation(setup)?;
     if resume_from.is_some() {
         checkpoint::load(&dir, &mut sim).map_err(bad)?;
         eprintln!("resuming at step {} (t = {:e} s)", sim.step, sim.time);
@@ -769,7 +797,7 @@ fn simulate(
         config::source_label(&file, &overrides)
     );
     // The output's reference state (initial positions, the step-0 fields) is the model as built.
-    let initial = build()?;
+    let initial = simulation(model()?)?;
     let mut out = RunOutput::create(&dir, &cfg.run.name, &config_copy, &initial)?;
     if let Some(ct) = &cfg.ct {
         out.track_crack(

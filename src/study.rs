@@ -141,6 +141,10 @@ pub struct SetResult {
     pub peak_mb: f64,
     /// Steps retried with a smaller time step.
     pub retries: usize,
+    /// Mean number of unknowns per step.
+    pub unknowns: f64,
+    /// Steps whose Jacobian pattern changed (PETSc objects built anew).
+    pub new_patterns: usize,
     /// Error message of a failed run.
     pub error: Option<String>,
 }
@@ -157,49 +161,61 @@ pub fn run(
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let mut results = Vec::new();
     for set in sets {
-        let out = dir.join(&set.name);
-        let log = out.join("log_view.txt");
-        std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
         eprintln!("study: {} ({})", set.name, set.options);
-        let start = std::time::Instant::now();
-        let output = Command::new(exe)
-            .arg("run")
-            .arg(config)
-            .args([
-                "--steps",
-                &steps.to_string(),
-                "--quiet",
-                "--overwrite",
-                "--output",
-            ])
-            .arg(&out)
-            .args(set.options.split_whitespace())
-            .arg("-log_view")
-            .arg(format!(":{}", log.display()))
-            .output()
-            .map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
-        let total = start.elapsed().as_secs_f64();
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        let error = (!output.status.success()).then(|| {
-            stderr
-                .lines()
-                .rev()
-                .find(|l| l.starts_with("error"))
-                .unwrap_or("failed")
-                .to_owned()
-        });
-        results.push(read_result(
-            set,
-            &out.join("history.csv"),
-            &stdout,
-            total,
-            steps,
-            error,
-        ));
+        results.push(run_one(exe, config, steps, set, &dir.join(&set.name))?);
     }
     write_report(dir, config, steps, &results)?;
     Ok(results)
+}
+
+/// Runs `config` for `steps` steps with the option set as its own `mpm-concrete run` process, results
+/// and PETSc's `-log_view` profile (`log_view.txt`) in `out` (replacing an earlier run's there); reads
+/// back its history and summary.
+pub fn run_one(
+    exe: &Path,
+    config: &Path,
+    steps: usize,
+    set: &OptionSet,
+    out: &Path,
+) -> Result<SetResult, String> {
+    let log = out.join("log_view.txt");
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let start = std::time::Instant::now();
+    let output = Command::new(exe)
+        .arg("run")
+        .arg(config)
+        .args([
+            "--steps",
+            &steps.to_string(),
+            "--quiet",
+            "--overwrite",
+            "--output",
+        ])
+        .arg(out)
+        .args(set.options.split_whitespace())
+        .arg("-log_view")
+        .arg(format!(":{}", log.display()))
+        .output()
+        .map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
+    let total = start.elapsed().as_secs_f64();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let error = (!output.status.success()).then(|| {
+        stderr
+            .lines()
+            .rev()
+            .find(|l| l.starts_with("error"))
+            .unwrap_or("failed")
+            .to_owned()
+    });
+    Ok(read_result(
+        set,
+        &out.join("history.csv"),
+        &stdout,
+        total,
+        steps,
+        error,
+    ))
 }
 
 fn read_result(
@@ -223,6 +239,8 @@ fn read_result(
         total,
         peak_mb: f64::NAN,
         retries: 0,
+        unknowns: f64::NAN,
+        new_patterns: 0,
         error,
     };
     let text = std::fs::read_to_string(csv).unwrap_or_default();
@@ -232,7 +250,7 @@ fn read_result(
         .map(|h| h.split(',').collect())
         .unwrap_or_default();
     let col = |name: &str| header.iter().position(|h| *h == name);
-    let (mut newton_sum, mut linear_sum) = (0.0, 0.0);
+    let (mut newton_sum, mut linear_sum, mut unknowns_sum) = (0.0, 0.0, 0.0);
     for line in lines {
         let f: Vec<&str> = line.split(',').collect();
         let num = |name: &str| {
@@ -250,7 +268,10 @@ fn read_result(
         r.assembly += num("wall_assembly");
         r.solve += num("wall_solve") - num("wall_assembly");
         r.retries += (num("attempts") as usize).saturating_sub(1);
+        unknowns_sum += num("unknowns");
+        r.new_patterns += usize::from(num("new_pattern") == 1.0);
     }
+    r.unknowns = unknowns_sum / r.steps.max(1) as f64;
     r.linear_per_newton = if newton_sum > 0.0 {
         linear_sum / newton_sum
     } else {

@@ -47,6 +47,8 @@ fn physics(rows: &[StepReport]) -> Vec<StepReport> {
             wall_solve: 0.0,
             wall_assembly: 0.0,
             wall_total: 0.0,
+            // Whether the PETSc objects were rebuilt is bookkeeping: a resumed run builds them anew.
+            new_pattern: false,
             ..r.clone()
         })
         .collect()

@@ -7,6 +7,7 @@ use mpm_concrete::dofs::DofMap;
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding, parallelogram_corners};
+use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{self, GridState};
 use nalgebra::{Matrix2, Vector2};
@@ -100,13 +101,14 @@ fn fd_error(kind: ShapeKind, mat: Material, strain: f64, eta_bar: f64, fields: u
             _ => strain * h * noise(i),
         })
         .collect();
-    // Dense Jacobian from the COO pattern.
+    // Dense Jacobian from the block pattern.
     asm.evaluate(&input, &x0).expect("evaluate");
-    let (rows, cols) = asm.pattern(0);
-    let vals = asm.jacobian(&input).to_vec();
+    let (rows, cols) = asm.pattern();
+    let mut vals = vec![0.0; asm.nonzeros()];
+    asm.jacobian_into(&input, &mut vals, BlockLayout::Rows);
     let mut jac = vec![0.0; n * n];
     for ((r, c), v) in rows.iter().zip(&cols).zip(&vals) {
-        jac[*r as usize * n + *c as usize] += v;
+        jac[r * n + c] += v;
     }
     let (mut rp, mut rm) = (vec![0.0; n], vec![0.0; n]);
     let (mut max_diff, mut max_j) = (0.0f64, 0.0f64);

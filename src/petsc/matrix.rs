@@ -1,10 +1,15 @@
 //! PETSc `Mat` (AIJ with a block size; `-mat_type` may override) assembled in coordinate (COO) form, and
 //! index sets.
 //!
-//! COO assembly fits per-particle contributions computed in parallel: the pattern (row, column pairs,
-//! repeats allowed and summed, negative indices ignored) is given once with
-//! [`Matrix::set_pattern_coo`] — exact preallocation — and every Newton iteration passes one value
-//! array in the same order to [`Matrix::set_values_coo`].
+//! Two ways to give the nonzero pattern once and the values many times:
+//! - **block CSR** ([`BlockCsr`], [`Matrix::set_block_pattern`], [`Matrix::fill_block_rows`]): the exact
+//!   pattern of the process's block rows, sorted, as the MPM assembler produces it from the node-particle
+//!   incidence. On one process the AIJ structure is built directly from it (no sorting) and the values
+//!   are written in place into PETSc's CSR value array, in parallel and without a copy; other matrix
+//!   types (`-mat_type baij`, MPI AIJ) are preallocated from the same pattern and filled row by row.
+//! - **COO** ([`Matrix::set_pattern_coo`], [`Matrix::set_values_coo`]): (row, column) pairs with repeats
+//!   summed and negative indices ignored; PETSc sorts them once. Simple for small problems (the smoke
+//!   lattice).
 
 use super::{
     PetscError, PetscInt, Result, SessionGuard, Vector, check, comm_world, sys, to_petsc_int,
@@ -20,7 +25,18 @@ pub struct Matrix {
 impl Matrix {
     /// A square matrix with `local_rows` rows on this process (a multiple of `block_size`), type AIJ
     /// with the block size set (GAMG/hypre accept it; `-mat_type baij` etc. override it).
-    pub fn new(_s: &SessionGuard, local_rows: usize, block_size: usize) -> Result<Self> {
+    pub fn new(s: &SessionGuard, local_rows: usize, block_size: usize) -> Result<Self> {
+        Self::with_type(s, local_rows, block_size, "aij")
+    }
+
+    /// As [`Matrix::new`] with another default type, e.g. `baij` (blocked kernels: faster ILU and
+    /// triangular solves, but no GAMG and no field split across a block); `-mat_type` still overrides it.
+    pub fn with_type(
+        _s: &SessionGuard,
+        local_rows: usize,
+        block_size: usize,
+        mat_type: &str,
+    ) -> Result<Self> {
         let mut raw = std::ptr::null_mut();
         let n = to_petsc_int(local_rows, "MatSetSizes")?;
         let decide = unsafe { sys::mpmc_petsc_decide() };
@@ -38,10 +54,8 @@ impl Matrix {
             unsafe { sys::MatSetSizes(m.raw, n, n, decide, decide) },
             "MatSetSizes",
         )?;
-        check(
-            unsafe { sys::MatSetType(m.raw, c"aij".as_ptr()) },
-            "MatSetType",
-        )?;
+        let t = super::cstring(mat_type)?;
+        check(unsafe { sys::MatSetType(m.raw, t.as_ptr()) }, "MatSetType")?;
         check(
             unsafe { sys::MatSetBlockSize(m.raw, to_petsc_int(block_size, "MatSetBlockSize")?) },
             "MatSetBlockSize",
@@ -119,6 +133,192 @@ impl Matrix {
         )
     }
 
+    /// Declares the exact nonzero pattern of this process's block rows (see [`BlockCsr`]) and leaves the
+    /// matrix assembled with zero values. On one process with type `seqaij` the CSR structure is handed to
+    /// PETSc as it is (`MatSeqAIJSetPreallocationCSR`: no sorting, no hashing); other types are
+    /// preallocated per block row (`MatXAIJSetPreallocation`) and the pattern is inserted once, so the
+    /// nonzero structure, and with it any symbolic factorisation, stays fixed while values change.
+    pub fn set_block_pattern(&mut self, p: &BlockCsr<'_>) -> Result<()> {
+        p.check()?;
+        if self.type_name()? == "seqaij" {
+            let bs = p.bs;
+            let rows = p.block_rows() * bs;
+            let mut i: Vec<PetscInt> = Vec::with_capacity(rows + 1);
+            let mut j: Vec<PetscInt> = Vec::with_capacity(p.nonzeros());
+            i.push(0);
+            for a in 0..p.block_rows() {
+                let cols = p.block_cols(a);
+                for _ in 0..bs {
+                    for &b in cols {
+                        let c = b as usize * bs;
+                        for k in 0..bs {
+                            j.push(to_petsc_int(c + k, "MatSeqAIJSetPreallocationCSR")?);
+                        }
+                    }
+                    i.push(to_petsc_int(j.len(), "MatSeqAIJSetPreallocationCSR")?);
+                }
+            }
+            // SAFETY: i has rows + 1 entries, j has i[rows]; PETSc copies both (null values = zeros).
+            return check(
+                unsafe {
+                    sys::MatSeqAIJSetPreallocationCSR(
+                        self.raw,
+                        i.as_ptr(),
+                        j.as_ptr(),
+                        std::ptr::null(),
+                    )
+                },
+                "MatSeqAIJSetPreallocationCSR",
+            );
+        }
+        if self.type_name()? == "seqbaij" {
+            let what = "MatSeqBAIJSetPreallocationCSR";
+            let i = p
+                .row_ptr
+                .iter()
+                .map(|&r| to_petsc_int(r, what))
+                .collect::<Result<Vec<_>>>()?;
+            let j = p
+                .cols
+                .iter()
+                .map(|&c| to_petsc_int(c as usize, what))
+                .collect::<Result<Vec<_>>>()?;
+            // SAFETY: block CSR of the local block rows; PETSc copies it (null values = zeros).
+            return check(
+                unsafe {
+                    sys::MatSeqBAIJSetPreallocationCSR(
+                        self.raw,
+                        to_petsc_int(p.bs, what)?,
+                        i.as_ptr(),
+                        j.as_ptr(),
+                        std::ptr::null(),
+                    )
+                },
+                what,
+            );
+        }
+        let own = p.first..p.first + p.block_rows();
+        let (mut dnnz, mut onnz) = (Vec::new(), Vec::new());
+        for a in 0..p.block_rows() {
+            let cols = p.block_cols(a);
+            let d = cols
+                .iter()
+                .filter(|&&b| own.contains(&(b as usize)))
+                .count();
+            dnnz.push(to_petsc_int(d, "MatXAIJSetPreallocation")?);
+            onnz.push(to_petsc_int(cols.len() - d, "MatXAIJSetPreallocation")?);
+        }
+        // SAFETY: one count per block row; the upper-triangle counts are only needed for SBAIJ.
+        check(
+            unsafe {
+                sys::MatXAIJSetPreallocation(
+                    self.raw,
+                    to_petsc_int(p.bs, "MatXAIJSetPreallocation")?,
+                    dnnz.as_ptr(),
+                    onnz.as_ptr(),
+                    std::ptr::null(),
+                    std::ptr::null(),
+                )
+            },
+            "MatXAIJSetPreallocation",
+        )?;
+        self.fill_block_rows(p, |v, _| v.fill(0.0))
+    }
+
+    /// Replaces all values of a matrix whose pattern was declared with [`Matrix::set_block_pattern`]:
+    /// `fill` receives an array of [`BlockCsr::nonzeros`] values in the given [`BlockLayout`] and must
+    /// write all of them. For `seqaij` and `seqbaij` this is PETSc's own value array (no copy); for other
+    /// types a scratch array inserted with `MatSetValuesBlocked`. Leaves the matrix assembled.
+    pub fn fill_block_rows(
+        &mut self,
+        p: &BlockCsr<'_>,
+        fill: impl FnOnce(&mut [f64], BlockLayout),
+    ) -> Result<()> {
+        let nnz = p.nonzeros();
+        type Access = unsafe extern "C" fn(sys::Mat, *mut *mut f64) -> sys::PetscErrorCode;
+        let direct: Option<(Access, Access, BlockLayout)> = match self.type_name()?.as_str() {
+            "seqaij" => Some((
+                sys::MatSeqAIJGetArray,
+                sys::MatSeqAIJRestoreArray,
+                BlockLayout::Rows,
+            )),
+            "seqbaij" => Some((
+                sys::MatSeqBAIJGetArray,
+                sys::MatSeqBAIJRestoreArray,
+                BlockLayout::Blocks,
+            )),
+            _ => None,
+        };
+        if let Some((get, restore, layout)) = direct {
+            let mut info = std::mem::MaybeUninit::<sys::MatInfo>::uninit();
+            // SAFETY: out-parameter filled by PETSc.
+            check(
+                unsafe { sys::MatGetInfo(self.raw, sys::MatInfoType_MAT_LOCAL, info.as_mut_ptr()) },
+                "MatGetInfo",
+            )?;
+            // SAFETY: initialised by the successful call above.
+            let used = unsafe { info.assume_init() }.nz_used as usize;
+            if used != nnz {
+                return Err(PetscError {
+                    code: 60,
+                    call: "fill_block_rows",
+                    message: format!(
+                        "the matrix holds {used} nonzeros but its declared block pattern {nnz}"
+                    ),
+                });
+            }
+            let mut a: *mut f64 = std::ptr::null_mut();
+            // SAFETY: the array has nnz entries in the order of `layout` for the block pattern
+            // (set_block_pattern built the structure from it); it is restored below.
+            check(unsafe { get(self.raw, &mut a) }, "MatSeq*GetArray")?;
+            fill(unsafe { std::slice::from_raw_parts_mut(a, nnz) }, layout);
+            return check(unsafe { restore(self.raw, &mut a) }, "MatSeq*RestoreArray");
+        }
+        let mut values = vec![0.0; nnz];
+        fill(&mut values, BlockLayout::Rows);
+        let bs = p.bs;
+        let mut cols: Vec<PetscInt> = Vec::new();
+        for a in 0..p.block_rows() {
+            let row = to_petsc_int(p.first + a, "MatSetValuesBlocked")?;
+            cols.clear();
+            for &b in p.block_cols(a) {
+                cols.push(to_petsc_int(b as usize, "MatSetValuesBlocked")?);
+            }
+            let lo = p.row_ptr[a] * bs * bs;
+            // SAFETY: one block row of cols.len() blocks, row-oriented: bs rows of cols.len() * bs values.
+            check(
+                unsafe {
+                    sys::MatSetValuesBlocked(
+                        self.raw,
+                        1,
+                        &row,
+                        to_petsc_int(cols.len(), "MatSetValuesBlocked")?,
+                        cols.as_ptr(),
+                        values[lo..].as_ptr(),
+                        sys::InsertMode_INSERT_VALUES,
+                    )
+                },
+                "MatSetValuesBlocked",
+            )?;
+        }
+        self.assemble()
+    }
+
+    /// The matrix type, e.g. `seqaij`, `mpiaij`, `seqbaij`.
+    pub fn type_name(&self) -> Result<String> {
+        let mut t: *const std::ffi::c_char = std::ptr::null();
+        // SAFETY: PETSc returns a pointer to its own type-name string (or null before MatSetType).
+        check(unsafe { sys::MatGetType(self.raw, &mut t) }, "MatGetType")?;
+        Ok(if t.is_null() {
+            String::new()
+        } else {
+            // SAFETY: non-null NUL-terminated string owned by PETSc.
+            unsafe { std::ffi::CStr::from_ptr(t) }
+                .to_string_lossy()
+                .into_owned()
+        })
+    }
+
     /// Finishes assembly (needed after operations other than COO, and for matrix-free operators).
     pub fn assemble(&mut self) -> Result<()> {
         let fin = sys::MatAssemblyType_MAT_FINAL_ASSEMBLY;
@@ -176,6 +376,90 @@ impl Matrix {
         // SAFETY: drops our reference; the matrix keeps its own.
         unsafe { sys::MatNullSpaceDestroy(&mut ns) };
         r
+    }
+}
+
+/// How the values of a block row are ordered in the array handed to [`Matrix::fill_block_rows`]. In both,
+/// block row `a` occupies `row_ptr[a] bs^2 .. row_ptr[a + 1] bs^2`; within it, for scalar row `i` of the
+/// block row, block position `pos` (0-based within the row, `n` blocks) and component `k`:
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlockLayout {
+    /// CSR order of the scalar rows (AIJ): offset `i n bs + pos bs + k`.
+    Rows,
+    /// Block after block, each stored column by column (BAIJ): offset `pos bs^2 + k bs + i`.
+    Blocks,
+}
+
+impl BlockLayout {
+    /// Offset within a block row of `n` blocks of size `bs`.
+    #[inline(always)]
+    pub fn offset(self, n: usize, bs: usize, i: usize, pos: usize, k: usize) -> usize {
+        match self {
+            BlockLayout::Rows => (i * n + pos) * bs + k,
+            BlockLayout::Blocks => (pos * bs + k) * bs + i,
+        }
+    }
+}
+
+/// The exact nonzero pattern of one process's block rows, as block CSR with `bs x bs` dense blocks.
+///
+/// Block row `a` (global block row `first + a`, scalar rows `(first + a) bs .. (first + a + 1) bs`) has the
+/// global block columns `cols[row_ptr[a]..row_ptr[a + 1]]`, strictly ascending. Values are ordered as
+/// [`BlockLayout`] says.
+#[derive(Debug, Clone, Copy)]
+pub struct BlockCsr<'a> {
+    /// Global index of the first block row of this process.
+    pub first: usize,
+    /// Block size (unknowns per node).
+    pub bs: usize,
+    /// Row pointers into `cols` (block rows + 1 entries, starting at 0).
+    pub row_ptr: &'a [usize],
+    /// Global block column indices, ascending within each row.
+    pub cols: &'a [u32],
+}
+
+impl BlockCsr<'_> {
+    /// Number of block rows.
+    pub fn block_rows(&self) -> usize {
+        self.row_ptr.len().saturating_sub(1)
+    }
+
+    /// The block columns of block row `a`.
+    pub fn block_cols(&self, a: usize) -> &[u32] {
+        &self.cols[self.row_ptr[a]..self.row_ptr[a + 1]]
+    }
+
+    /// Number of scalar nonzeros.
+    pub fn nonzeros(&self) -> usize {
+        self.row_ptr.last().copied().unwrap_or(0) * self.bs * self.bs
+    }
+
+    fn check(&self) -> Result<()> {
+        let bad = |message: String| {
+            Err(PetscError {
+                code: 60,
+                call: "set_block_pattern",
+                message,
+            })
+        };
+        if self.bs == 0 || self.row_ptr.first() != Some(&0) {
+            return bad(format!(
+                "block size {} and row pointers starting at {:?}",
+                self.bs,
+                self.row_ptr.first()
+            ));
+        }
+        if self.row_ptr.last() != Some(&self.cols.len()) {
+            return bad("row pointers do not end at the number of columns".into());
+        }
+        for a in 0..self.block_rows() {
+            if self.row_ptr[a] > self.row_ptr[a + 1]
+                || !self.block_cols(a).windows(2).all(|w| w[0] < w[1])
+            {
+                return bad(format!("block row {a}: columns not strictly ascending"));
+            }
+        }
+        Ok(())
     }
 }
 

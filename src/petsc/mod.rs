@@ -15,7 +15,7 @@ mod snes;
 pub mod sys;
 mod vector;
 
-pub use matrix::{IndexSet, Matrix};
+pub use matrix::{BlockCsr, BlockLayout, IndexSet, Matrix};
 pub use options::{
     apply_default_options, has_option, option_string, set_default_option, set_option,
     unused_options,
@@ -206,6 +206,14 @@ fn init_petsc(args: &[String]) -> Result<()> {
             call: "PetscInitialize",
             message: "PETSc/MPI initialisation failed".to_owned(),
         });
+    }
+    // The dense kernels of the direct solvers (MUMPS) run on the system BLAS. OpenBLAS's own threads
+    // would compete with rayon's (and with other MPI ranks) and spin while waiting: on a busy 2-core
+    // machine a factorisation took 7x longer with 2 OpenBLAS threads than with 1. One thread per process
+    // unless the user chose otherwise (OPENBLAS_NUM_THREADS).
+    if std::env::var_os("OPENBLAS_NUM_THREADS").is_none() {
+        // SAFETY: looks the function up at run time and calls it with a plain int.
+        unsafe { sys::mpmc_openblas_set_threads(1) };
     }
     // SAFETY: the handler is a plain function with the expected signature and no context.
     check(

@@ -1,3 +1,5 @@
+#define _GNU_SOURCE
+#include <dlfcn.h>
 #include "shim.h"
 
 MPI_Comm mpmc_comm_world(void) { return PETSC_COMM_WORLD; }
@@ -20,3 +22,11 @@ int mpmc_world_size(void)
 PetscInt mpmc_petsc_decide(void) { return PETSC_DECIDE; }
 PetscErrorCode mpmc_log_event_begin(PetscLogEvent e) { return PetscLogEventBegin(e, 0, 0, 0, 0); }
 PetscErrorCode mpmc_log_event_end(PetscLogEvent e) { return PetscLogEventEnd(e, 0, 0, 0, 0); }
+
+int mpmc_openblas_set_threads(int n)
+{
+  void (*set)(int) = (void (*)(int))dlsym(RTLD_DEFAULT, "openblas_set_num_threads");
+  if (!set) return 0;
+  set(n);
+  return 1;
+}

@@ -16,4 +16,7 @@ PetscInt mpmc_petsc_decide(void);
 /* PetscLogEventBegin/End are macros in 3.18. */
 PetscErrorCode mpmc_log_event_begin(PetscLogEvent e);
 PetscErrorCode mpmc_log_event_end(PetscLogEvent e);
+/* Sets the thread count of an OpenBLAS loaded in the process (found at run time; other BLAS have no such
+ * call). Returns 1 if OpenBLAS was found. */
+int mpmc_openblas_set_threads(int n);
 #endif

@@ -1,0 +1,203 @@
+//! The default PETSc solver of a run, chosen from the kind of step the model makes (docs/solvers.md).
+//!
+//! What makes a linear solver fast here is the balance in the Jacobian between the inertia term
+//! `M / (beta dt^2)` and the stiffness. Their ratio on the diagonal, for a cell of size `h`,
+//!
+//! ```text
+//! r = rho h^2 / (beta dt^2 M),   M = K + 4 G / 3 (P-wave modulus, MPa)
+//! ```
+//!
+//! is `(h / (c dt))^2 / beta` with `c` the P-wave speed: the inverse square of the step's Courant number.
+//! With `r` of order 0.1-1 (the CT test at 1 us steps: r = 0.25) the Jacobian is dominated by its diagonal
+//! blocks and GMRES with ILU(0) converges in a handful of iterations; with `r` far below that (long steps,
+//! soft or stiff-and-light bodies, quasi-static steps) ILU(0) needs hundreds of iterations and the solve
+//! needs a multigrid or a direct method. Every choice below can be overridden by `run.petsc_options` and,
+//! with the final word, by the command line.
+
+use crate::petsc::{self, SessionGuard};
+use crate::solver::Setup;
+
+/// Below this ratio `r` a dynamic step counts as stiffness-dominated.
+pub const STIFFNESS_DOMINATED_BELOW: f64 = 0.01;
+
+/// The kind of implicit step, for the choice of the linear solver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StepClass {
+    /// Dynamic, inertia significant (`r >= 0.01`): GMRES with block-Jacobi ILU(0).
+    InertiaDominated {
+        /// The ratio `r`.
+        ratio: f64,
+    },
+    /// Dynamic, `r < 0.01`: GMRES with algebraic multigrid (displacements only) or a lagged LU
+    /// (gradient-enhanced models).
+    StiffnessDominated {
+        /// The ratio `r`.
+        ratio: f64,
+    },
+    /// No inertia: Newton with an LU factorisation.
+    QuasiStatic,
+}
+
+/// Newton settings shared by every class: relative and absolute residual tolerances, at most 25 iterations.
+const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
+
+/// GMRES preconditioned by ILU(0) per process (on blocked storage, see the solver module), rebuilt at the
+/// first Newton iteration of a step and every third one after it (`-snes_lag_preconditioner 3`): with
+/// 1 us steps the Jacobian changes little within a step, and the ILU factorisation costs as much as five
+/// GMRES iterations.
+const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
+     -pc_type bjacobi -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
+
+/// GMRES with hypre's BoomerAMG (strength threshold 0.5 and one level of aggressive coarsening, the
+/// usual settings for 2D elasticity: about 11 iterations per Newton iteration, flat from 41k to 164k
+/// points on the cantilever benchmark), its hierarchy lagged like the ILU above.
+const STIFFNESS_AMG: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 500 \
+     -pc_type hypre -pc_hypre_type boomeramg -pc_hypre_boomeramg_strong_threshold 0.5 \
+     -pc_hypre_boomeramg_agg_nl 1";
+
+/// GMRES around a MUMPS LU factorisation that is refreshed at the first Newton iteration of a step and
+/// every third one (the coupled (u, eta_bar) Jacobian of the gradient-enhanced models is non-symmetric and,
+/// while softening, indefinite: pivoting LU is the robust choice).
+const STIFFNESS_LU: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-8 -ksp_max_it 200 \
+     -pc_type lu -pc_factor_mat_solver_type mumps";
+
+/// Newton with MUMPS LU, a new factorisation every iteration.
+const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
+
+/// Options of the fallback solver (prefix `fallback_`) tried at the same time step when the main one
+/// fails, before the step is halved: Newton with a fresh MUMPS LU every iteration (pivoting copes with the
+/// indefinite tangents of strongly softening material).
+pub const FALLBACK: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -fallback_snes_max_it 25 \
+     -fallback_ksp_type preonly -fallback_pc_type lu -fallback_pc_factor_mat_solver_type mumps";
+
+/// The ratio `r = rho h^2 / (beta dt^2 M)` of the model (smallest density, stiffest material), or `None`
+/// for a quasi-static model.
+pub fn inertia_ratio(setup: &Setup) -> Option<f64> {
+    if setup.time.quasi_static {
+        return None;
+    }
+    let p = &setup.particles;
+    let rho = (0..p.len())
+        .filter(|&i| p.vol0[i] > 0.0)
+        .map(|i| p.mass[i] / p.vol0[i])
+        .fold(f64::INFINITY, f64::min);
+    let modulus = setup
+        .materials
+        .iter()
+        .map(|m| {
+            let e = m.elastic_moduli();
+            e.bulk + 4.0 * e.shear / 3.0
+        })
+        .fold(0.0, f64::max);
+    let h = setup.grid.cell_size();
+    let dt = setup.time.dt;
+    Some(rho * h * h / (setup.time.beta * dt * dt * modulus))
+}
+
+/// The class of the model's steps.
+pub fn classify(setup: &Setup) -> StepClass {
+    match inertia_ratio(setup) {
+        None => StepClass::QuasiStatic,
+        Some(ratio) if ratio >= STIFFNESS_DOMINATED_BELOW => StepClass::InertiaDominated { ratio },
+        Some(ratio) => StepClass::StiffnessDominated { ratio },
+    }
+}
+
+/// The default options of the main solver for a class; `gradient` tells whether the model solves for
+/// eta_bar too.
+pub fn main_options(class: StepClass, gradient: bool) -> String {
+    let solver = match class {
+        StepClass::InertiaDominated { .. } => INERTIA,
+        StepClass::StiffnessDominated { .. } if gradient => STIFFNESS_LU,
+        StepClass::StiffnessDominated { .. } => STIFFNESS_AMG,
+        StepClass::QuasiStatic => QUASI_STATIC,
+    };
+    format!("{NEWTON} {solver}")
+}
+
+/// Applies the defaults of the model's class and the fallback solver to the options database (options
+/// already set, from the config or the command line, win) and returns the names of the options it set,
+/// e.g. `-ksp_type`, so that those a user's choice made irrelevant are not reported as unused. A lagged
+/// preconditioner only makes sense inside a Krylov method: under `-ksp_type preonly` (a user's direct
+/// solve) the default lag is withdrawn, so that Newton keeps a fresh factorisation every iteration.
+pub fn apply(
+    session: &SessionGuard,
+    setup: &Setup,
+) -> Result<(StepClass, Vec<String>), petsc::PetscError> {
+    let class = classify(setup);
+    let gradient = setup.materials.iter().any(|m| m.is_nonlocal());
+    let mut applied: Vec<String> =
+        petsc::apply_default_options(session, &main_options(class, gradient))?
+            .into_iter()
+            .chain(petsc::apply_default_options(session, FALLBACK)?)
+            .map(|(name, _)| format!("-{name}"))
+            .collect();
+    let lag = "-snes_lag_preconditioner".to_owned();
+    if applied.contains(&lag)
+        && petsc::option_string(session, "ksp_type")?.as_deref() == Some("preonly")
+    {
+        petsc::set_option(session, "snes_lag_preconditioner", Some("1"))?;
+        applied.retain(|o| *o != lag);
+    }
+    tracing::info!("default solver for {}", describe(class, gradient));
+    Ok((class, applied))
+}
+
+/// A one-line description for the run's log.
+pub fn describe(class: StepClass, gradient: bool) -> String {
+    let solver = match class {
+        StepClass::InertiaDominated { .. } => "GMRES + ILU(0)",
+        StepClass::StiffnessDominated { .. } if gradient => "GMRES + lagged MUMPS LU",
+        StepClass::StiffnessDominated { .. } => "GMRES + BoomerAMG",
+        StepClass::QuasiStatic => "MUMPS LU",
+    };
+    match class {
+        StepClass::InertiaDominated { ratio } => {
+            format!("inertia-dominated steps (r = {ratio:.3}): {solver}")
+        }
+        StepClass::StiffnessDominated { ratio } => {
+            format!("stiffness-dominated steps (r = {ratio:.2e}): {solver}")
+        }
+        StepClass::QuasiStatic => format!("quasi-static steps: {solver}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::RunConfig;
+    use std::path::Path;
+
+    fn class_of(config: &str) -> StepClass {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(config);
+        let cfg = RunConfig::from_file(&path).expect("config");
+        classify(&crate::scenario::build(&cfg).expect("model"))
+    }
+
+    #[test]
+    fn the_ct_test_is_inertia_dominated_and_the_cantilever_stiffness_dominated() {
+        // CT: rho h^2 / (beta dt^2 (K + 4G/3)) = 2.4e-9 / (0.25e-12 * 39088.7) = 0.2456 (4 mm demo cells: 16x).
+        match class_of("configs/ct-demo.toml") {
+            StepClass::InertiaDominated { ratio } => {
+                assert!((ratio - 16.0 * 0.24559).abs() < 1e-3, "{ratio}")
+            }
+            c => panic!("{c:?}"),
+        }
+        // Cantilever: 1e-9 * 3.125^2 / (0.25 * 4e-6 * 134.615) = 7.25e-5.
+        match class_of("configs/bench/cantilever-41k.toml") {
+            StepClass::StiffnessDominated { ratio } => {
+                assert!((ratio - 7.2545e-5).abs() < 1e-8, "{ratio}")
+            }
+            c => panic!("{c:?}"),
+        }
+        assert_eq!(
+            class_of("configs/crosscheck-cantilever.toml"),
+            StepClass::QuasiStatic
+        );
+        assert!(main_options(StepClass::QuasiStatic, true).contains("mumps"));
+        let amg = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, false);
+        assert!(amg.contains("-pc_type hypre"), "{amg}");
+        let lu = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, true);
+        assert!(lu.contains("mumps") && lu.contains("gmres"), "{lu}");
+    }
+}
