@@ -23,6 +23,7 @@ fn main() {
     println!("cargo:rerun-if-changed=src/petsc/shim.h");
     println!("cargo:rerun-if-changed=src/petsc/shim.c");
     println!("cargo:rerun-if-env-changed=PKG_CONFIG_PATH");
+    git_describe();
 
     let petsc = probe("PETSc");
     let mpi = probe("ompi-c");
@@ -88,6 +89,35 @@ fn main() {
         .unwrap_or_else(|e| panic!("\n\nbindgen failed on wrapper.h: {e}\n=> {SETUP}\n"));
     let out = PathBuf::from(std::env::var("OUT_DIR").expect("OUT_DIR")).join("petsc_sys.rs");
     bindings.write_to_file(&out).expect("write bindings");
+}
+
+/// Passes `git describe` of the source tree to the crate as `MPMC_GIT_DESCRIBE` (empty outside a git
+/// checkout or without git): part of the program version that every run records. The script reruns when
+/// HEAD or the current branch move and when a file under `src/` changes (so `-dirty` is current for the
+/// code).
+fn git_describe() {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
+    };
+    let git_dir = git(&["rev-parse", "--git-dir"]).map(PathBuf::from);
+    let common_dir = git(&["rev-parse", "--git-common-dir"]).map(PathBuf::from);
+    let branch =
+        git(&["rev-parse", "--symbolic-full-name", "HEAD"]).filter(|r| r.starts_with("refs/"));
+    let watched = [
+        git_dir.as_ref().map(|d| d.join("HEAD")),
+        common_dir.as_ref().zip(branch).map(|(d, b)| d.join(b)),
+        git_dir.as_ref().map(|_| PathBuf::from("src")),
+    ];
+    for path in watched.into_iter().flatten().filter(|p| p.exists()) {
+        println!("cargo:rerun-if-changed={}", path.display());
+    }
+    let describe = git(&["describe", "--always", "--dirty", "--tags"]).unwrap_or_default();
+    println!("cargo:rustc-env=MPMC_GIT_DESCRIBE={describe}");
 }
 
 /// PETSc's `Vec` type would shadow Rust's `Vec` in the bindings module: call it `PetscVec`.

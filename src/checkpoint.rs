@@ -1,22 +1,52 @@
 //! Checkpoint and restart: the complete committed state of a run (every particle column, the rigid bodies,
 //! the counters) and what its output has recorded so far, in one HDF5 file `checkpoint.h5` written
-//! atomically at every output step and when a run is interrupted. A resumed run continues bit for bit: the
-//! step is deterministic (assembly by gather, ordered reductions), so it ends with the same results as an
-//! uninterrupted one.
+//! atomically at every output step, when a run is interrupted and when a step fails for good. A resumed run
+//! continues bit for bit: the step is deterministic (assembly by gather, ordered reductions), so it ends
+//! with the same results as an uninterrupted one.
+//!
+//! A checkpoint proves what it holds: it carries the run's identity ([`RunIdentity`]: the effective
+//! configuration, program version and PETSc options) and every dataset carries a CRC-32 of its values in an
+//! attribute `crc32`. [`load`] reads and verifies every dataset before it changes anything, so a damaged
+//! file is reported as corrupt and never loaded.
 
 use crate::io::{OutputError, RunOutput};
+use crate::rundir::RunIdentity;
 use crate::solver::{Counters, Method, Simulation};
 use nalgebra::{Matrix2, Matrix3, Vector2};
-use std::path::Path;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 
 /// File name of the checkpoint inside the output directory.
 pub const FILE: &str = "checkpoint.h5";
 
-fn h5_err(path: &Path) -> impl Fn(hdf5_metno::Error) -> OutputError + '_ {
-    move |e| OutputError::Hdf5 {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    }
+/// Layout version written into `meta` (checkpoints without it predate checksums).
+const FORMAT: u64 = 2;
+
+/// A checkpoint that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// There is no checkpoint.
+    #[error("{path}: no checkpoint to resume from (start the run without --resume)")]
+    Missing {
+        /// The expected file.
+        path: String,
+    },
+    /// The file is damaged: unreadable, or a dataset does not match its checksum.
+    #[error("{path}: the checkpoint is corrupt ({detail}); nothing was loaded")]
+    Corrupt {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        detail: String,
+    },
+    /// The file is intact but cannot be used with this program or configuration.
+    #[error("{path}: {detail}")]
+    Unusable {
+        /// The file.
+        path: String,
+        /// Why.
+        detail: String,
+    },
 }
 
 fn flat2(v: &[Vector2<f64>]) -> Vec<f64> {
@@ -29,56 +59,90 @@ fn unflat2(f: &[f64]) -> Vec<Vector2<f64>> {
         .collect()
 }
 
-/// Writes the state of `sim` and the records of `out` to `dir/checkpoint.h5`.
-pub fn save(dir: &Path, sim: &Simulation, out: &RunOutput) -> Result<(), OutputError> {
+fn unflat_corners(f: &[f64]) -> Vec<[Vector2<f64>; 4]> {
+    f.chunks_exact(8)
+        .map(|c| {
+            let v = unflat2(c);
+            [v[0], v[1], v[2], v[3]]
+        })
+        .collect()
+}
+
+/// CRC-32 of the little-endian bytes of `data`.
+fn crc_f64(data: &[f64]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    let mut bytes = Vec::with_capacity(8 * 4096);
+    for chunk in data.chunks(4096) {
+        bytes.clear();
+        bytes.extend(chunk.iter().flat_map(|v| v.to_le_bytes()));
+        h.update(&bytes);
+    }
+    h.finalize()
+}
+
+/// Writes the state of `sim`, the records of `out` and the run's `identity` to `dir/checkpoint.h5`
+/// (through a temporary file, so a failed write leaves the previous checkpoint).
+pub fn save(
+    dir: &Path,
+    sim: &Simulation,
+    out: &RunOutput,
+    identity: &RunIdentity,
+) -> Result<(), OutputError> {
     let path = dir.join(FILE);
     let tmp = dir.join(format!("{FILE}.tmp"));
-    write(&tmp, sim, out).map_err(h5_err(&path))?;
+    write(&tmp, sim, out, identity).map_err(|e| OutputError::Hdf5 {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
     std::fs::rename(&tmp, &path).map_err(|source| OutputError::Io {
         path: path.display().to_string(),
         source,
     })
 }
 
-fn write(path: &Path, sim: &Simulation, out: &RunOutput) -> hdf5_metno::Result<()> {
+fn write(
+    path: &Path,
+    sim: &Simulation,
+    out: &RunOutput,
+    identity: &RunIdentity,
+) -> hdf5_metno::Result<()> {
     let f = hdf5_metno::File::create(path)?;
     let p = &sim.setup.particles;
-    let put = |name: &str, data: &[f64]| {
-        f.new_dataset_builder()
+    let mut names = Vec::new();
+    let mut put = |name: String, data: &[f64]| -> hdf5_metno::Result<()> {
+        let ds = f
+            .new_dataset_builder()
             .with_data(data)
-            .create(name)
-            .map(|_| ())
+            .create(name.as_str())?;
+        ds.new_attr::<u32>()
+            .create("crc32")?
+            .write_scalar(&crc_f64(data))?;
+        names.push(name);
+        Ok(())
     };
-    put("x", &flat2(&p.x))?;
-    put("v", &flat2(&p.v))?;
-    put("a", &flat2(&p.a))?;
-    put("r1", &flat2(&p.r1))?;
-    put("r2", &flat2(&p.r2))?;
-    put("vol", &p.vol)?;
+    let matrices = |m: &mut dyn Iterator<Item = &[f64]>| m.flatten().copied().collect::<Vec<_>>();
+    put("x".into(), &flat2(&p.x))?;
+    put("v".into(), &flat2(&p.v))?;
+    put("a".into(), &flat2(&p.a))?;
+    put("r1".into(), &flat2(&p.r1))?;
+    put("r2".into(), &flat2(&p.r2))?;
+    put("vol".into(), &p.vol)?;
+    put("f".into(), &matrices(&mut p.f.iter().map(|m| m.as_slice())))?;
     put(
-        "f",
-        &p.f.iter()
-            .flat_map(|m| m.iter().copied().collect::<Vec<_>>())
-            .collect::<Vec<_>>(),
+        "stress".into(),
+        &matrices(&mut p.stress.iter().map(|m| m.as_slice())),
     )?;
     put(
-        "stress",
-        &p.stress
-            .iter()
-            .flat_map(|m| m.iter().copied().collect::<Vec<_>>())
-            .collect::<Vec<_>>(),
-    )?;
-    put(
-        "corners",
+        "corners".into(),
         &p.corners.iter().flat_map(|c| flat2(c)).collect::<Vec<_>>(),
     )?;
-    put("history", &p.history)?;
-    put("eta_bar", &p.eta_bar)?;
-    put("damage", &p.damage)?;
+    put("history".into(), &p.history)?;
+    put("eta_bar".into(), &p.eta_bar)?;
+    put("damage".into(), &p.damage)?;
     for (k, rb) in sim.setup.rigid.iter().enumerate() {
-        put(&format!("rigid{k}_x"), &flat2(&rb.particles.x))?;
+        put(format!("rigid{k}_x"), &flat2(&rb.particles.x))?;
         put(
-            &format!("rigid{k}_corners"),
+            format!("rigid{k}_corners"),
             &rb.particles
                 .corners
                 .iter()
@@ -87,104 +151,234 @@ fn write(path: &Path, sim: &Simulation, out: &RunOutput) -> hdf5_metno::Result<(
         )?;
     }
     if let Some((v, a)) = sim.fem_nodal_state() {
-        put("fem_nodal_velocity", &flat2(v))?;
-        put("fem_nodal_acceleration", &flat2(a))?;
+        put("fem_nodal_velocity".into(), &flat2(v))?;
+        put("fem_nodal_acceleration".into(), &flat2(a))?;
     }
     let counters = serde_json::to_value(sim.counters())
         .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))?;
     let text = serde_json::json!({
+        "format": FORMAT,
+        "identity": identity,
+        "datasets": names,
         "counters": counters,
         "records": out.records_json(),
         "points": p.len(),
         "history_stride": p.history_stride(),
     })
     .to_string();
-    f.new_dataset_builder()
+    let meta = f
+        .new_dataset_builder()
         .with_data(text.as_bytes())
         .create("meta")?;
+    meta.new_attr::<u32>()
+        .create("crc32")?
+        .write_scalar(&crc32fast::hash(text.as_bytes()))?;
     Ok(())
 }
 
-/// Restores `sim` (freshly built from the same configuration) and `out` from `dir/checkpoint.h5`.
-pub fn load(dir: &Path, sim: &mut Simulation, out: &mut RunOutput) -> Result<(), OutputError> {
-    let path = dir.join(FILE);
-    read(&path, sim, out).map_err(h5_err(&path))
+/// What a checkpoint says about itself: the identity of the run that wrote it, its counters and the
+/// records of its output, verified against the checksum of its `meta` dataset.
+#[derive(Debug)]
+pub struct Header {
+    /// The identity of the run that wrote it.
+    pub identity: RunIdentity,
+    /// Time, step, time step and accumulated quantities at the checkpoint.
+    pub counters: Counters,
+    datasets: Vec<String>,
+    records: serde_json::Value,
+    points: usize,
+    history_stride: usize,
 }
 
-fn read(path: &Path, sim: &mut Simulation, out: &mut RunOutput) -> hdf5_metno::Result<()> {
-    let f = hdf5_metno::File::open(path)?;
-    let meta_bytes: Vec<u8> = f.dataset("meta")?.read_raw()?;
-    let meta: serde_json::Value = serde_json::from_slice(&meta_bytes)
-        .map_err(|e| hdf5_metno::Error::from(format!("meta: {e}").as_str()))?;
-    let p = &mut sim.setup.particles;
+impl Header {
+    /// Restores the records of the output (history rows, snapshots, crack states) into `out`.
+    pub fn restore_records(&self, out: &mut RunOutput) -> Result<(), serde_json::Error> {
+        out.restore_records(&self.records)
+    }
+}
+
+/// Opens `dir/checkpoint.h5` and reads and verifies its header.
+fn open(dir: &Path) -> Result<(hdf5_metno::File, Header, PathBuf), CheckpointError> {
+    let path = dir.join(FILE);
+    let shown = path.display().to_string();
+    if !path.is_file() {
+        return Err(CheckpointError::Missing { path: shown });
+    }
+    let corrupt = |detail: String| CheckpointError::Corrupt {
+        path: shown.clone(),
+        detail,
+    };
+    let f =
+        hdf5_metno::File::open(&path).map_err(|e| corrupt(format!("not readable as HDF5: {e}")))?;
+    let ds = f
+        .dataset("meta")
+        .map_err(|e| corrupt(format!("no readable `meta` dataset: {e}")))?;
+    let bytes: Vec<u8> = ds
+        .read_raw()
+        .map_err(|e| corrupt(format!("`meta` unreadable: {e}")))?;
+    let Ok(crc) = ds.attr("crc32").and_then(|a| a.read_scalar::<u32>()) else {
+        return Err(CheckpointError::Unusable {
+            path: shown,
+            detail:
+                "the checkpoint has no checksums (written by an older version of the program), so \
+                     what it holds cannot be verified; start the run again with --overwrite"
+                    .into(),
+        });
+    };
+    if crc32fast::hash(&bytes) != crc {
+        return Err(corrupt("`meta` does not match its checksum".into()));
+    }
+    let meta: serde_json::Value =
+        serde_json::from_slice(&bytes).map_err(|e| corrupt(format!("`meta`: {e}")))?;
+    if meta["format"].as_u64() != Some(FORMAT) {
+        return Err(CheckpointError::Unusable {
+            path: shown,
+            detail: format!(
+                "checkpoint format {} is not the format {FORMAT} of this program",
+                meta["format"]
+            ),
+        });
+    }
+    fn field<T: serde::de::DeserializeOwned>(
+        meta: &serde_json::Value,
+        name: &str,
+    ) -> Result<T, String> {
+        serde_json::from_value(meta[name].clone()).map_err(|e| format!("meta.{name}: {e}"))
+    }
+    let header = Header {
+        identity: field(&meta, "identity").map_err(corrupt)?,
+        counters: field(&meta, "counters").map_err(corrupt)?,
+        datasets: field(&meta, "datasets").map_err(corrupt)?,
+        points: field(&meta, "points").map_err(corrupt)?,
+        history_stride: field(&meta, "history_stride").map_err(corrupt)?,
+        records: meta["records"].clone(),
+    };
+    Ok((f, header, path))
+}
+
+/// Reads and verifies the header of `dir/checkpoint.h5` (not the particle data), e.g. to compare its
+/// identity with the configuration of a run that wants to resume it.
+pub fn read_header(dir: &Path) -> Result<Header, CheckpointError> {
+    open(dir).map(|(_, header, _)| header)
+}
+
+/// Restores `sim` (freshly built from the same configuration) from `dir/checkpoint.h5`: every dataset is
+/// read and checked against its checksum and the configuration before `sim` is changed. Returns the
+/// header (for the output's records).
+pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError> {
+    let (f, header, path) = open(dir)?;
+    let shown = path.display().to_string();
+    let corrupt = |detail: String| CheckpointError::Corrupt {
+        path: shown.clone(),
+        detail,
+    };
+    let mut data: HashMap<&str, Vec<f64>> = HashMap::new();
+    for name in &header.datasets {
+        let ds = f
+            .dataset(name)
+            .map_err(|e| corrupt(format!("dataset `{name}`: {e}")))?;
+        let values: Vec<f64> = ds
+            .read_raw()
+            .map_err(|e| corrupt(format!("dataset `{name}`: {e}")))?;
+        let crc = ds
+            .attr("crc32")
+            .and_then(|a| a.read_scalar::<u32>())
+            .map_err(|e| corrupt(format!("dataset `{name}`: checksum unreadable: {e}")))?;
+        if crc_f64(&values) != crc {
+            return Err(corrupt(format!(
+                "dataset `{name}` does not match its checksum"
+            )));
+        }
+        data.insert(name, values);
+    }
+    let unusable = |detail: String| CheckpointError::Unusable {
+        path: shown.clone(),
+        detail,
+    };
+    let p = &sim.setup.particles;
     let n = p.len();
-    let bad = |what: &str| hdf5_metno::Error::from(what);
-    if meta["points"].as_u64() != Some(n as u64) {
-        return Err(bad(
-            "the checkpoint has a different number of material points than the configuration",
+    if header.points != n {
+        return Err(unusable(format!(
+            "the checkpoint holds {} material points, the configuration {n}",
+            header.points
+        )));
+    }
+    if header.history_stride != p.history_stride() {
+        return Err(unusable(
+            "the checkpoint's material history has a different layout than the configuration"
+                .into(),
         ));
     }
-    let get = |name: &str, len: usize| -> hdf5_metno::Result<Vec<f64>> {
-        let v: Vec<f64> = f.dataset(name)?.read_raw()?;
-        if v.len() != len {
-            return Err(hdf5_metno::Error::from(
-                format!("dataset {name}: {} values, expected {len}", v.len()).as_str(),
-            ));
+    let mut expected: Vec<(String, usize)> = [
+        ("x", 2),
+        ("v", 2),
+        ("a", 2),
+        ("r1", 2),
+        ("r2", 2),
+        ("vol", 1),
+        ("f", 4),
+        ("stress", 9),
+        ("corners", 8),
+        ("history", header.history_stride),
+        ("eta_bar", 1),
+        ("damage", 1),
+    ]
+    .into_iter()
+    .map(|(name, per)| (name.to_owned(), per * n))
+    .collect();
+    for (k, rb) in sim.setup.rigid.iter().enumerate() {
+        let m = rb.particles.len();
+        expected.push((format!("rigid{k}_x"), 2 * m));
+        expected.push((format!("rigid{k}_corners"), 8 * m));
+    }
+    let fem = sim.setup.method == Method::Fem && data.contains_key("fem_nodal_velocity");
+    if fem {
+        let nodes = sim.setup.grid.num_nodes();
+        expected.push(("fem_nodal_velocity".into(), 2 * nodes));
+        expected.push(("fem_nodal_acceleration".into(), 2 * nodes));
+    }
+    for (name, len) in &expected {
+        match data.get(name.as_str()) {
+            Some(v) if v.len() == *len => {}
+            Some(v) => {
+                return Err(unusable(format!(
+                    "dataset `{name}` has {} values, the configuration needs {len}",
+                    v.len()
+                )));
+            }
+            None => return Err(unusable(format!("dataset `{name}` is missing"))),
         }
-        Ok(v)
-    };
-    p.x = unflat2(&get("x", 2 * n)?);
-    p.v = unflat2(&get("v", 2 * n)?);
-    p.a = unflat2(&get("a", 2 * n)?);
-    p.r1 = unflat2(&get("r1", 2 * n)?);
-    p.r2 = unflat2(&get("r2", 2 * n)?);
-    p.vol = get("vol", n)?;
-    p.f = get("f", 4 * n)?
+    }
+    let mut take = |name: &str| data.remove(name).unwrap_or_default();
+    let p = &mut sim.setup.particles;
+    p.x = unflat2(&take("x"));
+    p.v = unflat2(&take("v"));
+    p.a = unflat2(&take("a"));
+    p.r1 = unflat2(&take("r1"));
+    p.r2 = unflat2(&take("r2"));
+    p.vol = take("vol");
+    p.f = take("f")
         .chunks_exact(4)
         .map(Matrix2::from_column_slice)
         .collect();
-    p.stress = get("stress", 9 * n)?
+    p.stress = take("stress")
         .chunks_exact(9)
         .map(Matrix3::from_column_slice)
         .collect();
-    p.corners = get("corners", 8 * n)?
-        .chunks_exact(8)
-        .map(|c| {
-            let v = unflat2(c);
-            [v[0], v[1], v[2], v[3]]
-        })
-        .collect();
-    let stride = meta["history_stride"].as_u64().unwrap_or(0) as usize;
-    if stride != p.history_stride() {
-        return Err(bad(
-            "the checkpoint's material history has a different layout than the configuration",
-        ));
-    }
-    p.history = get("history", n * stride)?;
-    p.eta_bar = get("eta_bar", n)?;
-    p.damage = get("damage", n)?;
+    p.corners = unflat_corners(&take("corners"));
+    p.history = take("history");
+    p.eta_bar = take("eta_bar");
+    p.damage = take("damage");
     for (k, rb) in sim.setup.rigid.iter_mut().enumerate() {
-        let m = rb.particles.len();
-        rb.particles.x = unflat2(&get(&format!("rigid{k}_x"), 2 * m)?);
-        rb.particles.corners = get(&format!("rigid{k}_corners"), 8 * m)?
-            .chunks_exact(8)
-            .map(|c| {
-                let v = unflat2(c);
-                [v[0], v[1], v[2], v[3]]
-            })
-            .collect();
+        rb.particles.x = unflat2(&take(&format!("rigid{k}_x")));
+        rb.particles.corners = unflat_corners(&take(&format!("rigid{k}_corners")));
     }
-    if sim.setup.method == Method::Fem && f.link_exists("fem_nodal_velocity") {
-        let nodes = sim.setup.grid.num_nodes();
+    if fem {
         sim.set_fem_nodal_state(
-            unflat2(&get("fem_nodal_velocity", 2 * nodes)?),
-            unflat2(&get("fem_nodal_acceleration", 2 * nodes)?),
+            unflat2(&take("fem_nodal_velocity")),
+            unflat2(&take("fem_nodal_acceleration")),
         );
     }
-    let counters: Counters = serde_json::from_value(meta["counters"].clone())
-        .map_err(|e| bad(&format!("counters: {e}")))?;
-    sim.set_counters(counters);
-    out.restore_records(&meta["records"])
-        .map_err(|e| bad(&format!("records: {e}")))?;
-    Ok(())
+    sim.set_counters(header.counters.clone());
+    Ok(header)
 }

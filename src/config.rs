@@ -387,6 +387,37 @@ fn ct_density() -> f64 {
     2.4e-9
 }
 
+/// How errors name a configuration file read with `overrides`: `configs/x.toml (with --set a=1)`.
+pub fn source_label(file: &str, overrides: &[String]) -> String {
+    if overrides.is_empty() {
+        return file.to_owned();
+    }
+    let sets: Vec<String> = overrides.iter().map(|o| format!("--set {o}")).collect();
+    format!("{file} (with {})", sets.join(" "))
+}
+
+/// A TOML error on one line: the parser's message, the table it is in and, with `position`, the line and
+/// column in `text`.
+fn toml_message(e: &toml::de::Error, text: &str, position: bool) -> String {
+    let mut message = e.message().trim().replace('\n', " ");
+    if let Some(before) = e.span().and_then(|span| text.get(..span.start)) {
+        if let Some(table) = before
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('['))
+        {
+            message += &format!(" (in {table})");
+        }
+        if position {
+            let line = before.matches('\n').count() + 1;
+            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            message = format!("line {line}, column {column}: {message}");
+        }
+    }
+    message
+}
+
 impl RunConfig {
     /// Reads and validates a configuration file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
@@ -400,26 +431,35 @@ impl RunConfig {
 
     /// Reads a configuration file, applies `key=value` overrides (dotted keys into tables, values in TOML
     /// syntax, e.g. `shape.method="fem"` or `grid.cell_size=2.5`; a bare word is taken as a string) and
-    /// validates the result.
-    pub fn from_file_with(path: &Path, overrides: &[String]) -> Result<Self, ConfigError> {
-        if overrides.is_empty() {
-            return Self::from_file(path);
-        }
+    /// validates the result. Returns the configuration and its effective text: the file with the
+    /// overrides applied, in canonical TOML (sorted keys, no comments), the same for every spelling of
+    /// the same configuration.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<(Self, String), ConfigError> {
         let file = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             file: file.clone(),
             source,
         })?;
-        let parse_err = |message: String| ConfigError::Parse {
-            file: file.clone(),
+        let parse_err = |file: &str, message: String| ConfigError::Parse {
+            file: file.to_owned(),
             message,
         };
-        let mut table: toml::Table = toml::from_str(&text).map_err(|e| parse_err(e.to_string()))?;
+        if overrides.is_empty() {
+            // Parse the file itself first, so that errors point at its lines.
+            let cfg = Self::from_str_named(&text, &file)?;
+            let table: toml::Table = toml::from_str(&text)
+                .map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
+            let canonical = toml::to_string(&table).map_err(|e| parse_err(&file, e.to_string()))?;
+            return Ok((cfg, canonical));
+        }
+        let mut table: toml::Table =
+            toml::from_str(&text).map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
         for o in overrides {
             let (key, value) = o.split_once('=').ok_or_else(|| {
-                parse_err(format!(
-                    "--set {o}: expected key=value (e.g. grid.cell_size=2.5)"
-                ))
+                parse_err(
+                    &file,
+                    format!("--set {o}: expected key=value (e.g. grid.cell_size=2.5)"),
+                )
             })?;
             let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
                 Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
@@ -432,22 +472,27 @@ impl RunConfig {
                     .entry(k.to_string())
                     .or_insert_with(|| toml::Value::Table(toml::Table::new()))
                     .as_table_mut()
-                    .ok_or_else(|| parse_err(format!("--set {o}: `{k}` is not a table")))?;
+                    .ok_or_else(|| parse_err(&file, format!("--set {o}: `{k}` is not a table")))?;
             }
             t.insert(keys[keys.len() - 1].to_string(), value);
         }
-        let text = toml::to_string(&table).map_err(|e| parse_err(e.to_string()))?;
-        Self::from_str_named(
-            &text,
-            &format!("{file} (with --set {})", overrides.join(" ")),
-        )
+        let named = source_label(&file, overrides);
+        let canonical = toml::to_string(&table).map_err(|e| parse_err(&named, e.to_string()))?;
+        // Lines of the canonical text mean nothing to the user: name the table instead.
+        let cfg = Self::parse(&canonical, &named, false)?;
+        Ok((cfg, canonical))
     }
 
     /// Parses and validates configuration text; `file` names it in errors.
     pub fn from_str_named(text: &str, file: &str) -> Result<Self, ConfigError> {
+        Self::parse(text, file, true)
+    }
+
+    /// As [`RunConfig::from_str_named`]; `position`: errors give the line and column in `text`.
+    fn parse(text: &str, file: &str, position: bool) -> Result<Self, ConfigError> {
         let cfg: RunConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             file: file.to_owned(),
-            message: e.to_string(),
+            message: toml_message(&e, text, position),
         })?;
         cfg.validate(file)?;
         Ok(cfg)
@@ -460,6 +505,25 @@ impl RunConfig {
             value,
             allowed: allowed.to_owned(),
         };
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let time_ok = |t: f64| t.is_finite() && t >= 0.0;
+        let density_ok = |d: f64| d.is_finite() && d > 0.0;
+        let r = &self.run;
+        if r.name.trim().is_empty()
+            || r.name.contains(['/', '\\'])
+            || r.name == "."
+            || r.name == ".."
+            || r.name.chars().any(char::is_control)
+        {
+            return Err(bad(
+                "run.name",
+                format!("{:?}", r.name),
+                "a non-empty name without / or \\ (it names the output directory runs/<name>)",
+            ));
+        }
+        if r.steps == 0 {
+            return Err(bad("run.steps", "0".into(), "at least one step"));
+        }
         let t = &self.time;
         if !(t.dt.is_finite() && t.dt > 0.0) {
             return Err(bad("time.dt", t.dt.to_string(), "a time step > 0 (s)"));
@@ -520,40 +584,45 @@ impl RunConfig {
                 ));
             }
         }
-        for (i, l) in self.load.iter().enumerate() {
-            let finite = l
-                .from
-                .iter()
-                .chain(&l.to)
-                .chain(&l.force)
-                .all(|v| v.is_finite());
-            let axis_aligned = l.from[0] == l.to[0] || l.from[1] == l.to[1];
-            if !finite || !axis_aligned || l.from == l.to {
-                return Err(bad(
-                    &format!("load[{i}] ({}).from/to/force", l.name),
-                    format!("{:?}/{:?}/{:?}", l.from, l.to, l.force),
-                    "finite values and a horizontal or vertical segment of non-zero length (mm)",
-                ));
-            }
-            if !(l.rise_time.is_finite() && l.rise_time >= 0.0) {
-                return Err(bad(
-                    &format!("load[{i}] ({}).rise_time", l.name),
-                    l.rise_time.to_string(),
-                    "a time >= 0 (s)",
-                ));
-            }
+        if !finite(&self.body_force) {
+            return Err(bad(
+                "body_force",
+                format!("{:?}", self.body_force),
+                "finite components (mm/s^2)",
+            ));
         }
-        if self.run.steps == 0 {
-            return Err(bad("run.steps", "0".into(), "at least one step"));
+        if !time_ok(self.body_force_ramp) {
+            return Err(bad(
+                "body_force_ramp",
+                self.body_force_ramp.to_string(),
+                "a time >= 0 (s)",
+            ));
         }
         for (i, b) in self.body.iter().enumerate() {
-            if b.density.is_nan() || b.density <= 0.0 {
+            if b.name.trim().is_empty() {
+                return Err(bad(&format!("body[{i}].name"), "\"\"".into(), "a name"));
+            }
+            if !density_ok(b.density) {
                 return Err(bad(
                     &format!("body[{i}].density"),
                     b.density.to_string(),
                     "a density > 0 (t/mm^3)",
                 ));
             }
+            if !finite(&b.initial_velocity) {
+                return Err(bad(
+                    &format!("body[{i}].initial_velocity"),
+                    format!("{:?}", b.initial_velocity),
+                    "finite components (mm/s)",
+                ));
+            }
+            b.geometry.validate().map_err(|e| {
+                bad(
+                    &format!("body[{i}].geometry"),
+                    String::new(),
+                    &e.to_string(),
+                )
+            })?;
             b.material.build().map_err(|e| {
                 bad(
                     &format!("body[{i}].material"),
@@ -562,16 +631,95 @@ impl RunConfig {
                 )
             })?;
         }
+        // Constraint sets, rigid bodies and loads name the columns of history.csv.
+        let mut sets: Vec<(String, &str)> = Vec::new();
+        if self.ct.is_some() {
+            sets.push(("ct".into(), "loading_plate"));
+            sets.push(("ct".into(), "support_plate"));
+        }
+        let motion_ok = |m: &MotionSpec| match m {
+            MotionSpec::Velocity { velocity } => velocity.is_finite(),
+            MotionSpec::Keyword(_) => true,
+        };
         for (i, c) in self.constraint.iter().enumerate() {
-            if (0..2).any(|k| c.min[k] > c.max[k]) {
+            let field = format!("constraint[{i}]");
+            sets.push((field.clone(), &c.name));
+            if !finite(&c.min) || !finite(&c.max) || (0..2).any(|k| c.min[k] > c.max[k]) {
                 return Err(bad(
-                    &format!("constraint[{i}].min/max"),
+                    &format!("{field}.min/max"),
                     format!("{:?}/{:?}", c.min, c.max),
-                    "min <= max in both directions",
+                    "finite corners with min <= max in both directions (mm)",
+                ));
+            }
+            for (axis, m) in [("x", &c.x), ("y", &c.y)] {
+                if !motion_ok(m) {
+                    return Err(bad(
+                        &format!("{field}.{axis}"),
+                        format!("{m:?}"),
+                        "\"free\", \"fixed\" or { velocity = v } with a finite v (mm/s)",
+                    ));
+                }
+            }
+            if !time_ok(c.rise_time) {
+                return Err(bad(
+                    &format!("{field}.rise_time"),
+                    c.rise_time.to_string(),
+                    "a time >= 0 (s)",
+                ));
+            }
+        }
+        for (i, rb) in self.rigid_body.iter().enumerate() {
+            let field = format!("rigid_body[{i}]");
+            sets.push((field.clone(), &rb.name));
+            rb.geometry
+                .validate()
+                .map_err(|e| bad(&format!("{field}.geometry"), String::new(), &e.to_string()))?;
+            for (axis, m) in [("x", &rb.x), ("y", &rb.y)] {
+                if !motion_ok(m) {
+                    return Err(bad(
+                        &format!("{field}.{axis}"),
+                        format!("{m:?}"),
+                        "\"free\", \"fixed\" or { velocity = v } with a finite v (mm/s)",
+                    ));
+                }
+            }
+            if !time_ok(rb.rise_time) {
+                return Err(bad(
+                    &format!("{field}.rise_time"),
+                    rb.rise_time.to_string(),
+                    "a time >= 0 (s)",
+                ));
+            }
+        }
+        for (i, l) in self.load.iter().enumerate() {
+            sets.push((format!("load[{i}]"), &l.name));
+            let axis_aligned = l.from[0] == l.to[0] || l.from[1] == l.to[1];
+            if !finite(&l.from)
+                || !finite(&l.to)
+                || !finite(&l.force)
+                || !axis_aligned
+                || l.from == l.to
+            {
+                return Err(bad(
+                    &format!("load[{i}] ({}).from/to/force", l.name),
+                    format!("{:?}/{:?}/{:?}", l.from, l.to, l.force),
+                    "finite values and a horizontal or vertical segment of non-zero length (mm)",
+                ));
+            }
+            if !time_ok(l.rise_time) {
+                return Err(bad(
+                    &format!("load[{i}] ({}).rise_time", l.name),
+                    l.rise_time.to_string(),
+                    "a time >= 0 (s)",
                 ));
             }
         }
         if let Some(ct) = &self.ct {
+            for (field, v) in [("ct.width", ct.width), ("ct.height", ct.height)] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(bad(field, v.to_string(), "a length > 0 (mm)"));
+                }
+            }
             if !(ct.notch_length > 0.0 && ct.notch_length < ct.width) {
                 return Err(bad(
                     "ct.notch_length",
@@ -586,11 +734,12 @@ impl RunConfig {
                     "0 < notch_width < height (mm)",
                 ));
             }
-            if !(ct.load_zone[0] < ct.load_zone[1] && ct.load_zone[1] <= ct.notch_length) {
+            let [a, b] = ct.load_zone;
+            if !(a >= 0.0 && a < b && b <= ct.notch_length) {
                 return Err(bad(
                     "ct.load_zone",
                     format!("{:?}", ct.load_zone),
-                    "an x range [a, b] with a < b <= notch_length (mm)",
+                    "an x range [a, b] on the notch faces: 0 <= a < b <= notch_length (mm)",
                 ));
             }
             if !(ct.plate_thickness > 0.0 && 2.0 * ct.plate_thickness < ct.notch_width) {
@@ -600,7 +749,7 @@ impl RunConfig {
                     "0 < plate_thickness < notch_width / 2 (mm)",
                 ));
             }
-            if ct.density.is_nan() || ct.density <= 0.0 {
+            if !density_ok(ct.density) {
                 return Err(bad(
                     "ct.density",
                     ct.density.to_string(),
@@ -614,6 +763,13 @@ impl RunConfig {
                     "a finite velocity (mm/s)",
                 ));
             }
+            if !time_ok(ct.rise_time) {
+                return Err(bad(
+                    "ct.rise_time",
+                    ct.rise_time.to_string(),
+                    "a time >= 0 (s)",
+                ));
+            }
             ct.material
                 .build()
                 .map_err(|e| bad("ct.material", String::new(), &e.to_string()))?;
@@ -623,6 +779,30 @@ impl RunConfig {
                 "[]".into(),
                 "at least one [[body]] (or a [ct] section)",
             ));
+        }
+        for (k, (field, name)) in sets.iter().enumerate() {
+            let column_safe = |c: char| c.is_ascii_alphanumeric() || "_-.".contains(c);
+            if name.is_empty() || !name.chars().all(column_safe) {
+                return Err(bad(
+                    &format!("{field}.name"),
+                    format!("{name:?}"),
+                    "letters, digits, _, - or . (it names columns of history.csv)",
+                ));
+            }
+            if let Some((other, _)) = sets[..k].iter().find(|(_, n)| n == name) {
+                return Err(bad(
+                    &format!("{field}.name"),
+                    format!("{name:?}"),
+                    &format!(
+                        "a name not used by {other} (the names of constraints, rigid bodies and loads are history.csv columns{})",
+                        if other == "ct" {
+                            "; [ct] uses loading_plate and support_plate"
+                        } else {
+                            ""
+                        }
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -683,6 +863,10 @@ x = { velocity = 5.0 }
             .unwrap_err()
             .to_string();
         assert!(e.contains("t.toml") && e.contains("cell_sise"), "{e}");
+        assert!(
+            !e.contains('\n') && e.contains("line 6, column 1") && e.contains("(in [grid])"),
+            "one line with the position and the table: {e}"
+        );
         let beta0 = MINIMAL.replace("[grid]", "[time]\nbeta = 0.0\n[grid]");
         let e = RunConfig::from_str_named(&beta0, "t.toml")
             .unwrap_err()
@@ -695,7 +879,8 @@ x = { velocity = 5.0 }
         let path = std::env::temp_dir().join(format!("mpmc-cfg-{}.toml", std::process::id()));
         std::fs::write(&path, MINIMAL).unwrap();
         let set = |o: &[&str]| {
-            RunConfig::from_file_with(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+            RunConfig::load(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .map(|(c, _)| c)
         };
         let c = set(&[
             "shape.method=fem",
@@ -713,5 +898,91 @@ x = { velocity = 5.0 }
         let e = set(&["grid.cell_size"]).unwrap_err().to_string();
         assert!(e.contains("key=value"), "{e}");
         std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn effective_text_includes_the_overrides_and_ignores_formatting() {
+        let dir = std::env::temp_dir().join(format!("mpmc-cfg-eff-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a.toml"), dir.join("b.toml"));
+        std::fs::write(&a, MINIMAL).unwrap();
+        let reformatted = format!(
+            "# a comment\n{}",
+            MINIMAL.replace("steps = 2", "steps   =   2 # two")
+        );
+        std::fs::write(&b, reformatted).unwrap();
+        let (_, ta) = RunConfig::load(&a, &[]).unwrap();
+        let (_, tb) = RunConfig::load(&b, &[]).unwrap();
+        assert_eq!(
+            ta, tb,
+            "comments and spacing do not change the effective text"
+        );
+        let (c, tc) = RunConfig::load(&a, &["grid.cell_size=0.5".to_string()]).unwrap();
+        assert_eq!(c.grid.cell_size, 0.5);
+        assert!(tc.contains("cell_size = 0.5"), "{tc}");
+        let again = RunConfig::from_str_named(&tc, "effective").unwrap();
+        assert_eq!(again.grid.cell_size, 0.5);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn non_finite_negative_and_inconsistent_values_are_rejected() {
+        let ct = |extra: &str| {
+            format!(
+                "[run]\nname = \"c\"\nsteps = 1\n[grid]\ncell_size = 4.0\n[ct]\nloading_rate = 4300.0\n\
+                 material = {{ model = \"svk\", youngs_modulus = 100.0, poisson_ratio = 0.2 }}\n{extra}"
+            )
+        };
+        let cases: Vec<(String, &str)> = vec![
+            (ct("rise_time = -1e-6"), "ct.rise_time"),
+            (ct("rise_time = nan"), "ct.rise_time"),
+            (ct("load_zone = [-100.0, -50.0]"), "ct.load_zone"),
+            (ct("density = inf"), "ct.density"),
+            (ct("width = nan"), "ct.width"),
+            (
+                MINIMAL.replace("y = \"fixed\"", "y = { velocity = nan }"),
+                "constraint[0].y",
+            ),
+            (
+                MINIMAL.replace("max = [3.0, 0.1]", "max = [inf, 0.1]"),
+                "constraint[0].min/max",
+            ),
+            (
+                MINIMAL.replace(
+                    "material = {",
+                    "initial_velocity = [nan, 0.0]\nmaterial = {",
+                ),
+                "body[0].initial_velocity",
+            ),
+            (
+                MINIMAL.replace("y = \"fixed\"", "y = \"fixed\"\nrise_time = -1.0"),
+                "constraint[0].rise_time",
+            ),
+            (
+                MINIMAL.replace("max = [2.0, 2.0]", "max = [-2.0, 2.0]"),
+                "body[0].geometry",
+            ),
+            (MINIMAL.replace("name = \"t\"", "name = \"\""), "run.name"),
+            (
+                MINIMAL.replace("name = \"base\"", "name = \"a,b\""),
+                "constraint[0].name",
+            ),
+            (
+                format!(
+                    "{MINIMAL}\n[[constraint]]\nname = \"base\"\nmin = [0.0, 0.0]\nmax = [1.0, 1.0]\n"
+                ),
+                "constraint[1].name",
+            ),
+            (format!("body_force = [0.0, nan]\n{MINIMAL}"), "body_force"),
+        ];
+        for (text, field) in cases {
+            let e = RunConfig::from_str_named(&text, "t.toml")
+                .expect_err(field)
+                .to_string();
+            assert!(
+                e.starts_with("t.toml: field `") && e.contains(field),
+                "{field}: {e}"
+            );
+        }
     }
 }

@@ -24,6 +24,8 @@ pub mod material;
 pub mod particles;
 pub mod petsc;
 pub mod plot;
+pub mod preflight;
+pub mod rundir;
 pub mod scenario;
 pub mod shape;
 pub mod smoke;

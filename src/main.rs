@@ -2,19 +2,25 @@
 //!
 //! Program arguments come first (clap); everything from the first single-dash option on (`-snes_monitor`,
 //! `-ksp_type gmres`, `-pc_type hypre`, `-log_view`, `-help`, ...) goes to PETSc's options database.
+//!
+//! Exit codes: 0 success; 1 a run or command that failed while working (a step that does not converge, a
+//! file that cannot be written); 2 input rejected before any work (command line, configuration, PETSc
+//! options, output directory, checkpoint, memory), with one line that says what and why.
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use mpm_concrete::checkpoint;
-use mpm_concrete::config::RunConfig;
+use mpm_concrete::config::{self, RunConfig};
 use mpm_concrete::io::RunOutput;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
+use mpm_concrete::preflight;
+use mpm_concrete::rundir::{self, RunIdentity, RunRecord};
 use mpm_concrete::scenario;
 use mpm_concrete::smoke::{self, SmokeParams};
-use mpm_concrete::solver::Simulation;
+use mpm_concrete::solver::{Setup, Simulation, StepError};
 use mpm_concrete::solver_defaults;
 use mpm_concrete::study;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
 #[command(
@@ -43,9 +49,18 @@ enum Command {
         /// No progress bar (log lines instead).
         #[arg(long)]
         quiet: bool,
-        /// Continue from the checkpoint in the output directory (written at every output step and on Ctrl-C).
-        #[arg(long)]
+        /// Continue from the checkpoint in the output directory (written at every output step, on Ctrl-C
+        /// and when a step fails for good). Only the `[run]` section (steps, output cadence, PETSc options)
+        /// may differ from the checkpointed run.
+        #[arg(long, conflicts_with = "overwrite")]
         resume: bool,
+        /// Replace the results of another run in the output directory (removes the files the program
+        /// writes there, nothing else) instead of refusing to start.
+        #[arg(long)]
+        overwrite: bool,
+        /// Start even if the estimated memory need exceeds the memory available.
+        #[arg(long)]
+        allow_large: bool,
         /// Override a config value, `key=value` with a dotted key and a TOML value (repeatable), e.g.
         /// `--set shape.method=fem --set shape.kind=linear --set grid.cell_size=2.5`.
         #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -66,6 +81,9 @@ enum Command {
         /// Output directory (default runs/study-<config name>).
         #[arg(long)]
         output: Option<PathBuf>,
+        /// Replace the results of an earlier study in the output directory.
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Performance benchmark: the paper-size CT, the elastic cantilever at 40,960 and 163,840 points and
     /// the CT demo, each for a fixed number of steps in its own process, plus the microplane update's
@@ -105,6 +123,16 @@ enum Command {
     },
 }
 
+/// Input rejected before any work (exit code 2). An empty message means that another MPI rank reports it.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct BadInput(String);
+
+/// A [`BadInput`] error.
+fn bad(message: impl std::fmt::Display) -> anyhow::Error {
+    BadInput(message.to_string()).into()
+}
+
 /// Splits the process arguments into the program's and PETSc's (from the first `-word` option on).
 fn split_args(args: Vec<String>) -> (Vec<String>, Vec<String>) {
     let program = args
@@ -125,6 +153,18 @@ fn split_args(args: Vec<String>) -> (Vec<String>, Vec<String>) {
     (args[..split].to_vec(), petsc_args)
 }
 
+/// A program option (`--steps`) among the PETSc options would reach PETSc, not the program.
+fn misplaced_program_option(petsc_args: &[String]) -> Option<String> {
+    let first = petsc_args.get(1)?;
+    let misplaced = petsc_args[1..]
+        .iter()
+        .find(|a| a.len() > 2 && a.starts_with("--"))?;
+    Some(format!(
+        "`{misplaced}` comes after the PETSc option `{first}`: the program's arguments (--steps, --output, \
+         --set, ...) go before the first PETSc option"
+    ))
+}
+
 fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
@@ -132,28 +172,52 @@ fn main() -> std::process::ExitCode {
         .without_time()
         .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
-    let cli = Cli::parse_from(own);
+    let cli = Cli::parse_from(&own);
+    if let Some(message) = misplaced_program_option(&petsc_args) {
+        eprintln!("error: {message}");
+        return std::process::ExitCode::from(2);
+    }
     if let Command::Compare(args) = &cli.command {
         return std::process::ExitCode::from(mpm_concrete::compare::run_cli(
             args,
             &petsc_args[1..],
         ));
     }
-    match run(cli, &petsc_args) {
+    match run(cli, &own, &petsc_args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
-        }
+        Err(e) => match e.chain().find_map(|c| c.downcast_ref::<BadInput>()) {
+            Some(b) => {
+                if !b.0.is_empty() {
+                    eprintln!("error: {e:#}");
+                }
+                std::process::ExitCode::from(2)
+            }
+            None => {
+                eprintln!("error: {e:#}");
+                std::process::ExitCode::FAILURE
+            }
+        },
     }
 }
 
-fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
-    let command = match cli.command {
+/// Commands without PETSc accept no PETSc options (they would be silently ignored).
+fn no_petsc_options(command: &str, hint: &str, petsc_args: &[String]) -> Result<()> {
+    if petsc_args.len() > 1 {
+        return Err(bad(format!(
+            "{command} takes no PETSc options (got `{}`){hint}",
+            petsc_args[1..].join(" ")
+        )));
+    }
+    Ok(())
+}
+
+fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
+    match cli.command {
         Command::MaterialDriver(args) => {
+            no_petsc_options("material-driver", "", petsc_args)?;
             let summary = mpm_concrete::material::driver::run_driver(&args)?;
             println!("{summary}");
-            return Ok(());
+            Ok(())
         }
         Command::Bench {
             cases,
@@ -163,134 +227,167 @@ fn run(cli: Cli, petsc_args: &[String]) -> Result<()> {
             let mut all = mpm_concrete::bench::default_cases();
             if !cases.is_empty() {
                 let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
-                if let Some(bad) = cases.iter().find(|c| !names.contains(c)) {
-                    anyhow::bail!(
-                        "--cases: unknown case `{bad}` (allowed: {})",
+                if let Some(unknown) = cases.iter().find(|c| !names.contains(c)) {
+                    return Err(bad(format!(
+                        "--cases: unknown case `{unknown}` (allowed: {})",
                         names.join(", ")
-                    );
+                    )));
                 }
                 all.retain(|c| cases.contains(&c.name));
             }
             if let Some(n) = steps {
-                anyhow::ensure!(n > 0, "--steps must be at least 1");
+                if n == 0 {
+                    return Err(bad("--steps must be at least 1"));
+                }
                 all.iter_mut().for_each(|c| c.steps = n);
             }
             if let Some(c) = all.iter().find(|c| !c.config.is_file()) {
-                anyhow::bail!(
+                return Err(bad(format!(
                     "bench: {} not found (the cases' configs are relative to the repository root: run \
                      the command there)",
                     c.config.display()
-                );
+                )));
             }
+            let options = petsc_args[1..].join(" ");
+            preflight::check_petsc_options(&options)
+                .map_err(|e| bad(format!("command line: {e}")))?;
             let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
-            let report = mpm_concrete::bench::run(&exe, &all, &petsc_args[1..].join(" "), &output)
+            let report = mpm_concrete::bench::run(&exe, &all, &options, &output)
                 .map_err(anyhow::Error::msg)?;
             println!("{}", mpm_concrete::bench::markdown(&report));
             println!("results in {}", output.display());
-            return Ok(());
+            Ok(())
         }
         Command::Study {
             config,
             steps,
             sets,
             output,
+            overwrite,
         } => {
-            anyhow::ensure!(steps > 0, "--steps must be at least 1");
-            RunConfig::from_file(&config)?;
+            no_petsc_options(
+                "study",
+                ": the options of each run go into a --sets file",
+                petsc_args,
+            )?;
+            if steps == 0 {
+                return Err(bad("--steps must be at least 1"));
+            }
+            RunConfig::from_file(&config).map_err(bad)?;
             let sets = match sets {
-                Some(p) => study::read_sets(&p).map_err(anyhow::Error::msg)?,
+                Some(p) => study::read_sets(&p).map_err(bad)?,
                 None => study::default_sets(),
             };
             let dir = output.unwrap_or_else(|| study::default_dir(&config));
+            if dir.join(study::REPORT).exists() && !overwrite {
+                return Err(bad(format!(
+                    "{} holds an earlier study ({}): use --overwrite to replace it, or another --output",
+                    dir.display(),
+                    study::REPORT
+                )));
+            }
             let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
             let results =
                 study::run(&exe, &config, steps, &sets, &dir).map_err(anyhow::Error::msg)?;
             let failed = results.iter().filter(|r| !r.completed).count();
-            println!("{}", std::fs::read_to_string(dir.join("study.md"))?);
+            println!("{}", std::fs::read_to_string(dir.join(study::REPORT))?);
             println!(
                 "{} of {} option sets completed; results in {}",
                 results.len() - failed,
                 results.len(),
                 dir.display()
             );
-            return Ok(());
+            Ok(())
         }
-        other => other,
-    };
-    let session = Session::initialize(petsc_args).context("starting PETSc")?;
-    match command {
+        // handled in main, without PETSc
+        Command::Compare(_) => Ok(()),
         Command::Run {
             config,
             steps,
             output,
             quiet,
             resume,
+            overwrite,
+            allow_large,
             set,
         } => run_simulation(
-            &session,
+            own_args,
+            petsc_args,
             &config,
             RunFlags {
                 steps,
                 output,
                 quiet,
                 resume,
+                overwrite,
+                allow_large,
                 set,
             },
-        )?,
-        // handled above, without PETSc
-        Command::MaterialDriver(_)
-        | Command::Study { .. }
-        | Command::Bench { .. }
-        | Command::Compare(_) => {}
+        ),
         Command::Smoke {
             n,
             load,
             print_solution,
         } => {
             if n < 2 {
-                anyhow::bail!("--n must be at least 2 (got {n})");
+                return Err(bad(format!("--n must be at least 2 (got {n})")));
             }
-            petsc::apply_default_options(&session, "-ksp_type preonly -pc_type lu")?;
-            let p = SmokeParams {
-                n,
-                load,
-                ..SmokeParams::default()
-            };
-            let r = smoke::solve(&session, p, None).context("solving the lattice problem")?;
-            let norm = r.solution.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if session.rank() == 0 {
-                println!(
-                    "lattice {n}x{n} ({} unknowns) on {} process(es), solver {}",
-                    r.solution.len(),
-                    session.size(),
-                    r.solver
-                );
-                println!(
-                    "{}: {} Newton iterations, {} linear iterations, |x| = {norm:.12e}",
-                    r.info.reason_name, r.info.iterations, r.info.linear_iterations
-                );
-                if print_solution {
-                    println!("{}", serde_json::to_string(&r.solution)?);
-                }
-            }
-            let unused = petsc::unused_options(&session)?;
-            if !unused.is_empty() {
-                anyhow::bail!(
-                    "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options)",
-                    unused.join(" ")
-                );
-            }
-            if !r.info.converged() {
-                anyhow::bail!(
-                    "the lattice problem did not converge: {}",
-                    r.info.reason_name
-                );
-            }
+            preflight::check_petsc_options(&petsc_args[1..].join(" "))
+                .map_err(|e| bad(format!("command line: {e}")))?;
+            let session = Session::initialize(petsc_args).context("starting PETSc")?;
+            smoke_test(&session, n, load, print_solution)?;
+            Session::finalize(session)?;
+            Ok(())
         }
     }
-    Session::finalize(session)?;
+}
+
+fn smoke_test(session: &SessionGuard, n: usize, load: f64, print_solution: bool) -> Result<()> {
+    petsc::apply_default_options(session, "-ksp_type preonly -pc_type lu")?;
+    let p = SmokeParams {
+        n,
+        load,
+        ..SmokeParams::default()
+    };
+    let r = smoke::solve(session, p, None).context("solving the lattice problem")?;
+    let norm = r.solution.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if session.rank() == 0 {
+        println!(
+            "lattice {n}x{n} ({} unknowns) on {} process(es), solver {}",
+            r.solution.len(),
+            session.size(),
+            r.solver
+        );
+        println!(
+            "{}: {} Newton iterations, {} linear iterations, |x| = {norm:.12e}",
+            r.info.reason_name, r.info.iterations, r.info.linear_iterations
+        );
+        if print_solution {
+            println!("{}", serde_json::to_string(&r.solution)?);
+        }
+    }
+    let unused = petsc::unused_options(session)?;
+    if !unused.is_empty() {
+        return Err(bad(format!(
+            "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options)",
+            unused.join(" ")
+        )));
+    }
+    if !r.info.converged() {
+        anyhow::bail!(
+            "the lattice problem did not converge: {}",
+            r.info.reason_name
+        );
+    }
     Ok(())
 }
+
+/// Options prefix of the fallback solver (its defaults: [`solver_defaults::FALLBACK`]).
+const FALLBACK_PREFIX: &str = "fallback_";
+
+/// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
+/// range, unsupported, incompatible, unknown type).
+const PETSC_INPUT_ERRORS: [i32; 5] = [56, 62, 63, 75, 86];
 
 /// Command-line flags of `run`.
 struct RunFlags {
@@ -298,43 +395,321 @@ struct RunFlags {
     output: Option<PathBuf>,
     quiet: bool,
     resume: bool,
+    overwrite: bool,
+    allow_large: bool,
     set: Vec<String>,
 }
 
-fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlags) -> Result<()> {
-    let RunFlags {
-        steps,
-        output,
-        quiet,
-        resume,
-        set,
-    } = flags;
-    let mut cfg = RunConfig::from_file_with(path, &set)?;
-    if let Some(n) = steps {
-        anyhow::ensure!(n > 0, "--steps must be at least 1");
-        cfg.run.steps = n;
+/// Quotes `word` for a POSIX shell when it needs it.
+fn shell_quote(word: &str) -> String {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./=:,+@%".contains(c);
+    if !word.is_empty() && word.chars().all(plain) {
+        word.to_owned()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
     }
-    petsc::apply_default_options(session, &cfg.run.petsc_options)
-        .with_context(|| format!("{}: run.petsc_options", path.display()))?;
-    let mut setup =
-        scenario::build(&cfg).with_context(|| format!("{}: building the model", path.display()))?;
-    // The solver defaults follow the kind of step (docs/solvers.md).
-    let (_, defaults) = solver_defaults::apply(session, &setup)?;
-    setup.fallback_prefix = Some("fallback_".into());
-    let mut sim = Simulation::new(setup)?;
-    let dir = output.unwrap_or_else(|| cfg.output_dir());
-    let text = std::fs::read_to_string(path)?;
-    let mut out = RunOutput::create(&dir, &cfg.run.name, &text, &sim)?;
-    if let Some(ct) = &cfg.ct {
-        out.track_crack(
-            nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
-            Default::default(),
+}
+
+/// The command line as given, quoted for a shell.
+fn command_line(own: &[String], petsc: &[String]) -> String {
+    own.iter()
+        .chain(&petsc[1..])
+        .map(|w| shell_quote(w))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The command that resumes a run started with `own` + `petsc`: the same arguments with `--resume`
+/// instead of `--overwrite` and with the output directory spelled out.
+fn resume_command(own: &[String], petsc: &[String], dir: &Path) -> String {
+    let mut words: Vec<String> = own
+        .iter()
+        .filter(|a| *a != "--overwrite")
+        .cloned()
+        .collect();
+    if !own
+        .iter()
+        .any(|a| a == "--output" || a.starts_with("--output="))
+    {
+        words.push("--output".into());
+        words.push(dir.display().to_string());
+    }
+    if !own.iter().any(|a| a == "--resume") {
+        words.push("--resume".into());
+    }
+    let mut all = vec![words.remove(0)];
+    all.extend(words);
+    command_line(&all, petsc)
+}
+
+/// Why a new run may not write into `dir`.
+fn refusal(dir: &Path, contents: &rundir::Contents, identity: &RunIdentity) -> String {
+    let what = match &contents.record {
+        Some(r) => format!(
+            "the results of {} (config {}, {} at step {} of {})",
+            if r.identity.physics == identity.physics {
+                "an earlier run of the same model"
+            } else {
+                "another run"
+            },
+            r.config_file,
+            r.status,
+            r.steps_done,
+            r.steps_requested
+        ),
+        None => {
+            let n = contents.results.len();
+            format!(
+                "the results of another run ({}{})",
+                contents.results[..n.min(3)].join(", "),
+                if n > 3 {
+                    format!(" and {} more files", n - 3)
+                } else {
+                    String::new()
+                }
+            )
+        }
+    };
+    format!(
+        "{} holds {what}: use --overwrite to replace them, --resume to continue that run, or another --output",
+        dir.display()
+    )
+}
+
+/// Checks that the checkpoint in `dir` can be resumed by a run of `identity` with `steps` steps.
+fn check_resume(dir: &Path, identity: &RunIdentity, steps: usize) -> Result<checkpoint::Header> {
+    let header = checkpoint::read_header(dir).map_err(bad)?;
+    let file = dir.join(checkpoint::FILE);
+    let changes = header.identity.physics_changes(identity);
+    if !changes.is_empty() {
+        return Err(bad(format!(
+            "{}: the checkpoint was written with other physics ({}); --resume may change only the [run] \
+             section (steps, output_every, output_dir, name, petsc_options): start a new run instead",
+            file.display(),
+            changes.join("; ")
+        )));
+    }
+    let done = header.counters.step;
+    if steps <= done {
+        return Err(bad(format!(
+            "{}: the checkpoint is at step {done} and the run asks for {steps} steps, so there is nothing to \
+             do: give --steps N with N > {done} to continue",
+            file.display()
+        )));
+    }
+    if header.identity.version != identity.version {
+        eprintln!(
+            "note: the checkpoint was written by version {}, this is {}",
+            header.identity.version, identity.version
         );
     }
-    if resume {
-        checkpoint::load(&dir, &mut sim, &mut out)
-            .with_context(|| format!("resuming from {}", dir.join(checkpoint::FILE).display()))?;
-        eprintln!("resumed at step {} (t = {:e} s)", sim.step, sim.time);
+    if header.identity.petsc_options != identity.petsc_options {
+        let shown = |o: &str| {
+            if o.is_empty() {
+                "none".to_owned()
+            } else {
+                format!("`{o}`")
+            }
+        };
+        eprintln!(
+            "note: PETSc options {} at the checkpoint, {} now",
+            shown(&header.identity.petsc_options),
+            shown(&identity.petsc_options)
+        );
+    }
+    Ok(header)
+}
+
+/// Steps (their time steps `taken`) that took less than the nominal time step `dt`.
+fn reduced_steps(taken: &[f64], dt: f64) -> usize {
+    taken.iter().filter(|&&t| t < dt * (1.0 - 1e-9)).count()
+}
+
+/// A sentence when a run whose steps took `taken` reached less than its requested end time (steps x dt)
+/// or took reduced steps.
+fn time_note(taken: &[f64], time: f64, steps: usize, dt: f64) -> Option<String> {
+    let end = steps as f64 * dt;
+    let reduced = reduced_steps(taken, dt);
+    if time >= end * (1.0 - 1e-9) && reduced == 0 {
+        return None;
+    }
+    let smallest = taken.iter().copied().fold(f64::INFINITY, f64::min);
+    let mut note = format!(
+        "the run ended at t = {:.4} us, before its requested end time {:.4} us ({steps} steps of {:.4} us)",
+        time * 1e6,
+        end * 1e6,
+        dt * 1e6
+    );
+    if reduced > 0 {
+        note += &format!(
+            "; {reduced} of {} steps took a reduced time step (down to {:.4} us)",
+            taken.len(),
+            smallest * 1e6
+        );
+    }
+    Some(note)
+}
+
+/// Appends `# note` to the run's history.csv, if it has one (the next rewrite of the history, by a resumed
+/// run, drops it).
+fn append_history_note(dir: &Path, note: &str) -> Result<()> {
+    use std::io::Write as _;
+    let path = dir.join("history.csv");
+    if !path.exists() {
+        return Ok(());
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&path)
+        .with_context(|| format!("{}: appending a note", path.display()))?;
+    writeln!(f, "# {note}").with_context(|| format!("{}: appending a note", path.display()))
+}
+
+/// Writes the point fields, the force plots and the checkpoint of the current state.
+fn save_state(
+    out: &mut RunOutput,
+    sim: &Simulation,
+    dir: &Path,
+    identity: &RunIdentity,
+) -> Result<()> {
+    out.snapshot(sim)?;
+    out.force_plots()?;
+    checkpoint::save(dir, sim, out, identity)?;
+    Ok(())
+}
+
+fn run_simulation(
+    own_args: &[String],
+    petsc_args: &[String],
+    path: &Path,
+    flags: RunFlags,
+) -> Result<()> {
+    let file = path.display().to_string();
+    // Everything that can be checked is checked before anything is written: the configuration with its
+    // overrides (--steps is run.steps), the PETSc option values, the output directory or the checkpoint
+    // to resume, the memory, the number of processes, the model, and (by the first step) the PETSc set-up.
+    if flags.steps == Some(0) {
+        return Err(bad("--steps must be at least 1"));
+    }
+    let mut overrides = flags.set.clone();
+    if let Some(n) = flags.steps {
+        overrides.push(format!("run.steps={n}"));
+    }
+    let (cfg, effective) = RunConfig::load(path, &overrides).map_err(bad)?;
+    preflight::check_petsc_options(&cfg.run.petsc_options)
+        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
+    let command_options = petsc_args[1..].join(" ");
+    preflight::check_petsc_options(&command_options)
+        .map_err(|e| bad(format!("command line: {e}")))?;
+    let dir = flags.output.clone().unwrap_or_else(|| cfg.output_dir());
+    let petsc_options = format!("{} {command_options}", cfg.run.petsc_options)
+        .trim()
+        .to_owned();
+    let identity = RunIdentity::new(&effective, &petsc_options);
+    let contents = rundir::inspect(&dir).map_err(bad)?;
+    let resume_from = if flags.resume {
+        Some(check_resume(&dir, &identity, cfg.run.steps)?)
+    } else {
+        if !contents.results.is_empty() && !flags.overwrite {
+            return Err(bad(refusal(&dir, &contents, &identity)));
+        }
+        None
+    };
+    let need = preflight::memory_need(&cfg);
+    if let Some(limit) = preflight::memory_limit()
+        && need.bytes > limit.bytes
+        && !flags.allow_large
+    {
+        return Err(bad(format!(
+            "{}: the run needs about {} of memory ({:.3e} material points, {:.3e} grid nodes), more \
+             than the {} available ({}): use a larger grid.cell_size or fewer shape.points_per_cell, or \
+             --allow-large to start anyway",
+            config::source_label(&file, &overrides),
+            preflight::human_bytes(need.bytes),
+            need.points,
+            need.nodes,
+            preflight::human_bytes(limit.bytes),
+            limit.source
+        )));
+    }
+
+    let session = Session::initialize(petsc_args).context("starting PETSc")?;
+    if session.size() > 1 {
+        let first = session.rank() == 0;
+        let size = session.size();
+        Session::finalize(session)?;
+        return Err(bad(if first {
+            format!(
+                "`run` works on one process, not {size}: the distributed solver is not available yet \
+                 (start it without mpirun; `smoke` runs distributed)"
+            )
+        } else {
+            String::new()
+        }));
+    }
+    simulate(
+        &session,
+        own_args,
+        petsc_args,
+        path,
+        &flags,
+        Prepared {
+            cfg,
+            overrides,
+            effective,
+            identity,
+            dir,
+            resume_from,
+        },
+    )?;
+    Session::finalize(session)?;
+    Ok(())
+}
+
+/// A run that passed the checks that need no PETSc.
+struct Prepared {
+    cfg: RunConfig,
+    /// `--set` overrides, `--steps` as `run.steps=N`.
+    overrides: Vec<String>,
+    effective: String,
+    identity: RunIdentity,
+    dir: PathBuf,
+    resume_from: Option<checkpoint::Header>,
+}
+
+fn simulate(
+    session: &SessionGuard,
+    own_args: &[String],
+    petsc_args: &[String],
+    path: &Path,
+    flags: &RunFlags,
+    prepared: Prepared,
+) -> Result<()> {
+    let Prepared {
+        cfg,
+        overrides,
+        effective,
+        identity,
+        dir,
+        resume_from,
+    } = prepared;
+    let file = path.display().to_string();
+    petsc::apply_default_options(session, &cfg.run.petsc_options)
+        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
+    let model = || -> Result<Setup> {
+        let mut setup = scenario::build(&cfg).map_err(|e| bad(format!("{file}: {e}")))?;
+        setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
+        Ok(setup)
+    };
+    let simulation = |setup: Setup| Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")));
+    let setup = model()?;
+    // The solver defaults follow the kind of step (docs/solvers.md); those a user's solver choice makes
+    // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
+    let (_, defaults) = solver_defaults::apply(session, &setup)?;
+    let mut sim = simulation(setup)?;
+    if resume_from.is_some() {
+        checkpoint::load(&dir, &mut sim).map_err(bad)?;
+        eprintln!("resuming at step {} (t = {:e} s)", sim.step, sim.time);
     }
     // Ctrl-C: finish the current step, write a checkpoint and the outputs, and stop.
     let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -356,7 +731,7 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
         sim.fields(),
         dir.display()
     );
-    let bar = if quiet {
+    let bar = if flags.quiet {
         indicatif::ProgressBar::hidden()
     } else {
         indicatif::ProgressBar::new(cfg.run.steps as u64)
@@ -367,38 +742,136 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
+    bar.set_position(sim.step as u64);
     let started = std::time::Instant::now();
-    let mut unused_checked = false;
     // A PETSc logging stage for the time loop, so -log_view separates it from the set-up.
     let _stage = session.push_stage(session.register_stage("MPM time steps")?)?;
-    bar.set_position(sim.step as u64);
-    if !resume {
-        out.snapshot(&sim)?;
+
+    // The first step sets up PETSc's solvers, which read (and so validate) the options: until it has
+    // passed, nothing is written.
+    let mut step = sim.advance(session);
+    match &step {
+        Ok(_) => {
+            let mut unused = petsc::unused_options(session)?;
+            unused.retain(|o| {
+                !defaults.contains(o) && !o.starts_with(&format!("-{FALLBACK_PREFIX}"))
+            });
+            if !unused.is_empty() {
+                bar.abandon();
+                return Err(bad(format!(
+                    "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options); \
+                     nothing was written",
+                    unused.join(" ")
+                )));
+            }
+        }
+        Err(StepError::Petsc(e)) => {
+            bar.abandon();
+            let message = format!("the first step failed in PETSc: {e}; nothing was written");
+            return Err(if PETSC_INPUT_ERRORS.contains(&e.code) {
+                bad(message)
+            } else {
+                anyhow::anyhow!(message)
+            });
+        }
+        Err(e @ StepError::Setup(_)) => {
+            bar.abandon();
+            return Err(bad(format!("{file}: {e}; nothing was written")));
+        }
+        Err(_) => {}
     }
-    while sim.step < cfg.run.steps {
-        let report = match sim.advance(session) {
+
+    // The output: the directory now belongs to this run.
+    if flags.overwrite {
+        let removed = rundir::remove_program_files(&dir).map_err(anyhow::Error::msg)?;
+        if removed > 0 {
+            eprintln!(
+                "--overwrite: removed {removed} files of the earlier run from {}",
+                dir.display()
+            );
+        }
+    }
+    let config_copy = format!(
+        "# The effective configuration of the run in this directory: {}.\n\
+         # Canonical form (sorted keys; the file's comments are not kept).\n\n{effective}",
+        config::source_label(&file, &overrides)
+    );
+    // The output's reference state (initial positions, the step-0 fields) is the model as built.
+    let initial = simulation(model()?)?;
+    let mut out = RunOutput::create(&dir, &cfg.run.name, &config_copy, &initial)?;
+    if let Some(ct) = &cfg.ct {
+        out.track_crack(
+            nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
+            Default::default(),
+        );
+    }
+    let mut record = RunRecord {
+        identity: identity.clone(),
+        command: command_line(own_args, petsc_args),
+        config_file: file.clone(),
+        overrides: overrides.clone(),
+        started_unix: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
+        resumed_from_step: resume_from.as_ref().map(|h| h.counters.step),
+        status: "running".into(),
+        steps_done: sim.step,
+        steps_requested: cfg.run.steps,
+        time_reached: sim.time,
+        time_requested: cfg.run.steps as f64 * cfg.time.dt,
+        reduced_steps: 0,
+        note: None,
+    };
+    record.write(&dir)?;
+    match &resume_from {
+        Some(header) => header
+            .restore_records(&mut out)
+            .context("restoring the output's records from the checkpoint")?,
+        None => out.snapshot(&initial)?,
+    }
+    drop(initial);
+
+    let hint = resume_command(own_args, petsc_args, &dir);
+    let finish = |record: &mut RunRecord,
+                  out: &RunOutput,
+                  sim: &Simulation,
+                  status: &str,
+                  why: Option<String>|
+     -> Result<Option<String>> {
+        let taken: Vec<f64> = out.rows().iter().map(|r| r.dt).collect();
+        let note = time_note(&taken, sim.time, cfg.run.steps, cfg.time.dt);
+        record.status = status.into();
+        record.steps_done = sim.step;
+        record.time_reached = sim.time;
+        record.reduced_steps = reduced_steps(&taken, cfg.time.dt);
+        record.note = match (&why, &note) {
+            (Some(w), Some(n)) => Some(format!("{w}; {n}")),
+            (w, n) => w.clone().or(n.clone()),
+        };
+        if let Some(n) = &record.note {
+            append_history_note(&dir, n)?;
+        }
+        record.write(&dir)?;
+        Ok(note)
+    };
+    loop {
+        let report = match step {
             Ok(r) => r,
             Err(e) => {
                 bar.abandon();
-                out.snapshot(&sim)?;
-                out.force_plots()?;
-                return Err(anyhow::Error::new(e).context(format!(
-                    "run stopped; the last converged state (step {}) is saved in {}",
+                save_state(&mut out, &sim, &dir, &identity)?;
+                let why = format!("step {} failed: {}", sim.step + 1, e.to_string().trim());
+                finish(&mut record, &out, &sim, "failed", Some(why))?;
+                anyhow::bail!(
+                    "{}; the last converged state (step {}, t = {:e} s) is saved in {} with a checkpoint; \
+                     to continue (e.g. with other solver options): {hint}",
+                    e.to_string().trim(),
                     sim.step,
+                    sim.time,
                     dir.display()
-                )));
+                );
             }
         };
-        if !unused_checked {
-            let mut unused = petsc::unused_options(session)?;
-            unused.retain(|o| !defaults.contains(o));
-            anyhow::ensure!(
-                unused.is_empty(),
-                "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options)",
-                unused.join(" ")
-            );
-            unused_checked = true;
-        }
         let msg = format!(
             "t = {:.2} us, Newton {}, KSP {}, {}",
             report.time * 1e6,
@@ -406,7 +879,7 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
             report.solve.linear_iterations,
             report.solve.reason_name
         );
-        if quiet {
+        if flags.quiet {
             eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
         }
         bar.set_message(msg);
@@ -415,27 +888,54 @@ fn run_simulation(session: &SessionGuard, path: &std::path::Path, flags: RunFlag
         let every = cfg.run.output_every;
         let stop = interrupted.load(std::sync::atomic::Ordering::SeqCst);
         if (every > 0 && sim.step % every == 0) || sim.step == cfg.run.steps || stop {
-            out.snapshot(&sim)?;
-            out.force_plots()?;
-            checkpoint::save(&dir, &sim, &out)?;
+            save_state(&mut out, &sim, &dir, &identity)?;
+            // run.json follows the checkpoint, so a run killed outright shows how far it got.
+            record.steps_done = sim.step;
+            record.time_reached = sim.time;
+            record.write(&dir)?;
         }
-        if stop {
+        if stop && sim.step < cfg.run.steps {
             bar.abandon();
+            finish(
+                &mut record,
+                &out,
+                &sim,
+                "interrupted",
+                Some(format!("interrupted after step {}", sim.step)),
+            )?;
             anyhow::bail!(
-                "interrupted after step {}; the state is saved in {}: continue with `mpm-concrete run {} --resume`",
+                "interrupted after step {}; the state is saved in {}: continue with {hint}",
                 sim.step,
-                dir.display(),
-                path.display()
+                dir.display()
             );
         }
+        if sim.step >= cfg.run.steps {
+            break;
+        }
+        step = sim.advance(session);
     }
     bar.finish();
-    summary(&out, started.elapsed().as_secs_f64());
+    let note = finish(&mut record, &out, &sim, "finished", None)?;
+    summary(&out, started.elapsed().as_secs_f64(), note.as_deref());
+    if let Some(n) = note {
+        eprintln!("warning: {n}");
+    }
+    let unused_fallback: Vec<String> = petsc::unused_options(session)?
+        .into_iter()
+        .filter(|o| o.starts_with(&format!("-{FALLBACK_PREFIX}")) && !defaults.contains(o))
+        .collect();
+    if !unused_fallback.is_empty() {
+        eprintln!(
+            "note: {} never used: the fallback solver did not run, or the option is misspelled",
+            unused_fallback.join(" ")
+        );
+    }
     Ok(())
 }
 
-/// Final table: steps, iterations, times, memory, reactions.
-fn summary(out: &RunOutput, wall: f64) {
+/// Final table: steps, time reached, iterations, times, memory, reactions; `note` says that the run ended
+/// before its requested end time.
+fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
     let rows = out.rows();
     let newton: usize = rows.iter().map(|r| r.solve.iterations).sum();
     let linear: usize = rows.iter().map(|r| r.solve.linear_iterations).sum();
@@ -450,6 +950,14 @@ fn summary(out: &RunOutput, wall: f64) {
         rows.len(),
         retries
     );
+    let time = rows.last().map_or(0.0, |r| r.time);
+    match note {
+        Some(n) => println!("| time reached | **{:.4} us**: {n} |", time * 1e6),
+        None => println!(
+            "| time reached | {:.4} us, the requested end time |",
+            time * 1e6
+        ),
+    }
     println!(
         "| Newton iterations | {newton} ({:.2} per step) |",
         newton as f64 / rows.len().max(1) as f64
@@ -503,7 +1011,7 @@ fn peak_rss_mb() -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::split_args;
+    use super::*;
 
     #[test]
     fn petsc_options_start_at_the_first_single_dash_word() {
@@ -522,5 +1030,77 @@ mod tests {
         let (own, petsc) = split_args(args);
         assert_eq!(own, ["prog", "smoke", "--n", "4"]);
         assert_eq!(petsc, ["prog", "-snes_monitor", "-ksp_type", "gmres"]);
+    }
+
+    fn words(s: &[&str]) -> Vec<String> {
+        s.iter().map(|w| w.to_string()).collect()
+    }
+
+    #[test]
+    fn a_program_option_after_the_petsc_options_is_reported() {
+        let (_, petsc) = split_args(words(&[
+            "prog",
+            "run",
+            "c.toml",
+            "-snes_monitor",
+            "--steps",
+            "20",
+        ]));
+        let e = misplaced_program_option(&petsc).expect("misplaced");
+        assert!(
+            e.contains("`--steps`") && e.contains("`-snes_monitor`"),
+            "{e}"
+        );
+        let (_, petsc) = split_args(words(&[
+            "prog",
+            "run",
+            "c.toml",
+            "--steps",
+            "2",
+            "-ksp_rtol",
+            "-1",
+        ]));
+        assert_eq!(misplaced_program_option(&petsc), None);
+    }
+
+    #[test]
+    fn the_resume_command_repeats_the_invocation_with_resume_and_the_output() {
+        let own = words(&[
+            "target/release/mpm-concrete",
+            "run",
+            "configs/ct-demo.toml",
+            "--steps",
+            "20",
+            "--overwrite",
+            "--set",
+            "ct.material={ model = \"microplane\", preset = \"paper\" }",
+        ]);
+        let petsc = words(&["prog", "-ksp_type", "gmres"]);
+        assert_eq!(
+            resume_command(&own, &petsc, Path::new("runs/ct demo")),
+            "target/release/mpm-concrete run configs/ct-demo.toml --steps 20 --set \
+             'ct.material={ model = \"microplane\", preset = \"paper\" }' --output 'runs/ct demo' --resume \
+             -ksp_type gmres"
+        );
+        let own = words(&["mpm-concrete", "run", "c.toml", "--output", "d", "--resume"]);
+        assert_eq!(
+            resume_command(&own, &words(&["p"]), Path::new("d")),
+            "mpm-concrete run c.toml --output d --resume"
+        );
+        assert_eq!(shell_quote("it's"), "'it'\\''s'");
+    }
+
+    #[test]
+    fn the_time_note_tells_an_early_end_and_reduced_steps() {
+        let full = [1e-6; 4];
+        assert_eq!(time_note(&full, 4e-6, 4, 1e-6), None);
+        let halved = [1e-6, 0.5e-6, 0.25e-6, 0.5e-6];
+        let note = time_note(&halved, 2.25e-6, 4, 1e-6).expect("note");
+        assert!(
+            note.contains("t = 2.2500 us, before its requested end time 4.0000 us")
+                && note.contains("3 of 4 steps took a reduced time step (down to 0.2500 us)"),
+            "{note}"
+        );
+        assert!(time_note(&full[..2], 2e-6, 4, 1e-6).is_some());
     }
 }

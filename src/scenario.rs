@@ -42,6 +42,35 @@ pub enum ScenarioError {
     /// Grid construction failed.
     #[error(transparent)]
     Grid(#[from] GridError),
+    /// A constraint box contains no grid node, so it would constrain nothing.
+    #[error(
+        "constraint `{name}`: the box {min:?}..{max:?} mm holds no grid node (the grid spans {lo:?}..{hi:?} mm with nodes every {h} mm)"
+    )]
+    EmptyBox {
+        /// Constraint name.
+        name: String,
+        /// Box corners (mm).
+        min: [f64; 2],
+        /// Box corners (mm).
+        max: [f64; 2],
+        /// Grid extent (mm).
+        lo: [f64; 2],
+        /// Grid extent (mm).
+        hi: [f64; 2],
+        /// Cell size (mm).
+        h: f64,
+    },
+}
+
+/// Whether the box `[min, max]` (mm, with the solver's 1e-9 mm tolerance) contains a node of `grid`.
+fn box_holds_a_node(grid: &Grid, min: [f64; 2], max: [f64; 2]) -> bool {
+    let (o, h) = (grid.origin(), grid.cell_size());
+    let n = [grid.nx() as f64, grid.ny() as f64];
+    (0..2).all(|k| {
+        let first = ((min[k] - 1e-9 - o[k]) / h).ceil().max(0.0);
+        let last = ((max[k] + 1e-9 - o[k]) / h).floor().min(n[k]);
+        first <= last
+    })
 }
 
 /// A deformable body before seeding.
@@ -195,6 +224,20 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         hi = hi.sup(x);
     }
     let grid = Grid::covering(lo, hi, h, cfg.grid.margin_cells.max(1))?;
+    if let Some(c) = constraints
+        .iter()
+        .find(|c| !box_holds_a_node(&grid, c.min, c.max))
+    {
+        let (lo, hi) = (grid.origin(), grid.upper());
+        return Err(ScenarioError::EmptyBox {
+            name: c.name.clone(),
+            min: c.min,
+            max: c.max,
+            lo: [lo.x, lo.y],
+            hi: [hi.x, hi.y],
+            h,
+        });
+    }
     let boxes = constraints
         .drain(..)
         .map(|c| NodeBox {

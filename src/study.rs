@@ -11,6 +11,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// The study's report in its output directory.
+pub const REPORT: &str = "study.md";
+
 /// A named PETSc option set.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OptionSet {
@@ -58,10 +61,12 @@ pub fn default_sets() -> Vec<OptionSet> {
     ]
 }
 
-/// Reads option sets from a text file: one set per line, `name: options`; `#` starts a comment.
+/// Reads option sets from a text file: one set per line, `name: options`; `#` starts a comment. Names must
+/// be unique (each names a directory) and the values of common options are checked
+/// ([`crate::preflight::check_petsc_options`]).
 pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut sets = Vec::new();
+    let mut sets: Vec<(usize, OptionSet)> = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
@@ -86,15 +91,27 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
                 i + 1
             ));
         }
-        sets.push(OptionSet {
-            name: name.into(),
-            options: options.trim().into(),
-        });
+        if let Some((line, _)) = sets.iter().find(|(_, s)| s.name == name) {
+            return Err(format!(
+                "{}:{}: set name {name:?} is already used on line {line} (each set writes into the directory of its name)",
+                path.display(),
+                i + 1
+            ));
+        }
+        crate::preflight::check_petsc_options(options)
+            .map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?;
+        sets.push((
+            i + 1,
+            OptionSet {
+                name: name.into(),
+                options: options.trim().into(),
+            },
+        ));
     }
     if sets.is_empty() {
         return Err(format!("{}: no option sets", path.display()));
     }
-    Ok(sets)
+    Ok(sets.into_iter().map(|(_, s)| s).collect())
 }
 
 /// Result of one option set.
@@ -132,7 +149,8 @@ pub struct SetResult {
     pub error: Option<String>,
 }
 
-/// Runs every set for `steps` steps of `config`, results under `dir`.
+/// Runs every set for `steps` steps of `config`, results under `dir/<set name>` (replacing an earlier
+/// study's there).
 pub fn run(
     exe: &Path,
     config: &Path,
@@ -151,7 +169,8 @@ pub fn run(
 }
 
 /// Runs `config` for `steps` steps with the option set as its own `mpm-concrete run` process, results
-/// and PETSc's `-log_view` profile (`log_view.txt`) in `out`; reads back its history and summary.
+/// and PETSc's `-log_view` profile (`log_view.txt`) in `out` (replacing an earlier run's there); reads
+/// back its history and summary.
 pub fn run_one(
     exe: &Path,
     config: &Path,
@@ -165,7 +184,13 @@ pub fn run_one(
     let output = Command::new(exe)
         .arg("run")
         .arg(config)
-        .args(["--steps", &steps.to_string(), "--quiet", "--output"])
+        .args([
+            "--steps",
+            &steps.to_string(),
+            "--quiet",
+            "--overwrite",
+            "--output",
+        ])
         .arg(out)
         .args(set.options.split_whitespace())
         .arg("-log_view")
@@ -332,7 +357,7 @@ fn write_report(
         );
     }
     let io = |e: crate::io::OutputError| e.to_string();
-    write_atomic(&dir.join("study.md"), md.as_bytes()).map_err(io)?;
+    write_atomic(&dir.join(REPORT), md.as_bytes()).map_err(io)?;
     write_atomic(&dir.join("study.csv"), csv.as_bytes()).map_err(io)?;
     let series = |f: &dyn Fn(&SetResult) -> &Vec<f64>| -> Vec<Series> {
         results
@@ -403,6 +428,18 @@ mod tests {
                 name: "ilu".into(),
                 options: "-pc_type ilu".into()
             }
+        );
+        std::fs::write(&p, "a: -pc_type lu\nb: -pc_type ilu\na: -pc_type jacobi\n").expect("write");
+        let e = read_sets(&p).unwrap_err();
+        assert!(
+            e.contains("sets.txt:3") && e.contains("\"a\" is already used on line 1"),
+            "{e}"
+        );
+        std::fs::write(&p, "a: -ksp_type gmres -ksp_rtol -5\n").expect("write");
+        let e = read_sets(&p).unwrap_err();
+        assert!(
+            e.contains("sets.txt:1") && e.contains("-ksp_rtol -5"),
+            "{e}"
         );
         std::fs::write(&p, "no colon here\n").expect("write");
         let e = read_sets(&p).unwrap_err();

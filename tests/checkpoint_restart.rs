@@ -5,6 +5,7 @@ use mpm_concrete::checkpoint;
 use mpm_concrete::config::RunConfig;
 use mpm_concrete::io::RunOutput;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
+use mpm_concrete::rundir::RunIdentity;
 use mpm_concrete::scenario;
 use mpm_concrete::solver::{Simulation, StepReport};
 
@@ -86,12 +87,15 @@ fn check_restart(config: &str, tag: &str) {
     let mut b = simulation(&cfg);
     let mut out_b = RunOutput::create(&dir_b, "b", config, &b).expect("output");
     advance(&s, &mut b, &mut out_b, cfg.run.steps / 2);
-    checkpoint::save(&dir_b, &b, &out_b).expect("checkpoint");
+    let identity = RunIdentity::new(config, "");
+    checkpoint::save(&dir_b, &b, &out_b, &identity).expect("checkpoint");
     drop((b, out_b));
 
     let mut c = simulation(&cfg);
     let mut out_c = RunOutput::create(&dir_b, "b", config, &c).expect("output");
-    checkpoint::load(&dir_b, &mut c, &mut out_c).expect("restore");
+    let header = checkpoint::load(&dir_b, &mut c).expect("restore");
+    assert_eq!(header.identity, identity);
+    header.restore_records(&mut out_c).expect("records");
     assert_eq!(c.step, cfg.run.steps / 2);
     advance(&s, &mut c, &mut out_c, cfg.run.steps - cfg.run.steps / 2);
 

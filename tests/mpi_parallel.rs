@@ -54,3 +54,35 @@ fn two_processes_match_serial() {
         "serial vs 2 ranks: max diff {diff:e} (scale {scale:e})"
     );
 }
+
+/// `run` is serial until the distributed core lands: under `mpirun -n 2` it refuses with one message (from
+/// rank 0) and writes nothing, instead of two processes racing on the same output files.
+#[test]
+fn run_refuses_more_than_one_process() {
+    let dir = std::env::temp_dir().join(format!("mpmc-mpi-run-{}", std::process::id()));
+    let out = dir.join("out");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/ct-demo.toml");
+    let o = Command::new("mpirun")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .args([
+            "--oversubscribe",
+            "-n",
+            "2",
+            env!("CARGO_BIN_EXE_mpm-concrete"),
+        ])
+        .args(["run", config, "--steps", "1", "--output"])
+        .arg(&out)
+        .output()
+        .expect("failed to start mpirun");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    let refusals = err
+        .lines()
+        .filter(|l| l.starts_with("error: `run` works on one process, not 2"))
+        .count();
+    assert_eq!(refusals, 1, "{err}");
+    assert!(!out.exists(), "nothing may be written");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,0 +1,294 @@
+//! Checks that run before a simulation starts, so that a run that cannot work fails at once with one line
+//! instead of after its first step or with an allocation failure: the values of common PETSc options and
+//! the memory the run will need.
+
+use crate::config::RunConfig;
+use crate::particles::{Geometry, Region};
+
+/// What the value of a checked PETSc option must be.
+#[derive(Debug, Clone, Copy)]
+enum Allowed {
+    /// A relative tolerance: a number in [0, 1).
+    Fraction,
+    /// A number >= 0.
+    NonNegative,
+    /// An integer >= 1.
+    Count,
+    /// An integer >= 0.
+    NonNegativeCount,
+}
+
+/// Checked options, matched against the end of an option's name so that prefixed copies
+/// (`-fallback_snes_max_it`, `-sub_ksp_rtol`, `-fieldsplit_u_ksp_max_it`) are checked too. PETSc's own
+/// limits, except that an iteration limit must allow at least one iteration (with 0 every step fails).
+const CHECKED: [(&str, Allowed); 11] = [
+    ("ksp_rtol", Allowed::Fraction),
+    ("snes_rtol", Allowed::Fraction),
+    ("ksp_atol", Allowed::NonNegative),
+    ("snes_atol", Allowed::NonNegative),
+    ("snes_stol", Allowed::NonNegative),
+    ("pc_factor_shift_amount", Allowed::NonNegative),
+    ("ksp_max_it", Allowed::Count),
+    ("snes_max_it", Allowed::Count),
+    ("ksp_gmres_restart", Allowed::Count),
+    ("snes_linesearch_max_it", Allowed::Count),
+    ("pc_factor_levels", Allowed::NonNegativeCount),
+];
+
+/// Words PETSc accepts in place of a number.
+const KEYWORDS: [&str; 6] = [
+    "default",
+    "petsc_default",
+    "decide",
+    "petsc_decide",
+    "determine",
+    "petsc_determine",
+];
+
+/// Checks the values of the common numeric PETSc options in `options` (a PETSc options string, e.g.
+/// `-ksp_rtol 1e-6 -snes_max_it 25`); the error names the option, its value and what is allowed.
+pub fn check_petsc_options(options: &str) -> Result<(), String> {
+    let tokens: Vec<&str> = options.split_whitespace().collect();
+    let is_name = |t: &str| {
+        t.strip_prefix('-')
+            .and_then(|r| r.chars().next())
+            .is_some_and(|c| c.is_ascii_alphabetic())
+    };
+    for (i, token) in tokens.iter().enumerate() {
+        if !is_name(token) {
+            continue;
+        }
+        let name = &token[1..];
+        let Some(&(_, allowed)) = CHECKED
+            .iter()
+            .find(|(key, _)| name == *key || name.ends_with(&format!("_{key}")))
+        else {
+            continue;
+        };
+        let value = tokens.get(i + 1).filter(|v| !is_name(v));
+        let what = match allowed {
+            Allowed::Fraction => "a number in [0, 1)",
+            Allowed::NonNegative => "a number >= 0",
+            Allowed::Count => "an integer >= 1",
+            Allowed::NonNegativeCount => "an integer >= 0",
+        };
+        let Some(value) = value else {
+            return Err(format!("PETSc option {token} needs a value: {what}"));
+        };
+        if KEYWORDS.contains(&value.to_ascii_lowercase().as_str()) {
+            continue;
+        }
+        let ok = match (allowed, value.parse::<f64>()) {
+            (_, Err(_)) => false,
+            (Allowed::Fraction, Ok(v)) => (0.0..1.0).contains(&v),
+            (Allowed::NonNegative, Ok(v)) => v.is_finite() && v >= 0.0,
+            (Allowed::Count, Ok(v)) => v.fract() == 0.0 && (1.0..=i32::MAX as f64).contains(&v),
+            (Allowed::NonNegativeCount, Ok(v)) => {
+                v.fract() == 0.0 && (0.0..=i32::MAX as f64).contains(&v)
+            }
+        };
+        if !ok {
+            return Err(format!(
+                "PETSc option {token} {value}: the value must be {what}"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Process baseline (program, PETSc, MPI, HDF5 libraries) in bytes.
+pub const BASE_BYTES: f64 = 60e6;
+/// Bytes per material point over a run: the points' state, shape-function tables, the Jacobian and the
+/// linear solver (including the MUMPS LU of the fallback). Calibrated on the CT specimen: 155,600 points
+/// (1 mm cells) peak at about 850 MB; 39,120 points (2 mm) at 195 MB with GMRES/ILU and 246 MB with
+/// MUMPS; 9,780 points (4 mm) at 89-100 MB.
+pub const BYTES_PER_POINT: f64 = 5.2e3;
+/// Bytes per background-grid node (nodal state and unknown numbering); measured as the growth of the
+/// peak with the grid margin (120,000 extra nodes: +17 MB).
+pub const BYTES_PER_NODE: f64 = 150.0;
+
+/// Estimated size of a run, from its configuration alone (before any point is seeded).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MemoryNeed {
+    /// Material points (deformable and rigid), from the areas of the geometries.
+    pub points: f64,
+    /// Background-grid nodes.
+    pub nodes: f64,
+    /// Peak resident memory (bytes).
+    pub bytes: f64,
+}
+
+/// The memory a run of `cfg` will need at its peak (an upper estimate: overlapping include regions and
+/// exclude regions are not subtracted, except the CT notch).
+pub fn memory_need(cfg: &RunConfig) -> MemoryNeed {
+    let h = cfg.grid.cell_size;
+    let per_area = (cfg.shape.points_per_cell * cfg.shape.points_per_cell) as f64 / (h * h);
+    let mut area = 0.0;
+    let mut boxes: Vec<([f64; 2], [f64; 2])> = Vec::new();
+    if let Some(ct) = &cfg.ct {
+        area += ct.width * ct.height - ct.notch_length * ct.notch_width;
+        area += 2.0 * (ct.load_zone[1] - ct.load_zone[0]) * ct.plate_thickness;
+        boxes.push(([0.0, 0.0], [ct.width, ct.height]));
+    }
+    let geometries = cfg
+        .body
+        .iter()
+        .map(|b| &b.geometry)
+        .chain(cfg.rigid_body.iter().map(|r| &r.geometry));
+    for g in geometries {
+        area += geometry_area(g);
+        boxes.extend(g.include.iter().map(|r| {
+            let (lo, hi) = r.bounding_box();
+            ([lo.x, lo.y], [hi.x, hi.y])
+        }));
+    }
+    let (lo, hi) = boxes.iter().fold(
+        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+        |(lo, hi), (l, u)| {
+            (
+                [lo[0].min(l[0]), lo[1].min(l[1])],
+                [hi[0].max(u[0]), hi[1].max(u[1])],
+            )
+        },
+    );
+    let margin = 2.0 * cfg.grid.margin_cells.max(1) as f64 + 1.0;
+    let nodes = ((hi[0] - lo[0]) / h + margin).max(1.0) * ((hi[1] - lo[1]) / h + margin).max(1.0);
+    let points = area * per_area;
+    MemoryNeed {
+        points,
+        nodes,
+        bytes: BASE_BYTES + BYTES_PER_POINT * points + BYTES_PER_NODE * nodes,
+    }
+}
+
+/// Area of the include regions (mm^2).
+fn geometry_area(g: &Geometry) -> f64 {
+    g.include
+        .iter()
+        .map(|r| match r {
+            Region::Rect { min, max } => (max[0] - min[0]) * (max[1] - min[1]),
+            Region::Polygon { vertices } => {
+                let n = vertices.len();
+                let twice: f64 = (0..n)
+                    .map(|k| {
+                        let (a, b) = (vertices[k], vertices[(k + 1) % n]);
+                        a[0] * b[1] - b[0] * a[1]
+                    })
+                    .sum();
+                0.5 * twice.abs()
+            }
+        })
+        .sum()
+}
+
+/// The memory a new process can use: the smaller of `MemAvailable` in /proc/meminfo and the free part
+/// of the cgroup's `memory.max`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MemoryLimit {
+    /// Bytes.
+    pub bytes: f64,
+    /// Where the number comes from.
+    pub source: &'static str,
+}
+
+/// The current limit, or `None` where /proc/meminfo cannot be read.
+pub fn memory_limit() -> Option<MemoryLimit> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let available = meminfo
+        .lines()
+        .find_map(|l| l.strip_prefix("MemAvailable:"))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|kb| kb.parse::<f64>().ok())?
+        * 1024.0;
+    let read = |file: &str| {
+        std::fs::read_to_string(format!("/sys/fs/cgroup/{file}"))
+            .ok()
+            .and_then(|s| s.trim().parse::<f64>().ok())
+    };
+    let cgroup = read("memory.max").map(|max| max - read("memory.current").unwrap_or(0.0));
+    Some(match cgroup {
+        Some(free) if free < available => MemoryLimit {
+            bytes: free,
+            source: "the cgroup's memory.max less memory.current",
+        },
+        _ => MemoryLimit {
+            bytes: available,
+            source: "MemAvailable in /proc/meminfo",
+        },
+    })
+}
+
+/// Bytes in a short human form (`850 MB`, `330 GB`).
+pub fn human_bytes(b: f64) -> String {
+    if b >= 1e12 {
+        format!("{:.1} TB", b / 1e12)
+    } else if b >= 1e9 {
+        format!("{:.1} GB", b / 1e9)
+    } else {
+        format!("{:.0} MB", b / 1e6)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn common_option_values_are_checked_with_prefixes() {
+        for good in [
+            "",
+            "-ksp_rtol 1e-6 -snes_max_it 25 -snes_monitor",
+            "-fallback_snes_max_it 50 -sub_pc_factor_levels 0 -ksp_rtol 0",
+            "-snes_atol default -log_view :log.txt -x -1.5",
+        ] {
+            assert_eq!(check_petsc_options(good), Ok(()), "{good}");
+        }
+        for (bad, needle) in [
+            (
+                "-ksp_rtol -5",
+                "-ksp_rtol -5: the value must be a number in [0, 1)",
+            ),
+            ("-ksp_rtol 1", "[0, 1)"),
+            (
+                "-snes_max_it -3",
+                "-snes_max_it -3: the value must be an integer >= 1",
+            ),
+            ("-fallback_snes_max_it 0", "-fallback_snes_max_it 0"),
+            ("-ksp_max_it 2.5", "an integer >= 1"),
+            ("-snes_atol nan", "a number >= 0"),
+            ("-snes_stol abc", "-snes_stol abc"),
+            ("-ksp_rtol -snes_monitor", "-ksp_rtol needs a value"),
+            ("-snes_max_it", "-snes_max_it needs a value"),
+        ] {
+            let e = check_petsc_options(bad).expect_err(bad);
+            assert!(e.contains(needle), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_memory_estimate_matches_the_measured_ct_runs() {
+        let ct = |h: f64| {
+            RunConfig::from_str_named(
+                &format!(
+                    "[run]\nname = \"m\"\nsteps = 1\n[grid]\ncell_size = {h:?}\n[ct]\nloading_rate = 4300.0\n\
+                     material = {{ model = \"microplane\", preset = \"paper\" }}\n"
+                ),
+                "m.toml",
+            )
+            .expect("config")
+        };
+        let full = memory_need(&ct(1.0));
+        // 155,600 points of concrete and 480 of the two rigid plates.
+        assert_eq!(full.points, 156_080.0, "{full:?}");
+        assert!((0.85e9..1.0e9).contains(&full.bytes), "{full:?}");
+        let tiny_cells = memory_need(&ct(0.05));
+        assert!(tiny_cells.bytes > 3e11, "{tiny_cells:?}");
+        assert_eq!(human_bytes(tiny_cells.bytes).split(' ').nth(1), Some("GB"));
+    }
+
+    #[test]
+    fn the_memory_limit_is_read_from_proc_meminfo() {
+        let limit = memory_limit().expect("/proc/meminfo");
+        assert!(limit.bytes > 0.0, "{limit:?}");
+    }
+}

@@ -1,0 +1,643 @@
+//! A run's results can be trusted: the real binary on a tiny CT specimen (360 points, 1 us steps).
+//!
+//! * every class of bad input is refused before any work with exit code 2 and one `error:` line that names
+//!   the file or option, the key and what is allowed, and nothing is written into the output directory;
+//! * an output directory belongs to one run (`--overwrite` removes only the program's files);
+//! * a checkpoint proves what it holds: a corrupt one is refused, as is resuming with other physics or
+//!   with no steps left; a run that fails for good or is interrupted leaves a checkpoint of its last
+//!   converged step and a resume command that works as printed;
+//! * a run that ended before its requested end time says so.
+
+use mpm_concrete::checkpoint;
+use mpm_concrete::rundir::RunRecord;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+const EXE: &str = env!("CARGO_BIN_EXE_mpm-concrete");
+
+const TINY: &str = r#"
+[run]
+name = "tiny-ct"
+steps = 4
+output_every = 2
+
+[grid]
+cell_size = 4.0
+
+[ct]
+width = 40.0
+height = 40.0
+notch_length = 20.0
+notch_width = 8.0
+load_zone = [0.0, 8.0]
+loading_rate = 4300.0
+rise_time = 2.0e-6
+material = { model = "microplane", preset = "paper" }
+"#;
+
+/// A block with a held base, for the sections the CT generator does not have.
+const BLOCK: &str = r#"
+[run]
+name = "block"
+steps = 2
+
+[grid]
+cell_size = 2.0
+
+[[body]]
+name = "b"
+density = 2.4e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
+material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
+initial_velocity = [0.0, 0.0]
+
+[[constraint]]
+name = "base"
+min = [-1.0, -0.1]
+max = [11.0, 0.1]
+y = "fixed"
+"#;
+
+/// A fresh scratch directory with the two configurations.
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mpmc-safety-{}-{tag}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    std::fs::write(dir.join("tiny.toml"), TINY).expect("config");
+    std::fs::write(dir.join("block.toml"), BLOCK).expect("config");
+    dir
+}
+
+/// Runs the program in `cwd`.
+fn run(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(EXE)
+        .current_dir(cwd)
+        .args(args)
+        .output()
+        .expect("start mpm-concrete")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn succeeds(o: &Output) {
+    assert!(
+        o.status.success(),
+        "{}\n{}{}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        stderr(o)
+    );
+}
+
+/// Exit code 2, one `error:` line holding every `needle`, no panic.
+fn refused(o: &Output, needles: &[&str]) -> String {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(lines.len(), 1, "one error line expected:\n{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(lines[0].contains(n), "`{n}` missing in: {}", lines[0]);
+    }
+    lines[0].to_owned()
+}
+
+/// Names and contents of the files in `dir`.
+fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .expect("dir")
+        .map(|e| {
+            let p = e.expect("entry").path();
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read(&p).expect("read"))
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+fn record(dir: &Path) -> RunRecord {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).expect("run.json"))
+        .expect("run.json parses")
+}
+
+#[test]
+fn bad_input_is_refused_before_anything_is_written() {
+    let dir = scratch("bad");
+    std::fs::write(dir.join("a_file"), "").unwrap();
+    std::fs::write(
+        dir.join("sets.txt"),
+        "a: -pc_type lu\nb: -pc_type ilu\na: -pc_type jacobi\n",
+    )
+    .unwrap();
+    let block = |name: &str, from: &str, to: &str| {
+        let text = BLOCK.replace(from, to);
+        assert_ne!(text, BLOCK, "{from}");
+        std::fs::write(dir.join(name), text).unwrap();
+    };
+    block(
+        "far-box.toml",
+        "min = [-1.0, -0.1]\nmax = [11.0, 0.1]",
+        "min = [-1.0, -60.0]\nmax = [11.0, -50.0]",
+    );
+    block(
+        "nan-velocity.toml",
+        "initial_velocity = [0.0, 0.0]",
+        "initial_velocity = [nan, 0.0]",
+    );
+    // (program arguments after `run tiny.toml --quiet --output out`, PETSc options, what the error line
+    // must name)
+    type Case<'a> = (Vec<&'a str>, Vec<&'a str>, Vec<&'a str>);
+    let cases: Vec<Case> = vec![
+        (
+            vec!["--set", "ct.rise_time=-1e-6"],
+            vec![],
+            vec!["tiny.toml", "ct.rise_time", "-0.000001", "a time >= 0"],
+        ),
+        (
+            vec!["--set", "ct.rise_time=nan"],
+            vec![],
+            vec!["tiny.toml", "ct.rise_time", "NaN", ">= 0"],
+        ),
+        (
+            vec!["--set", "ct.load_zone=[-100.0,-50.0]"],
+            vec![],
+            vec!["ct.load_zone", "0 <= a < b <= notch_length"],
+        ),
+        (
+            vec!["--set", "grid.cell_sise=2.0"],
+            vec![],
+            vec!["tiny.toml", "cell_sise"],
+        ),
+        (vec!["--steps", "0"], vec![], vec!["--steps", "at least 1"]),
+        (
+            vec![],
+            vec!["-ksp_rtol", "-5"],
+            vec!["command line", "-ksp_rtol -5", "[0, 1)"],
+        ),
+        (
+            vec![],
+            vec!["-snes_max_it", "-3"],
+            vec!["command line", "-snes_max_it -3", "an integer >= 1"],
+        ),
+        (
+            vec!["--set", "run.petsc_options=\"-fallback_snes_max_it 0\""],
+            vec![],
+            vec![
+                "tiny.toml",
+                "run.petsc_options",
+                "-fallback_snes_max_it 0",
+                ">= 1",
+            ],
+        ),
+        (
+            vec![],
+            vec!["-snes_monitor", "--steps", "2"],
+            vec!["`--steps` comes after the PETSc option `-snes_monitor`"],
+        ),
+        (
+            vec!["--set", "grid.cell_size=0.001"],
+            vec![],
+            vec!["tiny.toml", "needs about", "available", "--allow-large"],
+        ),
+        (
+            vec!["--resume"],
+            vec![],
+            vec!["checkpoint.h5", "no checkpoint"],
+        ),
+        (
+            vec![],
+            vec!["-snes_monitr"],
+            vec!["unknown or unused PETSc option", "-snes_monitr"],
+        ),
+        (
+            vec![],
+            vec!["-pc_type", "nonsense"],
+            vec!["first step", "Unable to find requested PC type nonsense"],
+        ),
+    ];
+    for (own, petsc, needles) in &cases {
+        let mut args = vec!["run", "tiny.toml", "--quiet", "--output", "out"];
+        args.extend(own);
+        args.extend(petsc);
+        let line = refused(&run(&dir, &args), needles);
+        assert!(!dir.join("out").exists(), "{args:?} wrote out/: {line}");
+    }
+    // Inputs of the other commands and sections.
+    let others: Vec<(Vec<&str>, Vec<&str>)> = vec![
+        (
+            vec!["run", "far-box.toml", "--output", "out"],
+            vec!["constraint `base`", "holds no grid node"],
+        ),
+        (
+            vec!["run", "nan-velocity.toml", "--output", "out"],
+            vec!["body[0].initial_velocity", "finite"],
+        ),
+        (
+            vec!["run", "tiny.toml", "--output", "a_file"],
+            vec!["a_file", "not a directory"],
+        ),
+        (
+            vec![
+                "study",
+                "tiny.toml",
+                "--sets",
+                "sets.txt",
+                "--output",
+                "out",
+            ],
+            vec!["sets.txt:3", "\"a\" is already used on line 1"],
+        ),
+        (
+            vec!["study", "tiny.toml", "--output", "out", "-snes_monitor"],
+            vec!["study takes no PETSc options", "-snes_monitor"],
+        ),
+        (
+            vec!["material-driver", "--out", "out", "-snes_monitor"],
+            vec!["material-driver takes no PETSc options", "-snes_monitor"],
+        ),
+    ];
+    for (args, needles) in &others {
+        let line = refused(&run(&dir, args), needles);
+        assert!(!dir.join("out").exists(), "{args:?} wrote out/: {line}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn an_output_directory_belongs_to_one_run() {
+    let dir = scratch("own");
+    succeeds(&run(
+        &dir,
+        &["run", "tiny.toml", "--quiet", "--output", "d"],
+    ));
+    let d = dir.join("d");
+    std::fs::write(d.join("notes.txt"), "the user's own file").unwrap();
+    let before = snapshot(&d);
+    assert!(before.iter().any(|(n, _)| n == "fields_000004.h5"));
+    // The same model again, and another model: both refused, nothing touched.
+    let line = refused(
+        &run(&dir, &["run", "tiny.toml", "--quiet", "--output", "d"]),
+        &[
+            "d holds the results of an earlier run of the same model",
+            "--overwrite",
+            "--resume",
+        ],
+    );
+    assert!(line.contains("finished at step 4 of 4"), "{line}");
+    refused(
+        &run(
+            &dir,
+            &[
+                "run",
+                "tiny.toml",
+                "--quiet",
+                "--output",
+                "d",
+                "--set",
+                "ct.loading_rate=1000.0",
+            ],
+        ),
+        &["d holds the results of another run"],
+    );
+    // --overwrite with a misspelled option: refused after the first step, the old run intact.
+    refused(
+        &run(
+            &dir,
+            &[
+                "run",
+                "tiny.toml",
+                "--quiet",
+                "--output",
+                "d",
+                "--overwrite",
+                "-snes_monitr",
+            ],
+        ),
+        &["-snes_monitr"],
+    );
+    assert_eq!(
+        snapshot(&d),
+        before,
+        "a refused run must not touch the directory"
+    );
+    // --overwrite replaces the program's files only: the stale fields of step 4 go, notes.txt stays.
+    succeeds(&run(
+        &dir,
+        &[
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--overwrite",
+            "--steps",
+            "2",
+            "--set",
+            "ct.loading_rate=1000.0",
+        ],
+    ));
+    let after: Vec<String> = snapshot(&d).into_iter().map(|(n, _)| n).collect();
+    assert!(after.contains(&"notes.txt".to_owned()), "{after:?}");
+    assert!(after.contains(&"fields_000002.h5".to_owned()), "{after:?}");
+    assert!(!after.contains(&"fields_000004.h5".to_owned()), "{after:?}");
+    assert!(
+        after
+            .iter()
+            .all(|n| n == "notes.txt" || mpm_concrete::rundir::is_program_file(n)),
+        "every file a run writes is one --overwrite would remove: {after:?}"
+    );
+    let r = record(&d);
+    assert_eq!((r.status.as_str(), r.steps_done), ("finished", 2));
+    let copy = std::fs::read_to_string(d.join("config.toml")).unwrap();
+    assert!(
+        copy.contains("(with --set ct.loading_rate=1000.0 --set run.steps=2)")
+            && copy.contains("loading_rate = 1000.0"),
+        "the copied config includes the overrides:\n{copy}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// XORs `len` bytes of `file` from `offset`.
+fn flip(file: &Path, offset: u64, len: usize) {
+    let mut bytes = std::fs::read(file).unwrap();
+    for b in &mut bytes[offset as usize..offset as usize + len] {
+        *b ^= 0xff;
+    }
+    std::fs::write(file, bytes).unwrap();
+}
+
+/// File offset of a dataset's data.
+fn data_offset(file: &Path, dataset: &str) -> u64 {
+    let f = hdf5_metno::File::open(file).unwrap();
+    f.dataset(dataset).unwrap().offset().expect("contiguous")
+}
+
+#[test]
+fn a_corrupt_checkpoint_is_refused_and_changes_nothing() {
+    let dir = scratch("corrupt");
+    succeeds(&run(
+        &dir,
+        &[
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--steps",
+            "2",
+        ],
+    ));
+    let d = dir.join("d");
+    let ck = d.join(checkpoint::FILE);
+    let good = std::fs::read(&ck).unwrap();
+    for (dataset, len) in [("stress", 200), ("meta", 8)] {
+        std::fs::write(&ck, &good).unwrap();
+        flip(&ck, data_offset(&ck, dataset) + 16, len);
+        let before = snapshot(&d);
+        refused(
+            &run(
+                &dir,
+                &[
+                    "run",
+                    "tiny.toml",
+                    "--quiet",
+                    "--output",
+                    "d",
+                    "--steps",
+                    "4",
+                    "--resume",
+                ],
+            ),
+            &[
+                "checkpoint.h5",
+                "corrupt",
+                &format!("`{dataset}` does not match its checksum"),
+            ],
+        );
+        assert_eq!(snapshot(&d), before, "{dataset}: nothing may change");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn resume_refuses_other_physics_and_no_steps_left_and_accepts_run_control() {
+    let dir = scratch("resume");
+    succeeds(&run(
+        &dir,
+        &[
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--steps",
+            "2",
+        ],
+    ));
+    let d = dir.join("d");
+    let before = snapshot(&d);
+    let resume = |extra: &[&str]| {
+        let mut args = vec!["run", "tiny.toml", "--quiet", "--output", "d", "--resume"];
+        args.extend(extra);
+        run(&dir, &args)
+    };
+    refused(
+        &resume(&["--steps", "4", "--set", "ct.loading_rate=35"]),
+        &[
+            "other physics",
+            "ct.loading_rate: 4300.0 in the checkpoint, 35.0 now",
+            "[run] section",
+        ],
+    );
+    refused(
+        &resume(&["--steps", "4", "--set", "time.beta=0.3"]),
+        &["time.beta: absent in the checkpoint, 0.3 now"],
+    );
+    refused(
+        &resume(&["--steps", "2"]),
+        &["at step 2", "asks for 2 steps", "nothing to do", "N > 2"],
+    );
+    assert_eq!(snapshot(&d), before);
+    // Run control may change: more steps, another output cadence, other solver options.
+    succeeds(&resume(&[
+        "--steps",
+        "3",
+        "--set",
+        "run.output_every=1",
+        "-ksp_rtol",
+        "1e-7",
+    ]));
+    let r = record(&d);
+    assert_eq!(
+        (r.status.as_str(), r.steps_done, r.resumed_from_step),
+        ("finished", 3, Some(2))
+    );
+    assert!(d.join("fields_000003.h5").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_failed_run_keeps_a_checkpoint_of_its_last_converged_step() {
+    let dir = scratch("failed");
+    // Two Newton iterations with GMRES and one with the fallback are too few for step 2, and dt_min = dt
+    // forbids halving: the run fails for good at step 2.
+    let args = [
+        "run",
+        "tiny.toml",
+        "--quiet",
+        "--output",
+        "d",
+        "--set",
+        "time.dt_min=1e-6",
+        "--set",
+        "run.output_every=0",
+        "-snes_max_it",
+        "2",
+        "-fallback_snes_max_it",
+        "1",
+    ];
+    let o = run(&dir, &args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("step 2 at t = 1e-6 s did not converge"),
+        "{err}"
+    );
+    let d = dir.join("d");
+    let header = checkpoint::read_header(&d).expect("checkpoint");
+    assert_eq!(
+        header.counters.step, 1,
+        "checkpoint of the last converged step"
+    );
+    assert!(d.join("fields_000001.h5").exists());
+    let r = record(&d);
+    assert_eq!((r.status.as_str(), r.steps_done), ("failed", 1));
+    // The printed command resumes that run (and fails the same way with the same options).
+    let hint = err
+        .lines()
+        .find_map(|l| l.split_once("to continue (e.g. with other solver options): "))
+        .map(|(_, cmd)| cmd.to_owned())
+        .expect("resume command");
+    let o = Command::new("sh")
+        .current_dir(&dir)
+        .args(["-c", &hint])
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(err.contains("resuming at step 1"), "{hint}\n{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn an_interrupted_run_prints_a_resume_command_that_works() {
+    let dir = scratch("interrupt");
+    let mut child = Command::new(EXE)
+        .current_dir(&dir)
+        .args([
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--steps",
+            "400",
+            "--set",
+            "run.output_every=1000",
+            "-ksp_rtol",
+            "1e-7",
+        ])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(child.stderr.take().unwrap()));
+    let mut err = String::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        err += &line;
+        err.push('\n');
+        if line.starts_with("step 1:") {
+            let kill = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status()
+                .unwrap();
+            assert!(kill.success());
+            break;
+        }
+    }
+    for line in lines {
+        err += &line.unwrap();
+        err.push('\n');
+    }
+    assert_eq!(child.wait().unwrap().code(), Some(1), "{err}");
+    let hint = err
+        .lines()
+        .find_map(|l| l.split_once(": continue with "))
+        .map(|(_, cmd)| cmd.to_owned())
+        .unwrap_or_else(|| panic!("no resume command in:\n{err}"));
+    assert!(
+        hint.contains("--output d")
+            && hint.contains("--steps 400")
+            && hint.contains("-ksp_rtol 1e-7"),
+        "{hint}"
+    );
+    let done = checkpoint::read_header(&dir.join("d"))
+        .unwrap()
+        .counters
+        .step;
+    assert!((1..400).contains(&done), "{done}");
+    // Fewer steps to go: the hint with --steps 400 replaced keeps the test short.
+    let hint = hint.replace("--steps 400", &format!("--steps {}", done + 2));
+    let o = Command::new("sh")
+        .current_dir(&dir)
+        .args(["-c", &hint])
+        .output()
+        .unwrap();
+    succeeds(&o);
+    let r = record(&dir.join("d"));
+    assert_eq!((r.status.as_str(), r.steps_done), ("finished", done + 2));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_run_that_ended_early_says_so() {
+    let dir = scratch("early");
+    // Step 2 needs three Newton iterations: with two (GMRES) and one (fallback) it is halved until one
+    // iteration converges, so the two steps end well before 2 us.
+    let o = run(
+        &dir,
+        &[
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--steps",
+            "2",
+            "-snes_max_it",
+            "2",
+            "-fallback_snes_max_it",
+            "1",
+        ],
+    );
+    succeeds(&o);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let note = "before its requested end time 2.0000 us (2 steps of 1.0000 us); 1 of 2 steps took a reduced time step";
+    assert!(stdout.contains(note), "summary:\n{stdout}");
+    assert!(stderr(&o).contains(note), "{}", stderr(&o));
+    let history = std::fs::read_to_string(dir.join("d/history.csv")).unwrap();
+    assert!(
+        history
+            .lines()
+            .last()
+            .unwrap()
+            .starts_with("# the run ended at t = ")
+    );
+    assert!(history.contains(note));
+    let r = record(&dir.join("d"));
+    assert_eq!(r.reduced_steps, 1);
+    assert!(r.time_reached < r.time_requested);
+    std::fs::remove_dir_all(&dir).ok();
+}
