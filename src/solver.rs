@@ -437,28 +437,6 @@ impl NonlinearProblem for StepProblem<'_, '_> {
     }
 }
 
-/// The default storage of the Jacobian for the solver chosen under `prefix`: blocked (BAIJ: 3x3 kernels
-/// in ILU, triangular solves and products, measured 1.4-1.8x faster than AIJ at the paper's size) where
-/// the preconditioner works on it, point AIJ otherwise (LU through external packages, GAMG, hypre, the
-/// field split, which cuts across the node blocks). `-mat_type` overrides either.
-fn matrix_type(session: &SessionGuard, prefix: Option<&str>) -> Result<&'static str, StepError> {
-    let p = prefix.unwrap_or("");
-    let pc = petsc::option_string(session, &format!("{p}pc_type"))?;
-    let sub_pc = petsc::option_string(session, &format!("{p}sub_pc_type"))?;
-    let blocked = |pc: Option<&str>| {
-        matches!(
-            pc,
-            None | Some("ilu" | "jacobi" | "pbjacobi" | "sor" | "none")
-        )
-    };
-    Ok(match pc.as_deref() {
-        Some("bjacobi" | "asm") if blocked(sub_pc.as_deref()) => "baij",
-        Some("bjacobi" | "asm") => "aij",
-        pc if blocked(pc) => "baij",
-        _ => "aij",
-    })
-}
-
 /// The PETSc objects of the implicit step: the unknowns, the Jacobian with its block pattern, and the
 /// SNES (with its KSP and PC). They are kept from step to step while the active nodes and the pattern
 /// stay the same (at 1 us steps particles rarely cross a cell boundary), so the matrix structure, the
@@ -499,7 +477,11 @@ impl LinearSystem {
         let n = dofs.len();
         let x = Vector::new(session, n, nf)?;
         let first = x.ownership_range()?.start;
-        let mut jac = Matrix::with_type(session, n, nf, matrix_type(session, prefix)?)?;
+        // AIJ with the block size set (inode kernels). `-mat_type baij` makes ILU, triangular solves and
+        // products 1.4-1.8x faster at the paper's size, but its block ILU(0) (no pivot shift) failed in 2
+        // of 1000 steps of the half-resolution CT at 4.3 m/s where point ILU(0) with a nonzero shift passes
+        // (docs/benchmarks.md); GAMG and the field split need AIJ anyway.
+        let mut jac = Matrix::new(session, n, nf)?;
         let pattern = asm.block_pattern(first / nf);
         jac.set_block_pattern(&pattern)?;
         // Near-null space of the displacement block (two translations and the in-plane rotation) for

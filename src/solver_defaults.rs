@@ -41,7 +41,7 @@ pub enum StepClass {
 /// Newton settings shared by every class: relative and absolute residual tolerances, at most 25 iterations.
 const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
 
-/// GMRES preconditioned by ILU(0) per process (on blocked storage, see the solver module), rebuilt at the
+/// GMRES preconditioned by ILU(0) per process (pivots shifted away from zero), rebuilt at the
 /// first Newton iteration of a step and every third one after it (`-snes_lag_preconditioner 3`): with
 /// 1 us steps the Jacobian changes little within a step, and the ILU factorisation costs as much as five
 /// GMRES iterations.
