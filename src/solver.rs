@@ -478,7 +478,7 @@ impl LinearSystem {
         let x = Vector::new(session, n, nf)?;
         let first = x.ownership_range()?.start;
         // AIJ with the block size set (inode kernels). `-mat_type baij` makes ILU, triangular solves and
-        // products 1.4-1.8x faster at the paper's size, but its block ILU(0) (no pivot shift) failed in 2
+        // products 1.4-1.8x faster at the paper's size, but its block ILU(0) (no pivot shift) failed in 3
         // of 1000 steps of the half-resolution CT at 4.3 m/s where point ILU(0) with a nonzero shift passes
         // (docs/benchmarks.md); GAMG and the field split need AIJ anyway.
         let mut jac = Matrix::new(session, n, nf)?;
