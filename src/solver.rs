@@ -32,6 +32,8 @@ pub struct TimeIntegration {
     pub gamma: f64,
     /// Drop inertia (static equilibrium each step, loads ramped with time).
     pub quasi_static: bool,
+    /// How a dynamic run starts in acceleration (ignored quasi-statically and on resume).
+    pub initial_acceleration: InitialAcceleration,
 }
 
 impl Default for TimeIntegration {
@@ -42,6 +44,36 @@ impl Default for TimeIntegration {
             beta: 0.25,
             gamma: 0.5,
             quasi_static: false,
+            initial_acceleration: InitialAcceleration::default(),
+        }
+    }
+}
+
+/// The acceleration a dynamic run starts with (`[time] initial_acceleration`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(try_from = "String")]
+pub enum InitialAcceleration {
+    /// `M a_0 = f_ext(0) - f_int(u_0)` on the grid before the first step, constrained components with the
+    /// acceleration of their prescribed motion, carried to the points: a load applied at t = 0 acts from
+    /// the first step on.
+    #[default]
+    Consistent,
+    /// `a_0 = 0`: the run starts at rest in acceleration, and a load applied at t = 0 is felt about half a
+    /// step late.
+    Zero,
+}
+
+impl TryFrom<String> for InitialAcceleration {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<Self, String> {
+        match name.as_str() {
+            "consistent" => Ok(Self::Consistent),
+            "zero" => Ok(Self::Zero),
+            _ => Err(format!(
+                "field `time.initial_acceleration` = \"{name}\": \"consistent\" (M a_0 = f_ext - f_int at \
+                 t = 0, the default) or \"zero\" (start at rest in acceleration)"
+            )),
         }
     }
 }
@@ -195,6 +227,18 @@ pub fn prescribed_increment(v: f64, rise: f64, t: f64, dt: f64) -> f64 {
         }
     };
     v * (g(t + dt) - g(t))
+}
+
+/// Acceleration (mm/s^2) just after `t` of a component whose velocity rises linearly from 0 to `v` over
+/// `rise`: `v / rise` during the rise, 0 after it. A velocity step (`rise = 0`) gets 0: its jump at t = 0
+/// is an impulse that no finite acceleration represents (the prescribed increments carry it), and 0 is
+/// the acceleration just after the jump.
+pub fn prescribed_acceleration(v: f64, rise: f64, t: f64) -> f64 {
+    if rise > 0.0 && t < rise {
+        v / rise
+    } else {
+        0.0
+    }
 }
 
 /// Scale of constrained rows and of the Helmholtz rows (MPa): the largest P-wave modulus `K + 4G/3`.
@@ -673,8 +717,18 @@ impl Simulation {
     }
 
     /// Advances one step of (at most) `self.dt`, halving the step on failure down to `dt_min`; after a
-    /// reduced step the next one tries twice as long again, up to the nominal `dt`.
+    /// reduced step the next one tries twice as long again, up to the nominal `dt`. The first step of a
+    /// dynamic run starts with the consistent initial acceleration unless `initial_acceleration` is
+    /// [`InitialAcceleration::Zero`].
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
+        // Before the first step only: a resumed run continues with its checkpointed accelerations.
+        let time = &self.setup.time;
+        if self.step == 0
+            && !time.quasi_static
+            && time.initial_acceleration == InitialAcceleration::Consistent
+        {
+            self.initialize_acceleration()?;
+        }
         let mut dt = self.dt;
         let mut attempts = 0;
         // The main solver first; after a failure the fallback solver (if any) at the same dt, then halving.
@@ -1138,6 +1192,78 @@ impl Simulation {
         }
         eb
     }
+
+    /// The consistent initial acceleration of a dynamic run (`docs/theory.md`, "Initial acceleration"):
+    /// on the grid at t = 0, `m_I a_I = f_ext,I - f_int,I` with the lumped mass, `f_ext` the body force
+    /// and the loads at t = 0 and `f_int` the internal force of the points' state (the residual of a
+    /// quasi-static step at `du = 0`); constrained components take the acceleration of their prescribed
+    /// motion ([`prescribed_acceleration`]). Carried to the points with the G2P interpolation,
+    /// `a_p = sum_I S_Ip a_I`; in FEM mode it is also the carried nodal acceleration. The result depends
+    /// only on the state at t = 0, not on the points' previous `a_p`.
+    fn initialize_acceleration(&mut self) -> Result<(), StepError> {
+        self.project_to_grid()?;
+        let t = self.time;
+        let prescribed = self.constraint_values(|v, rise| prescribed_acceleration(v, rise, t));
+        let sets = self.constrain(&prescribed)?;
+        let (nodal_force, _) = self.nodal_loads(t)?;
+        let eta_bar = self.nodal_eta_bar();
+        let nf = self.dofs.fields();
+        let s = &self.setup;
+        let input = StepInput {
+            table: &self.table,
+            particles: &s.particles,
+            materials: &s.materials,
+            dofs: &self.dofs,
+            mass: &self.grid_state.mass,
+            velocity: &self.grid_state.velocity,
+            acceleration: &self.grid_state.acceleration,
+            newmark: None,
+            body_force: s.body_force,
+            nodal_force: &nodal_force,
+            row_scale: row_scale(&s.materials),
+        };
+        self.assembler.begin_step(&input);
+        let mut x = vec![0.0; self.dofs.len()];
+        if nf == 3 {
+            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+                x[a * nf + 2] = eta_bar[node as usize];
+            }
+        }
+        self.assembler.evaluate(&input, &x)?;
+        // R = f_int - f_ext at du = 0 (no inertia), unbalanced forces in the constrained rows too.
+        let mut r = vec![0.0; x.len()];
+        self.assembler.residual(&input, &x, &mut r, true)?;
+        let mut acc = vec![Vector2::zeros(); s.grid.num_nodes()];
+        for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+            let node = node as usize;
+            let m = self.grid_state.mass[node];
+            acc[node] = Vector2::from_fn(|c, _| {
+                let d = a * nf + c;
+                self.dofs.prescribed(d).unwrap_or(-r[d] / m)
+            });
+        }
+        // The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
+        // with the initial inertia in each constrained set, the applied resultant of each load.
+        for (reaction, dofs) in self.last_reactions.iter_mut().zip(&sets) {
+            *reaction = [0.0; 2];
+            for &d in dofs {
+                let (node, c) = (self.dofs.node(d / nf), d % nf);
+                reaction[c] += r[d] + self.grid_state.mass[node] * acc[node][c];
+            }
+        }
+        for (reaction, load) in self.last_reactions[sets.len()..].iter_mut().zip(&s.loads) {
+            let f = load.force * load.factor(t);
+            *reaction = [f.x, f.y];
+        }
+        let table = &self.table;
+        for (p, ap) in self.setup.particles.a.iter_mut().enumerate() {
+            *ap = transfer::interpolate(table.weights(p), |i| acc[i]);
+        }
+        if let Some(fem) = &mut self.fem {
+            fem.nodal = Some((self.grid_state.velocity.clone(), acc));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -1165,6 +1291,24 @@ mod tests {
                 .sum();
             assert!((hat_integral(a, b, c, h) - q).abs() < 1e-6, "{a} {b} {c}");
         }
+    }
+
+    #[test]
+    fn prescribed_acceleration_is_that_of_the_prescribed_increments() {
+        let (v, rise, dt) = (4300.0, 1e-5, 1e-6);
+        // From rest with constant acceleration a: du = a dt^2 / 2 in the first step.
+        let a = prescribed_acceleration(v, rise, 0.0);
+        assert!((a - v / rise).abs() < 1e-9 * a);
+        let du = prescribed_increment(v, rise, 0.0, dt);
+        assert!((du - 0.5 * a * dt * dt).abs() < 1e-12 * du);
+        // Inside the rise: the second difference of the prescribed path.
+        let t = 4e-6;
+        let d2 = (prescribed_increment(v, rise, t, dt) - prescribed_increment(v, rise, t - dt, dt))
+            / (dt * dt);
+        assert!((d2 - prescribed_acceleration(v, rise, t)).abs() < 1e-6 * a);
+        // After the rise and for a velocity step: constant velocity.
+        assert_eq!(prescribed_acceleration(v, rise, 2.0 * rise), 0.0);
+        assert_eq!(prescribed_acceleration(v, 0.0, 0.0), 0.0);
     }
 
     #[test]
