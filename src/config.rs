@@ -3,7 +3,7 @@
 //!
 //! ```toml
 //! [run]                 # name, steps, output cadence, PETSc options (the command line wins)
-//! [time]                # dt, Newmark beta/gamma, quasi-static, dt_min
+//! [time]                # dt, Newmark beta/gamma, quasi-static, dt_min, initial acceleration
 //! [grid]                # cell size, margin cells
 //! [shape]               # interpolator, points per cell
 //! [ct]                  # optional: the compact tension specimen generator (scenario::ct)
@@ -17,7 +17,7 @@
 use crate::material::MaterialConfig;
 use crate::particles::Geometry;
 use crate::shape::ShapeKind;
-use crate::solver::Method;
+use crate::solver::{InitialAcceleration, Method};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -130,6 +130,9 @@ pub struct TimeSection {
     /// Static equilibrium each step (no inertia).
     #[serde(default)]
     pub quasi_static: bool,
+    /// Acceleration of a dynamic run at t = 0: "consistent" (default, `M a_0 = f_ext - f_int`) or "zero".
+    #[serde(default)]
+    pub initial_acceleration: InitialAcceleration,
 }
 
 fn default_dt() -> f64 {
@@ -150,6 +153,7 @@ impl Default for TimeSection {
             beta: default_beta(),
             gamma: default_gamma(),
             quasi_static: false,
+            initial_acceleration: InitialAcceleration::default(),
         }
     }
 }
@@ -843,6 +847,7 @@ x = { velocity = 5.0 }
     fn minimal_config_parses_with_defaults() {
         let c = RunConfig::from_str_named(MINIMAL, "t.toml").expect("valid");
         assert_eq!(c.time.beta, 0.25);
+        assert_eq!(c.time.initial_acceleration, InitialAcceleration::Consistent);
         assert_eq!(c.shape.kind, ShapeKind::Cpdi1);
         assert_eq!(c.constraint[0].x, MotionSpec::Velocity { velocity: 5.0 });
         assert_eq!(c.constraint[0].y, MotionSpec::Keyword(Keyword::Fixed));
@@ -866,6 +871,18 @@ x = { velocity = 5.0 }
         assert!(
             !e.contains('\n') && e.contains("line 6, column 1") && e.contains("(in [grid])"),
             "one line with the position and the table: {e}"
+        );
+        let start = MINIMAL.replace("[grid]", "[time]\ninitial_acceleration = \"rest\"\n[grid]");
+        let e = RunConfig::from_str_named(&start, "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("t.toml")
+                && e.contains("time.initial_acceleration")
+                && e.contains("\"rest\"")
+                && e.contains("\"consistent\"")
+                && e.contains("\"zero\""),
+            "{e}"
         );
         let beta0 = MINIMAL.replace("[grid]", "[time]\nbeta = 0.0\n[grid]");
         let e = RunConfig::from_str_named(&beta0, "t.toml")

@@ -260,6 +260,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             beta: t.beta,
             gamma: t.gamma,
             quasi_static: t.quasi_static,
+            initial_acceleration: t.initial_acceleration,
         },
         body_force: Vector2::new(cfg.body_force[0], cfg.body_force[1]),
         body_force_ramp: cfg.body_force_ramp,

@@ -32,6 +32,8 @@ pub struct TimeIntegration {
     pub gamma: f64,
     /// Drop inertia (static equilibrium each step, loads ramped with time).
     pub quasi_static: bool,
+    /// How a dynamic run starts in acceleration (ignored quasi-statically and on resume).
+    pub initial_acceleration: InitialAcceleration,
 }
 
 impl Default for TimeIntegration {
@@ -42,6 +44,36 @@ impl Default for TimeIntegration {
             beta: 0.25,
             gamma: 0.5,
             quasi_static: false,
+            initial_acceleration: InitialAcceleration::default(),
+        }
+    }
+}
+
+/// The acceleration a dynamic run starts with (`[time] initial_acceleration`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(try_from = "String")]
+pub enum InitialAcceleration {
+    /// `M a_0 = f_ext(0) - f_int(u_0)` on the grid before the first step, constrained components with the
+    /// acceleration of their prescribed motion, carried to the points: a load applied at t = 0 acts from
+    /// the first step on.
+    #[default]
+    Consistent,
+    /// `a_0 = 0`: the run starts at rest in acceleration, and a load applied at t = 0 is felt about half a
+    /// step late.
+    Zero,
+}
+
+impl TryFrom<String> for InitialAcceleration {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<Self, String> {
+        match name.as_str() {
+            "consistent" => Ok(Self::Consistent),
+            "zero" => Ok(Self::Zero),
+            _ => Err(format!(
+                "field `time.initial_acceleration` = \"{name}\": \"consistent\" (M a_0 = f_ext - f_int at \
+                 t = 0, the default) or \"zero\" (start at rest in acceleration)"
+            )),
         }
     }
 }
@@ -197,12 +229,27 @@ pub fn prescribed_increment(v: f64, rise: f64, t: f64, dt: f64) -> f64 {
     v * (g(t + dt) - g(t))
 }
 
-/// Per-component prescribed increments of a constraint set in the step `[t, t + dt]`.
-fn increments(motion: &[Motion; 2], rise: f64, t: f64, dt: f64) -> [Option<f64>; 2] {
-    motion.map(|m| match m {
-        Motion::Free => None,
-        Motion::Velocity(v) => Some(prescribed_increment(v, rise, t, dt)),
-    })
+/// Acceleration (mm/s^2) just after `t` of a component whose velocity rises linearly from 0 to `v` over
+/// `rise`: `v / rise` during the rise, 0 after it. A velocity step (`rise = 0`) gets 0: its jump at t = 0
+/// is an impulse that no finite acceleration represents (the prescribed increments carry it), and 0 is
+/// the acceleration just after the jump.
+pub fn prescribed_acceleration(v: f64, rise: f64, t: f64) -> f64 {
+    if rise > 0.0 && t < rise {
+        v / rise
+    } else {
+        0.0
+    }
+}
+
+/// Scale of constrained rows and of the Helmholtz rows (MPa): the largest P-wave modulus `K + 4G/3`.
+fn row_scale(materials: &[Material]) -> f64 {
+    materials
+        .iter()
+        .map(|m| {
+            let e = m.elastic_moduli();
+            e.bulk + 4.0 * e.shear / 3.0
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Everything that defines a run.
@@ -373,6 +420,9 @@ pub struct Simulation {
 
 /// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
 pub type NodalState = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+
+/// Per load, its active grid nodes and their shares of the resultant (summing to 1).
+type LoadNodes = Vec<Vec<(usize, f64)>>;
 
 /// State of the FEM mode kept between steps (the grid is not reset).
 #[derive(Debug, Clone)]
@@ -649,8 +699,18 @@ impl Simulation {
     }
 
     /// Advances one step of (at most) `self.dt`, halving the step on failure down to `dt_min`; after a
-    /// reduced step the next one tries twice as long again, up to the nominal `dt`.
+    /// reduced step the next one tries twice as long again, up to the nominal `dt`. The first step of a
+    /// dynamic run starts with the consistent initial acceleration unless `initial_acceleration` is
+    /// [`InitialAcceleration::Zero`].
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
+        // Before the first step only: a resumed run continues with its checkpointed accelerations.
+        let time = &self.setup.time;
+        if self.step == 0
+            && !time.quasi_static
+            && time.initial_acceleration == InitialAcceleration::Consistent
+        {
+            self.initialize_acceleration()?;
+        }
         let mut dt = self.dt;
         let mut attempts = 0;
         // The main solver first; after a failure the fallback solver (if any) at the same dt, then halving.
@@ -716,130 +776,27 @@ impl Simulation {
             }
         };
         let setup_guard = setup_event.begin();
+        self.project_to_grid()?;
+        // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
+        let set_du = self.constraint_values(|v, rise| prescribed_increment(v, rise, self.time, dt));
+        let sets = self.constrain(&set_du)?;
+        let t_new = self.time + dt;
+        // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
+        let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
+        let eta_bar = self.nodal_eta_bar();
+        let nf = self.dofs.fields();
         let s = &self.setup;
         let grid = &s.grid;
-        match &self.fem {
-            None => self.table.compute(s.shape, grid, &s.particles)?,
-            Some(fem) => self.table.push_forward(&fem.reference, &s.particles.f)?,
-        }
-        transfer::particles_to_grid(
-            &self.table,
-            &s.particles,
-            grid,
-            s.mass_tolerance,
-            &mut self.grid_state,
-        )?;
-        if let Some((v, a)) = self.fem.as_ref().and_then(|f| f.nodal.as_ref()) {
-            // FEM: the nodal state carries over (the same nodes are active in every step).
-            self.grid_state.velocity.copy_from_slice(v);
-            self.grid_state.acceleration.copy_from_slice(a);
-        }
-        let nf = self.fields();
-        self.dofs.rebuild(&self.grid_state.active, nf);
-        // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
-        let set_du: Vec<[Option<f64>; 2]> = s
-            .boxes
-            .iter()
-            .map(|b| increments(&b.motion, b.rise_time, self.time, dt))
-            .chain(
-                s.rigid
-                    .iter()
-                    .map(|r| increments(&r.motion, r.rise_time, self.time, dt)),
-            )
-            .collect();
-        let mut sets: Vec<Vec<usize>> = Vec::new();
-        for (b, du) in s.boxes.iter().zip(&set_du) {
-            let mut dofs_of_set = Vec::new();
-            for node in 0..grid.num_nodes() {
-                let x = grid.node_position(node);
-                let inside = (0..2).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
-                if let (true, Some(a)) = (inside, self.dofs.active_index(node)) {
-                    for (c, d) in du.iter().enumerate() {
-                        if let Some(d) = d {
-                            self.dofs.constrain(node, c, *d);
-                            dofs_of_set.push(a * nf + c);
-                        }
-                    }
-                }
-            }
-            sets.push(dofs_of_set);
-        }
-        for ((rb, rt), du) in s
-            .rigid
-            .iter()
-            .zip(self.rigid_tables.iter_mut())
-            .zip(&set_du[s.boxes.len()..])
-        {
-            if self.fem.is_none() {
-                rt.compute(s.shape, grid, &rb.particles)?;
-            }
-            let mut dofs_of_set = Vec::new();
-            for p in 0..rb.particles.len() {
-                for w in rt.weights(p) {
-                    if w.value <= 0.0 {
-                        continue;
-                    }
-                    if let Some(a) = self.dofs.active_index(w.node as usize) {
-                        for (c, d) in du.iter().enumerate() {
-                            if let Some(d) = d {
-                                self.dofs.constrain(w.node as usize, c, *d);
-                                dofs_of_set.push(a * nf + c);
-                            }
-                        }
-                    }
-                }
-            }
-            dofs_of_set.sort_unstable();
-            dofs_of_set.dedup();
-            sets.push(dofs_of_set);
-        }
         let newmark = (!s.time.quasi_static).then_some(Newmark {
             beta: s.time.beta,
             gamma: s.time.gamma,
             dt,
         });
-        let t_new = self.time + dt;
         let load_factor = if s.time.quasi_static && s.body_force_ramp > 0.0 {
             (t_new / s.body_force_ramp).min(1.0)
         } else {
             1.0
         };
-        // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
-        let mut nodal_force = Vec::new();
-        let mut load_nodes: Vec<Vec<(usize, f64)>> = Vec::with_capacity(s.loads.len());
-        for (load, shares) in s.loads.iter().zip(&self.load_shares) {
-            let active: Vec<(usize, f64)> = shares
-                .iter()
-                .copied()
-                .filter(|&(node, _)| self.grid_state.active[node])
-                .collect();
-            let total: f64 = active.iter().map(|(_, w)| w).sum();
-            if total <= 0.0 {
-                return Err(StepError::Setup(format!(
-                    "load `{}`: no node of its segment carries mass (is the segment on the body's \
-                     boundary?)",
-                    load.name
-                )));
-            }
-            if nodal_force.is_empty() {
-                nodal_force = vec![Vector2::zeros(); grid.num_nodes()];
-            }
-            let f = load.force * load.factor(self.time + dt);
-            let active: Vec<(usize, f64)> =
-                active.into_iter().map(|(n, w)| (n, w / total)).collect();
-            for &(node, w) in &active {
-                nodal_force[node] += w * f;
-            }
-            load_nodes.push(active);
-        }
-        let row_scale = s
-            .materials
-            .iter()
-            .map(|m| {
-                let e = m.elastic_moduli();
-                e.bulk + 4.0 * e.shear / 3.0
-            })
-            .fold(0.0, f64::max);
         let input = StepInput {
             table: &self.table,
             particles: &s.particles,
@@ -851,7 +808,7 @@ impl Simulation {
             newmark,
             body_force: s.body_force * load_factor,
             nodal_force: &nodal_force,
-            row_scale,
+            row_scale: row_scale(&s.materials),
         };
         self.assembler.begin_step(&input);
         // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged.
@@ -875,15 +832,6 @@ impl Simulation {
         // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
         // increments into the body); eta_bar from the particles (mass-weighted projection).
-        let mut eb_nodes = vec![0.0; grid.num_nodes()];
-        if nf == 3 {
-            for p in 0..s.particles.len() {
-                for w in self.table.weights(p) {
-                    eb_nodes[w.node as usize] +=
-                        w.value * s.particles.mass[p] * s.particles.eta_bar[p];
-                }
-            }
-        }
         x.write(|xs| {
             for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
                 let node = node as usize;
@@ -897,7 +845,7 @@ impl Simulation {
                 xs[a * nf] = du.x;
                 xs[a * nf + 1] = du.y;
                 if nf == 3 {
-                    xs[a * nf + 2] = eb_nodes[node] / self.grid_state.mass[node];
+                    xs[a * nf + 2] = eta_bar[node];
                 }
                 for c in 0..nf {
                     if let (Some(v), Some(_)) = (self.dofs.prescribed(a * nf + c), newmark) {
@@ -1076,6 +1024,228 @@ impl Simulation {
             new_pattern,
         }))
     }
+
+    /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and
+    /// acceleration replace the projected ones) and the numbering of the unknowns, nothing constrained yet.
+    fn project_to_grid(&mut self) -> Result<(), StepError> {
+        let s = &self.setup;
+        match &self.fem {
+            None => self.table.compute(s.shape, &s.grid, &s.particles)?,
+            Some(fem) => self.table.push_forward(&fem.reference, &s.particles.f)?,
+        }
+        transfer::particles_to_grid(
+            &self.table,
+            &s.particles,
+            &s.grid,
+            s.mass_tolerance,
+            &mut self.grid_state,
+        )?;
+        if let Some((v, a)) = self.fem.as_ref().and_then(|f| f.nodal.as_ref()) {
+            // FEM: the nodal state carries over (the same nodes are active in every step).
+            self.grid_state.velocity.copy_from_slice(v);
+            self.grid_state.acceleration.copy_from_slice(a);
+        }
+        let nf = self.fields();
+        self.dofs.rebuild(&self.grid_state.active, nf);
+        Ok(())
+    }
+
+    /// Per constraint set (boxes first, then rigid bodies) and component: `value(v, rise_time)` for a
+    /// component moving with velocity `v`, `None` for a free one.
+    fn constraint_values(&self, value: impl Fn(f64, f64) -> f64) -> Vec<[Option<f64>; 2]> {
+        let s = &self.setup;
+        s.boxes
+            .iter()
+            .map(|b| (b.motion, b.rise_time))
+            .chain(s.rigid.iter().map(|r| (r.motion, r.rise_time)))
+            .map(|(motion, rise)| {
+                motion.map(|m| match m {
+                    Motion::Free => None,
+                    Motion::Velocity(v) => Some(value(v, rise)),
+                })
+            })
+            .collect()
+    }
+
+    /// Prescribes `values` (one per set, as from [`Simulation::constraint_values`]) on the active nodes of
+    /// every constraint set; returns each set's constrained unknowns.
+    fn constrain(&mut self, values: &[[Option<f64>; 2]]) -> Result<Vec<Vec<usize>>, StepError> {
+        let s = &self.setup;
+        let grid = &s.grid;
+        let nf = self.dofs.fields();
+        let mut sets: Vec<Vec<usize>> = Vec::new();
+        for (b, du) in s.boxes.iter().zip(values) {
+            let mut dofs_of_set = Vec::new();
+            for node in 0..grid.num_nodes() {
+                let x = grid.node_position(node);
+                let inside = (0..2).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
+                if let (true, Some(a)) = (inside, self.dofs.active_index(node)) {
+                    for (c, d) in du.iter().enumerate() {
+                        if let Some(d) = d {
+                            self.dofs.constrain(node, c, *d);
+                            dofs_of_set.push(a * nf + c);
+                        }
+                    }
+                }
+            }
+            sets.push(dofs_of_set);
+        }
+        for ((rb, rt), du) in s
+            .rigid
+            .iter()
+            .zip(self.rigid_tables.iter_mut())
+            .zip(&values[s.boxes.len()..])
+        {
+            if self.fem.is_none() {
+                rt.compute(s.shape, grid, &rb.particles)?;
+            }
+            let mut dofs_of_set = Vec::new();
+            for p in 0..rb.particles.len() {
+                for w in rt.weights(p) {
+                    if w.value <= 0.0 {
+                        continue;
+                    }
+                    if let Some(a) = self.dofs.active_index(w.node as usize) {
+                        for (c, d) in du.iter().enumerate() {
+                            if let Some(d) = d {
+                                self.dofs.constrain(w.node as usize, c, *d);
+                                dofs_of_set.push(a * nf + c);
+                            }
+                        }
+                    }
+                }
+            }
+            dofs_of_set.sort_unstable();
+            dofs_of_set.dedup();
+            sets.push(dofs_of_set);
+        }
+        Ok(sets)
+    }
+
+    /// The loads at time `t` on the active nodes: the nodal forces (one per grid node; empty without
+    /// loads) and, per load, its nodes with their shares renormalised to 1.
+    fn nodal_loads(&self, t: f64) -> Result<(Vec<Vector2<f64>>, LoadNodes), StepError> {
+        let s = &self.setup;
+        let mut nodal_force = Vec::new();
+        let mut load_nodes = Vec::with_capacity(s.loads.len());
+        for (load, shares) in s.loads.iter().zip(&self.load_shares) {
+            let active: Vec<(usize, f64)> = shares
+                .iter()
+                .copied()
+                .filter(|&(node, _)| self.grid_state.active[node])
+                .collect();
+            let total: f64 = active.iter().map(|(_, w)| w).sum();
+            if total <= 0.0 {
+                return Err(StepError::Setup(format!(
+                    "load `{}`: no node of its segment carries mass (is the segment on the body's \
+                     boundary?)",
+                    load.name
+                )));
+            }
+            if nodal_force.is_empty() {
+                nodal_force = vec![Vector2::zeros(); s.grid.num_nodes()];
+            }
+            let f = load.force * load.factor(t);
+            let active: Vec<(usize, f64)> =
+                active.into_iter().map(|(n, w)| (n, w / total)).collect();
+            for &(node, w) in &active {
+                nodal_force[node] += w * f;
+            }
+            load_nodes.push(active);
+        }
+        Ok((nodal_force, load_nodes))
+    }
+
+    /// The points' `eta_bar` projected to the active nodes (mass-weighted), one per grid node; empty for
+    /// a run without gradient enhancement.
+    fn nodal_eta_bar(&self) -> Vec<f64> {
+        if self.dofs.fields() != 3 {
+            return Vec::new();
+        }
+        let p = &self.setup.particles;
+        let mut eb = vec![0.0; self.grid_state.mass.len()];
+        for q in 0..p.len() {
+            for w in self.table.weights(q) {
+                eb[w.node as usize] += w.value * p.mass[q] * p.eta_bar[q];
+            }
+        }
+        for &node in self.dofs.active_nodes() {
+            eb[node as usize] /= self.grid_state.mass[node as usize];
+        }
+        eb
+    }
+
+    /// The consistent initial acceleration of a dynamic run (`docs/theory.md`, "Initial acceleration"):
+    /// on the grid at t = 0, `m_I a_I = f_ext,I - f_int,I` with the lumped mass, `f_ext` the body force
+    /// and the loads at t = 0 and `f_int` the internal force of the points' state (the residual of a
+    /// quasi-static step at `du = 0`); constrained components take the acceleration of their prescribed
+    /// motion ([`prescribed_acceleration`]). Carried to the points with the G2P interpolation,
+    /// `a_p = sum_I S_Ip a_I`; in FEM mode it is also the carried nodal acceleration. The result depends
+    /// only on the state at t = 0, not on the points' previous `a_p`.
+    fn initialize_acceleration(&mut self) -> Result<(), StepError> {
+        self.project_to_grid()?;
+        let t = self.time;
+        let prescribed = self.constraint_values(|v, rise| prescribed_acceleration(v, rise, t));
+        let sets = self.constrain(&prescribed)?;
+        let (nodal_force, _) = self.nodal_loads(t)?;
+        let eta_bar = self.nodal_eta_bar();
+        let nf = self.dofs.fields();
+        let s = &self.setup;
+        let input = StepInput {
+            table: &self.table,
+            particles: &s.particles,
+            materials: &s.materials,
+            dofs: &self.dofs,
+            mass: &self.grid_state.mass,
+            velocity: &self.grid_state.velocity,
+            acceleration: &self.grid_state.acceleration,
+            newmark: None,
+            body_force: s.body_force,
+            nodal_force: &nodal_force,
+            row_scale: row_scale(&s.materials),
+        };
+        self.assembler.begin_step(&input);
+        let mut x = vec![0.0; self.dofs.len()];
+        if nf == 3 {
+            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+                x[a * nf + 2] = eta_bar[node as usize];
+            }
+        }
+        self.assembler.evaluate(&input, &x)?;
+        // R = f_int - f_ext at du = 0 (no inertia), unbalanced forces in the constrained rows too.
+        let mut r = vec![0.0; x.len()];
+        self.assembler.residual(&input, &x, &mut r, true)?;
+        let mut acc = vec![Vector2::zeros(); s.grid.num_nodes()];
+        for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+            let node = node as usize;
+            let m = self.grid_state.mass[node];
+            acc[node] = Vector2::from_fn(|c, _| {
+                let d = a * nf + c;
+                self.dofs.prescribed(d).unwrap_or(-r[d] / m)
+            });
+        }
+        // The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
+        // with the initial inertia in each constrained set, the applied resultant of each load.
+        for (reaction, dofs) in self.last_reactions.iter_mut().zip(&sets) {
+            *reaction = [0.0; 2];
+            for &d in dofs {
+                let (node, c) = (self.dofs.node(d / nf), d % nf);
+                reaction[c] += r[d] + self.grid_state.mass[node] * acc[node][c];
+            }
+        }
+        for (reaction, load) in self.last_reactions[sets.len()..].iter_mut().zip(&s.loads) {
+            let f = load.force * load.factor(t);
+            *reaction = [f.x, f.y];
+        }
+        let table = &self.table;
+        for (p, ap) in self.setup.particles.a.iter_mut().enumerate() {
+            *ap = transfer::interpolate(table.weights(p), |i| acc[i]);
+        }
+        if let Some(fem) = &mut self.fem {
+            fem.nodal = Some((self.grid_state.velocity.clone(), acc));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -1103,6 +1273,24 @@ mod tests {
                 .sum();
             assert!((hat_integral(a, b, c, h) - q).abs() < 1e-6, "{a} {b} {c}");
         }
+    }
+
+    #[test]
+    fn prescribed_acceleration_is_that_of_the_prescribed_increments() {
+        let (v, rise, dt) = (4300.0, 1e-5, 1e-6);
+        // From rest with constant acceleration a: du = a dt^2 / 2 in the first step.
+        let a = prescribed_acceleration(v, rise, 0.0);
+        assert!((a - v / rise).abs() < 1e-9 * a);
+        let du = prescribed_increment(v, rise, 0.0, dt);
+        assert!((du - 0.5 * a * dt * dt).abs() < 1e-12 * du);
+        // Inside the rise: the second difference of the prescribed path.
+        let t = 4e-6;
+        let d2 = (prescribed_increment(v, rise, t, dt) - prescribed_increment(v, rise, t - dt, dt))
+            / (dt * dt);
+        assert!((d2 - prescribed_acceleration(v, rise, t)).abs() < 1e-6 * a);
+        // After the rise and for a velocity step: constant velocity.
+        assert_eq!(prescribed_acceleration(v, rise, 2.0 * rise), 0.0);
+        assert_eq!(prescribed_acceleration(v, 0.0, 0.0), 0.0);
     }
 
     #[test]

@@ -3,29 +3,15 @@
 //! Units: mm, s, N, MPa, t (density t/mm^3, gravity mm/s^2); the large-deformation case uses AMPLE's
 //! numbers, which are consistent among themselves only.
 
-use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Material, MaterialConfig};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+mod common;
+
+use common::Column;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, TimeIntegration};
-use nalgebra::Vector2;
+use mpm_concrete::solver::{Method, Simulation, TimeIntegration};
 
-fn material(toml_text: &str) -> Material {
-    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
-    cfg.build().expect("valid material")
-}
-
-/// Height, Young's modulus, density and gravity of a column (nu = 0).
-struct Column {
-    height: f64,
-    e: f64,
-    rho: f64,
-    g: f64,
-}
-
-/// Column of height H, one cell wide, 2 x 2 points per cell, rollers on the sides (x fixed at every node)
-/// and a clamped base; gravity ramped over `load_steps` quasi-static steps, one more step at full load.
+/// The column of [`Column::setup`] (one cell wide, rollers, clamped base) with gravity ramped over
+/// `load_steps` quasi-static steps, one more step at full load.
 /// Returns the normalised L2 error of sigma_yy over the points,
 /// `sqrt(sum V (s - s_exact)^2 / sum V s_exact^2)` with `s_exact(Y) = -rho g (H - Y)` (Y the initial
 /// height; exact for any elastic law, since the cross-section of the confined column does not change),
@@ -43,67 +29,15 @@ fn column(
         "-v2_ksp_type preonly -v2_pc_type lu -v2_snes_rtol 1e-10 -v2_snes_atol 1e-11",
     )
     .expect("options");
-    let h = c.height / cells as f64;
-    let geometry = Geometry {
-        include: vec![Region::Rect {
-            min: [0.0, 0.0],
-            max: [h, c.height],
-        }],
-        exclude: vec![],
+    let time = TimeIntegration {
+        dt: 1.0,
+        dt_min: 1.0 / 16.0,
+        quasi_static: true,
+        ..TimeIntegration::default()
     };
-    let particles = Particles::seed(
-        &geometry,
-        &Seeding {
-            h,
-            points_per_cell: 2,
-            density: c.rho,
-            body: 0,
-        },
-    )
-    .expect("seed");
-    let y0: Vec<f64> = particles.x.iter().map(|x| x.y).collect();
-    let grid =
-        Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(h, c.height), h, 2).expect("grid");
-    let far = 1e6;
-    let setup = Setup {
-        grid,
-        particles,
-        materials: vec![material(&format!(
-            "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
-            c.e
-        ))],
-        shape: kind,
-        time: TimeIntegration {
-            dt: 1.0,
-            dt_min: 1.0 / 16.0,
-            quasi_static: true,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::new(0.0, -c.g),
-        body_force_ramp: load_steps as f64,
-        boxes: vec![
-            NodeBox {
-                name: "side rollers".into(),
-                min: Vector2::new(-far, -far),
-                max: Vector2::new(far, far),
-                motion: [Motion::Velocity(0.0), Motion::Free],
-                rise_time: 0.0,
-            },
-            NodeBox {
-                name: "base".into(),
-                min: Vector2::new(-far, -far),
-                max: Vector2::new(far, 0.0),
-                motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-        ],
-        rigid: vec![],
-        options_prefix: Some("v2_".into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
-    };
+    let mut setup = c.setup(law, kind, Method::Mpm, cells, time, "v2_");
+    setup.body_force_ramp = load_steps as f64;
+    let y0: Vec<f64> = setup.particles.x.iter().map(|x| x.y).collect();
     let mut sim = Simulation::new(setup).expect("simulation");
     while sim.time < load_steps as f64 + 1.0 - 1e-9 {
         let r = sim.advance(&s).expect("step");

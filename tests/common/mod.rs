@@ -1,0 +1,102 @@
+//! Set-ups shared by the verification tests: the material helper and the one-cell-wide elastic column of
+//! V2 (quasi-static self-weight, `verification_static.rs`) and of the suddenly loaded column
+//! (`verification_dynamics.rs`).
+//!
+//! Units: mm, s, N, MPa, t (density t/mm^3, gravity mm/s^2).
+
+use mpm_concrete::grid::Grid;
+use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::shape::ShapeKind;
+use mpm_concrete::solver::{Method, Motion, NodeBox, Setup, TimeIntegration};
+use nalgebra::Vector2;
+
+/// A constitutive law from its TOML section.
+pub fn material(toml_text: &str) -> Material {
+    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
+    cfg.build().expect("valid material")
+}
+
+/// Height, Young's modulus, density and gravity of a column (nu = 0).
+pub struct Column {
+    pub height: f64,
+    pub e: f64,
+    pub rho: f64,
+    pub g: f64,
+}
+
+impl Column {
+    /// The column one cell wide and `cells` cells high, 2 x 2 points per cell (Gauss points in FEM mode),
+    /// law `law` (E, nu = 0), rollers on the sides (x fixed at every node, for nu = 0 the same as side
+    /// rollers), a clamped base (all nodes with y <= 0) and gravity `-g` in y applied at once
+    /// (`body_force_ramp` = 0); SNES options under `prefix`.
+    pub fn setup(
+        &self,
+        law: &str,
+        kind: ShapeKind,
+        method: Method,
+        cells: usize,
+        time: TimeIntegration,
+        prefix: &str,
+    ) -> Setup {
+        let h = self.height / cells as f64;
+        let geometry = Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [h, self.height],
+            }],
+            exclude: vec![],
+        };
+        let seed = match method {
+            Method::Mpm => Particles::seed,
+            Method::Fem => Particles::seed_gauss,
+        };
+        let particles = seed(
+            &geometry,
+            &Seeding {
+                h,
+                points_per_cell: 2,
+                density: self.rho,
+                body: 0,
+            },
+        )
+        .expect("seed");
+        let grid = Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(h, self.height), h, 2)
+            .expect("grid");
+        let far = 1e6;
+        Setup {
+            grid,
+            particles,
+            materials: vec![material(&format!(
+                "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
+                self.e
+            ))],
+            shape: kind,
+            time,
+            body_force: Vector2::new(0.0, -self.g),
+            body_force_ramp: 0.0,
+            boxes: vec![
+                NodeBox {
+                    name: "side rollers".into(),
+                    min: Vector2::new(-far, -far),
+                    max: Vector2::new(far, far),
+                    motion: [Motion::Velocity(0.0), Motion::Free],
+                    rise_time: 0.0,
+                },
+                NodeBox {
+                    name: "base".into(),
+                    min: Vector2::new(-far, -far),
+                    max: Vector2::new(far, 0.0),
+                    motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+            ],
+            rigid: vec![],
+            options_prefix: Some(prefix.into()),
+            mass_tolerance: 1e-6,
+            loads: Vec::new(),
+            method,
+            fallback_prefix: None,
+        }
+    }
+}
