@@ -604,8 +604,9 @@ fn an_interrupted_run_prints_a_resume_command_that_works() {
 #[test]
 fn a_run_that_ended_early_says_so() {
     let dir = scratch("early");
-    // Step 2 needs three Newton iterations: with two (GMRES) and one (fallback) it is halved until one
-    // iteration converges, so the two steps end well before 2 us.
+    // Step 2 needs three Newton iterations: with two (GMRES), then one (fallback) to a relative residual
+    // of 1e-3, it is halved until one iteration gets there (at dt/4), so the two steps end well before
+    // 2 us.
     let o = run(
         &dir,
         &[
@@ -620,6 +621,8 @@ fn a_run_that_ended_early_says_so() {
             "2",
             "-fallback_snes_max_it",
             "1",
+            "-fallback_snes_rtol",
+            "1e-3",
         ],
     );
     succeeds(&o);
