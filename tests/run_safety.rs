@@ -77,6 +77,13 @@ fn run(cwd: &Path, args: &[&str]) -> Output {
         .expect("start mpm-concrete")
 }
 
+/// `mpm-concrete run tiny.toml --quiet --output d` in `cwd` with further arguments.
+fn run_tiny(cwd: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["run", "tiny.toml", "--quiet", "--output", "d"];
+    args.extend_from_slice(extra);
+    run(cwd, &args)
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -288,34 +295,12 @@ fn an_output_directory_belongs_to_one_run() {
     );
     assert!(line.contains("finished at step 4 of 4"), "{line}");
     refused(
-        &run(
-            &dir,
-            &[
-                "run",
-                "tiny.toml",
-                "--quiet",
-                "--output",
-                "d",
-                "--set",
-                "ct.loading_rate=1000.0",
-            ],
-        ),
+        &run_tiny(&dir, &["--set", "ct.loading_rate=1000.0"]),
         &["d holds the results of another run"],
     );
     // --overwrite with a misspelled option: refused after the first step, the old run intact.
     refused(
-        &run(
-            &dir,
-            &[
-                "run",
-                "tiny.toml",
-                "--quiet",
-                "--output",
-                "d",
-                "--overwrite",
-                "-snes_monitr",
-            ],
-        ),
+        &run_tiny(&dir, &["--overwrite", "-snes_monitr"]),
         &["-snes_monitr"],
     );
     assert_eq!(
@@ -324,14 +309,9 @@ fn an_output_directory_belongs_to_one_run() {
         "a refused run must not touch the directory"
     );
     // --overwrite replaces the program's files only: the stale fields of step 4 go, notes.txt stays.
-    succeeds(&run(
+    succeeds(&run_tiny(
         &dir,
         &[
-            "run",
-            "tiny.toml",
-            "--quiet",
-            "--output",
-            "d",
             "--overwrite",
             "--steps",
             "2",
@@ -378,18 +358,7 @@ fn data_offset(file: &Path, dataset: &str) -> u64 {
 #[test]
 fn a_corrupt_checkpoint_is_refused_and_changes_nothing() {
     let dir = scratch("corrupt");
-    succeeds(&run(
-        &dir,
-        &[
-            "run",
-            "tiny.toml",
-            "--quiet",
-            "--output",
-            "d",
-            "--steps",
-            "2",
-        ],
-    ));
+    succeeds(&run_tiny(&dir, &["--steps", "2"]));
     let d = dir.join("d");
     let ck = d.join(checkpoint::FILE);
     let good = std::fs::read(&ck).unwrap();
@@ -398,19 +367,7 @@ fn a_corrupt_checkpoint_is_refused_and_changes_nothing() {
         flip(&ck, data_offset(&ck, dataset) + 16, len);
         let before = snapshot(&d);
         refused(
-            &run(
-                &dir,
-                &[
-                    "run",
-                    "tiny.toml",
-                    "--quiet",
-                    "--output",
-                    "d",
-                    "--steps",
-                    "4",
-                    "--resume",
-                ],
-            ),
+            &run_tiny(&dir, &["--steps", "4", "--resume"]),
             &[
                 "checkpoint.h5",
                 "corrupt",
@@ -425,18 +382,7 @@ fn a_corrupt_checkpoint_is_refused_and_changes_nothing() {
 #[test]
 fn resume_refuses_other_physics_and_no_steps_left_and_accepts_run_control() {
     let dir = scratch("resume");
-    succeeds(&run(
-        &dir,
-        &[
-            "run",
-            "tiny.toml",
-            "--quiet",
-            "--output",
-            "d",
-            "--steps",
-            "2",
-        ],
-    ));
+    succeeds(&run_tiny(&dir, &["--steps", "2"]));
     let d = dir.join("d");
     let before = snapshot(&d);
     let resume = |extra: &[&str]| {
@@ -607,14 +553,9 @@ fn a_run_that_ended_early_says_so() {
     // Step 2 needs three Newton iterations: with two (GMRES), then one (fallback) to a relative residual
     // of 1e-3, it is halved until one iteration gets there (at dt/4), so the two steps end well before
     // 2 us.
-    let o = run(
+    let o = run_tiny(
         &dir,
         &[
-            "run",
-            "tiny.toml",
-            "--quiet",
-            "--output",
-            "d",
             "--steps",
             "2",
             "-snes_max_it",
