@@ -11,9 +11,12 @@
 //! R^eb_I  = s_eb sum_p V_p^n [ S_Ip (eta_bar_p - eta_p) + c grad_{X_n} S_Ip . grad_{X_n} eta_bar_p ]
 //! K^uu    = m_I/(beta dt^2) delta_IJ + sum_p V_p^0 G_Ip . A_p . G_Jp      (A = dP/dF: material + geometric)
 //! K^u,eb  = sum_p V_p^0 (dP/d eta_bar . G_Ip) S_Jp
-//! K^eb,u  = -s_eb sum_p V_p^n S_Ip (d eta/dF F_n^T) g_Jp
-//! K^eb,eb = s_eb sum_p V_p^n (S_Ip S_Jp + c g_Ip . g_Jp)
+//! K^eb,u  = -s_eb sum_p V_p^n (S_Ip - dc/d eta g_Ip . grad eta_bar_p) (d eta/dF F_n^T) g_Jp
+//! K^eb,eb = s_eb sum_p V_p^n (S_Ip S_Jp + c g_Ip . g_Jp + dc/d eta_bar (g_Ip . grad eta_bar_p) S_Jp)
 //! ```
+//!
+//! `c = c_p` is the gradient activity of the point at the iterate (constant `c_0` in the paper; evolving
+//! with `eta` or `eta_bar` for the forms of [`crate::material::activity`], whence the `dc/d` terms).
 //!
 //! `sum_p V^0 P G_I` equals `sum_p v_p sigma_p grad_x S_Ip` of the spec (with `v_p = det F V^0`), and its
 //! derivative through `A` contains both the material and the geometric stiffness with gradients on the
@@ -135,6 +138,10 @@ struct PointEval {
     damage: f64,
     /// det F.
     det: f64,
+    /// Gradient activity `c_p` (mm^2) and its derivatives `dc/d eta`, `dc/d eta_bar` at the iterate.
+    c: f64,
+    dc_deta: f64,
+    dc_deb: f64,
 }
 
 impl Default for PointEval {
@@ -150,6 +157,9 @@ impl Default for PointEval {
             energy: 0.0,
             damage: 0.0,
             det: 1.0,
+            c: 0.0,
+            dc_deta: 0.0,
+            dc_deb: 0.0,
         }
     }
 }
@@ -416,6 +426,9 @@ impl Assembler {
                     energy: r.energy,
                     damage: r.damage,
                     det,
+                    c: r.activity.c,
+                    dc_deta: r.activity.dc_deta,
+                    dc_deb: r.activity.dc_deta_bar,
                 };
                 Ok(())
             })?;
@@ -451,9 +464,8 @@ impl Assembler {
                 ru += particles.vol0[p] * (pp * g0);
                 if nf == 3 {
                     let w = &table.weights(p)[k];
-                    let c = input.materials[particles.body[p] as usize].gradient_parameter();
                     reb += particles.vol[p]
-                        * (w.value * (ev.eta_bar - ev.eta) + c * w.grad.dot(&ev.grad_eta_bar));
+                        * (w.value * (ev.eta_bar - ev.eta) + ev.c * w.grad.dot(&ev.grad_eta_bar));
                 }
             }
             let m = input.mass[node];
@@ -630,7 +642,9 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
             }
         }
         let q = ev.dp_deb * gi0;
-        let c = input.materials[particles.body[p] as usize].gradient_parameter();
+        // Evolving activity: d(c grad S_I . grad eta_bar)/d(unknowns) through c(eta, eta_bar).
+        let flux = gi.dot(&ev.grad_eta_bar);
+        let (c, dc_deta, dc_deb) = (ev.c, ev.dc_deta * flux, ev.dc_deb * flux);
         for (kj, (wj, &pos)) in ws.iter().zip(positions).enumerate() {
             if pos == NO_COLUMN {
                 continue;
@@ -647,9 +661,9 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
                 row[at(0, pos, 2)] += v0 * q.x * sj;
                 row[at(1, pos, 2)] += v0 * q.y * sj;
                 let h = ev.deta_dx * gj;
-                row[at(2, pos, 0)] -= s * vn * si * h.x;
-                row[at(2, pos, 1)] -= s * vn * si * h.y;
-                row[at(2, pos, 2)] += s * vn * (si * sj + c * gi.dot(&gj));
+                row[at(2, pos, 0)] -= s * vn * (si - dc_deta) * h.x;
+                row[at(2, pos, 1)] -= s * vn * (si - dc_deta) * h.y;
+                row[at(2, pos, 2)] += s * vn * (si * sj + c * gi.dot(&gj) + dc_deb * sj);
             }
         }
     }

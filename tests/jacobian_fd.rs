@@ -198,3 +198,27 @@ fn local_microplane_jacobian_matches_finite_differences_while_damaging() {
         );
     }
 }
+
+#[test]
+fn evolving_gradient_activity_jacobians_match_finite_differences_while_damaging() {
+    // Localizing (c decreasing with the nonlocal damage, dc/d eta_bar != 0 while loading) and transient
+    // (c following the local eta, dc/d eta != 0 below eta_u; the block is pre-stretched by 2 %, so
+    // eta_u is well above that): the extra Helmholtz-row terms.
+    for activity in [
+        "{ kind = \"localizing\", residual = 0.02, decay = 5.0 }",
+        "{ kind = \"localizing\", residual = 0.05, decay = 0.0 }",
+        "{ kind = \"transient\", ultimate_strain = 0.08, exponent = 1.5 }",
+    ] {
+        let text = format!(
+            "model = \"microplane\"\npreset = \"paper_gamma0_1.25e-4\"\ngradient_activity = {activity}"
+        );
+        for kind in [ShapeKind::Cpdi1, ShapeKind::Bspline2] {
+            let err = fd_error(kind, material(&text), 1e-3, 1e-3, 3);
+            assert!(
+                err < 1e-6,
+                "microplane with activity {activity}, {}: relative Jacobian error {err:e}",
+                kind.name()
+            );
+        }
+    }
+}

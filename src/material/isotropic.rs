@@ -33,6 +33,7 @@
 use nalgebra::{Matrix3, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
+use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::{
     Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, Response, Sym6, check_finite,
@@ -99,6 +100,9 @@ pub struct IsotropicDamageConfig {
     /// Strain measure and undamaged stress.
     #[serde(default)]
     pub kinematics: Kinematics,
+    /// Evolution of `c` (default `{ kind = "constant" }`), see [`super::activity`].
+    #[serde(default)]
+    pub gradient_activity: GradientActivity,
 }
 
 /// The isotropic damage material (history: one `gamma`).
@@ -133,6 +137,7 @@ impl IsotropicDamageConfig {
         if !(self.c.is_finite() && self.c >= 0.0) {
             return bad("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
         }
+        self.gradient_activity.validate()?;
         Ok(IsotropicDamage {
             config: self.clone(),
             moduli: ElasticModuli {
@@ -507,6 +512,7 @@ mod tests {
             c: 1.0,
             equivalent_strain: eq,
             kinematics: k,
+            gradient_activity: GradientActivity::Constant,
         }
         .build()
         .unwrap()

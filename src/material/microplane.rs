@@ -37,6 +37,7 @@
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
+use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::quadrature::{MAX_DIRECTIONS, Quadrature};
 use super::{
@@ -58,6 +59,19 @@ pub enum EtaMode {
     Max,
     /// `eta = 2 sum_I w_I eta_mic,I` (sphere average).
     Mean,
+}
+
+/// The strain tensor whose projections give the microplane equivalent strains `eta_mic` (eq. 14). The
+/// stress stays the derivative of the energy in the Green-Lagrange strain either way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StrainMeasure {
+    /// Green-Lagrange `E = (C - I)/2` (the paper).
+    #[default]
+    GreenLagrange,
+    /// Logarithmic (Hencky) `E_h = ln(C)/2`: grows like the engineering strain under large stretch
+    /// (`E_h = ln(lambda)` against `E = (lambda^2 - 1)/2` for a uniaxial stretch `lambda`).
+    Hencky,
 }
 
 /// Named parameter sets (Table 1 of the paper and its low-threshold variant).
@@ -96,6 +110,8 @@ impl Preset {
             c: 1.0,
             quadrature: Quadrature::Bo21,
             eta_mode: EtaMode::Max,
+            gradient_activity: GradientActivity::Constant,
+            strain_measure: StrainMeasure::GreenLagrange,
         };
         match self {
             Preset::Paper => paper,
@@ -134,6 +150,10 @@ pub struct MicroplaneConfig {
     pub quadrature: Option<Quadrature>,
     /// `"max"` (default) or `"mean"`.
     pub eta_mode: Option<EtaMode>,
+    /// Evolution of `c` (default `{ kind = "constant" }`, the paper), see [`super::activity`].
+    pub gradient_activity: Option<GradientActivity>,
+    /// Strain projected for `eta_mic`: `"green_lagrange"` (default, the paper) or `"hencky"`.
+    pub strain_measure: Option<StrainMeasure>,
 }
 
 /// Complete, validated microplane parameters.
@@ -159,6 +179,10 @@ pub struct MicroplaneParams {
     pub quadrature: Quadrature,
     /// Definition of the macroscopic eta.
     pub eta_mode: EtaMode,
+    /// Evolution of the gradient activity `c` (constant in the paper).
+    pub gradient_activity: GradientActivity,
+    /// Strain tensor of the equivalent strains.
+    pub strain_measure: StrainMeasure,
 }
 
 impl MicroplaneConfig {
@@ -190,6 +214,8 @@ impl MicroplaneConfig {
             c: get(self.c, |p| p.c, "c")?,
             quadrature: self.quadrature.unwrap_or_default(),
             eta_mode: self.eta_mode.unwrap_or_default(),
+            gradient_activity: self.gradient_activity.unwrap_or_default(),
+            strain_measure: self.strain_measure.unwrap_or_default(),
         };
         p.validate()?;
         Ok(p)
@@ -225,7 +251,7 @@ impl MicroplaneParams {
         if !(self.c.is_finite() && self.c >= 0.0) {
             return bad("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
         }
-        Ok(())
+        self.gradient_activity.validate()
     }
 }
 
@@ -401,8 +427,15 @@ impl Constitutive for Microplane {
         let gamma_0 = self.params.gamma_0;
 
         let e = green_lagrange(f);
-        let tr = e[0] + e[1] + e[2];
-        let ev = tr / 3.0;
+        let ev = (e[0] + e[1] + e[2]) / 3.0;
+        // The strain of the equivalent strains: E itself, or E_h with its pull-back to E.
+        let hencky = match self.params.strain_measure {
+            StrainMeasure::GreenLagrange => None,
+            StrainMeasure::Hencky => Some(super::Hencky::new(f)),
+        };
+        let e_eta = hencky.as_ref().map_or(e, |h| h.0);
+        let tr = e_eta[0] + e_eta[1] + e_eta[2];
+        let ev_eta = tr / 3.0;
         let a_vol = k1 * tr; // = 3 k1 E_V
 
         // Pass 1: projections and local equivalent strains (eq. 14).
@@ -413,7 +446,7 @@ impl Constitutive for Microplane {
         let (mut eta, mut i_max) = (f64::NEG_INFINITY, 0);
         let mut eta_mean = 0.0;
         for (i, dir) in self.dirs.iter().enumerate() {
-            let (ed, ned) = project(&dir.n, &e, ev);
+            let (ed, ned) = project(&dir.n, &e_eta, ev_eta);
             let ed2 = ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2];
             let r = (a_vol * a_vol + 1.5 * k2 * ed2).sqrt();
             let em = a_vol + r;
@@ -438,17 +471,22 @@ impl Constitutive for Microplane {
                 (0.0, 0.0)
             }
         };
+        // d eta_mic,I / dE (through d E_h/dE for the Hencky measure).
         let grad_eta_mic = |i: usize| -> Sym6 {
             let (ga, gb) = grad_coeffs(i);
             let t = dev_t(&self.dirs[i].n, &ed_all[i], ned_all[i]);
-            [
+            let g = [
                 ga + gb * t[0],
                 ga + gb * t[1],
                 ga + gb * t[2],
                 gb * t[3],
                 gb * t[4],
                 gb * t[5],
-            ]
+            ];
+            match &hencky {
+                Some((_, h)) => h.pull(&g),
+                None => g,
+            }
         };
         let mut g_eta: Sym6 = [0.0; 6];
         match self.params.eta_mode {
@@ -485,8 +523,13 @@ impl Constitutive for Microplane {
                 (1.0, 0.0)
             };
             let d = 1.0 - omd;
-            let ed = &ed_all[i];
-            let ned = ned_all[i];
+            // Projections of E for the stress (those of pass 1 unless eta uses another strain).
+            let (ed, ned) = if hencky.is_some() {
+                project(&dir.n, &e, ev)
+            } else {
+                (ed_all[i], ned_all[i])
+            };
+            let ed = &ed;
             let t = dev_t(&dir.n, ed, ned);
             let vol = k_mic * ev / 3.0;
             let s = [
@@ -512,16 +555,26 @@ impl Constitutive for Microplane {
                 let coef = dir.w6 * dd;
                 if ratio_mode {
                     // d eta_bar_mic/dE = q (d eta_mic/dE - (eta_mic/eta) d eta/dE)
-                    let (ga, gb) = grad_coeffs(i);
                     let cq = coef * q;
                     let rel = eta_mic[i] / eta;
+                    let g = if hencky.is_some() {
+                        grad_eta_mic(i)
+                    } else {
+                        // The same as grad_eta_mic(i), reusing this plane's dev_t.
+                        let (ga, gb) = grad_coeffs(i);
+                        [
+                            ga + gb * t[0],
+                            ga + gb * t[1],
+                            ga + gb * t[2],
+                            gb * t[3],
+                            gb * t[4],
+                            gb * t[5],
+                        ]
+                    };
                     for a in 0..6 {
                         let sa = cq * s[a];
-                        for b in 0..3 {
-                            d_tot[a][b] -= sa * (ga + gb * t[b]);
-                        }
-                        for b in 3..6 {
-                            d_tot[a][b] -= sa * gb * t[b];
+                        for b in 0..6 {
+                            d_tot[a][b] -= sa * g[b];
                         }
                         v[a] += sa * rel;
                         ds_deb[a] -= coef * rel * s[a];
@@ -685,9 +738,15 @@ mod tests {
 
     #[test]
     fn tangents_match_finite_differences_in_all_states() {
-        for mode in [EtaMode::Max, EtaMode::Mean] {
+        for (mode, measure) in [
+            (EtaMode::Max, StrainMeasure::GreenLagrange),
+            (EtaMode::Mean, StrainMeasure::GreenLagrange),
+            (EtaMode::Max, StrainMeasure::Hencky),
+            (EtaMode::Mean, StrainMeasure::Hencky),
+        ] {
             let m = Microplane::new(MicroplaneParams {
                 eta_mode: mode,
+                strain_measure: measure,
                 ..Preset::Paper.params()
             })
             .unwrap();
@@ -697,15 +756,18 @@ mod tests {
                     let (r, ht) = eval(&m, &f, eb, &h);
                     let n_loading = ht.iter().zip(&h).filter(|(a, b)| a > b).count();
                     if label.starts_with("loading") || label.starts_with("reloading") {
-                        assert!(n_loading > 0, "{mode:?} {scale} {label}: no plane loads");
+                        assert!(
+                            n_loading > 0,
+                            "{mode:?} {measure:?} {scale} {label}: no plane loads"
+                        );
                         n_loading_states += 1;
                     }
                     if label == "unloading" || label == "undamaged" {
-                        assert_eq!(n_loading, 0, "{mode:?} {scale} {label}");
+                        assert_eq!(n_loading, 0, "{mode:?} {measure:?} {scale} {label}");
                         assert_eq!(r.dp_deta_bar, Matrix3::zeros());
                     }
                     let (ea, ep, ee) = tangent_errors(&m, &f, eb, &h);
-                    let tag = format!("{mode:?} scale {scale} {label}");
+                    let tag = format!("{mode:?} {measure:?} scale {scale} {label}");
                     assert!(ea < 1e-6, "{tag}: A rel err {ea}");
                     assert!(ep < 1e-6, "{tag}: dP/d eta_bar rel err {ep}");
                     assert!(ee < 1e-6, "{tag}: d eta/dF rel err {ee}");
@@ -713,6 +775,36 @@ mod tests {
                 assert_eq!(n_loading_states, 4);
             }
         }
+    }
+
+    #[test]
+    fn hencky_measure_uses_the_logarithmic_strain() {
+        // Uniaxial stretch lambda along x: every plane sees E_h = ln(lambda) e_x (x) e_x instead of
+        // E = (lambda^2 - 1)/2 e_x (x) e_x, so eta scales by the ratio of the two (eta is homogeneous of
+        // degree one in the strain); the stress is the same.
+        let gl = paper();
+        let hk = Microplane::new(MicroplaneParams {
+            strain_measure: StrainMeasure::Hencky,
+            ..Preset::Paper.params()
+        })
+        .unwrap();
+        let lam: f64 = 1.3;
+        let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(lam, 1.0, 1.0));
+        let (rg, _) = eval(&gl, &f, 0.0, &fresh(&gl));
+        let (rh, _) = eval(&hk, &f, 0.0, &fresh(&hk));
+        let ratio = lam.ln() / (0.5 * (lam * lam - 1.0));
+        assert!(
+            (rh.eta / rg.eta - ratio).abs() < 1e-12,
+            "{} {}",
+            rh.eta / rg.eta,
+            ratio
+        );
+        assert!(rel_err(&rh.p, &rg.p) < 1e-14);
+        // Small strain: both measures agree to first order.
+        let f = generic_f(1e-6);
+        let (rg, _) = eval(&gl, &f, 0.0, &fresh(&gl));
+        let (rh, _) = eval(&hk, &f, 0.0, &fresh(&hk));
+        assert!((rh.eta - rg.eta).abs() < 1e-5 * rg.eta);
     }
 
     #[test]

@@ -14,6 +14,7 @@
 //! The interface is incremental and pure: [`Constitutive::update`] reads the committed history `h_n`
 //! and writes the trial history `h_trial`, which the caller commits only after the step converged.
 
+pub mod activity;
 pub mod driver;
 pub mod elastic;
 pub mod isotropic;
@@ -23,9 +24,12 @@ pub mod quadrature;
 use nalgebra::{Matrix3, SMatrix};
 use serde::{Deserialize, Serialize};
 
+pub use activity::{Activity, GradientActivity};
 pub use elastic::{ElasticConfig, ElasticModuli, LinearElastic, NeoHookean, StVenantKirchhoff};
 pub use isotropic::{EquivalentStrain, IsotropicDamage, IsotropicDamageConfig, Kinematics};
-pub use microplane::{EtaMode, Microplane, MicroplaneConfig, MicroplaneParams, Preset};
+pub use microplane::{
+    EtaMode, Microplane, MicroplaneConfig, MicroplaneParams, Preset, StrainMeasure,
+};
 pub use quadrature::Quadrature;
 
 /// 9x9 matrix of a fourth-order two-point tangent, `A_iJkL` stored at `(3*i+J, 3*k+L)`.
@@ -49,6 +53,9 @@ pub struct Response {
     pub damage: f64,
     /// Stored (free) energy density `Psi` per reference volume (MPa).
     pub energy: f64,
+    /// Gradient activity `c` of the Helmholtz equation at this state (mm^2) and its derivatives
+    /// `dc/d eta`, `dc/d eta_bar` (see [`activity`]); 0 for local and elastic materials.
+    pub activity: Activity,
 }
 
 impl Response {
@@ -62,6 +69,7 @@ impl Response {
             deta_df: Matrix3::zeros(),
             damage: 0.0,
             energy: 0.0,
+            activity: Activity::default(),
         }
     }
 
@@ -167,7 +175,45 @@ impl Material {
         self.gradient_parameter() > 0.0
     }
 
-    /// Gradient activity parameter `c` of eq. 3 (mm^2); 0 for local and elastic materials.
+    /// How the gradient activity evolves (constant for every material without a Helmholtz field).
+    pub fn gradient_activity(&self) -> GradientActivity {
+        match self {
+            Material::Microplane(m) => m.params().gradient_activity,
+            Material::IsotropicDamage(m) => m.config().gradient_activity,
+            _ => GradientActivity::Constant,
+        }
+    }
+
+    /// Damage threshold `gamma_0` and damage law `d(gamma), d'(gamma)` (eq. 11) of a damage model.
+    fn damage_law(&self, gamma: f64) -> (f64, f64) {
+        match self {
+            Material::Microplane(m) => m.damage_law(gamma.max(m.params().gamma_0)),
+            Material::IsotropicDamage(m) => m.damage_law(gamma),
+            _ => (0.0, 0.0),
+        }
+    }
+
+    fn gamma_0(&self) -> f64 {
+        match self {
+            Material::Microplane(m) => m.params().gamma_0,
+            Material::IsotropicDamage(m) => m.config().gamma_0,
+            _ => 0.0,
+        }
+    }
+
+    /// History slots of the constitutive law itself (before the activity's).
+    fn law_history_len(&self) -> usize {
+        match self {
+            Material::LinearElastic(m) => m.history_len(),
+            Material::StVenantKirchhoff(m) => m.history_len(),
+            Material::NeoHookean(m) => m.history_len(),
+            Material::Microplane(m) => m.history_len(),
+            Material::IsotropicDamage(m) => m.history_len(),
+        }
+    }
+
+    /// Reference gradient activity parameter `c_0` of eq. 3 (mm^2; the constant `c` of the paper);
+    /// 0 for local and elastic materials.
     pub fn gradient_parameter(&self) -> f64 {
         match self {
             Material::Microplane(m) => m.params().c,
@@ -191,18 +237,18 @@ impl Material {
     }
 }
 
+/// History layout of a [`Material`]: the law's slots, then the gradient activity's (`kappa_bar` of the
+/// localizing form).
 impl Constitutive for Material {
     fn history_len(&self) -> usize {
-        match self {
-            Material::LinearElastic(m) => m.history_len(),
-            Material::StVenantKirchhoff(m) => m.history_len(),
-            Material::NeoHookean(m) => m.history_len(),
-            Material::Microplane(m) => m.history_len(),
-            Material::IsotropicDamage(m) => m.history_len(),
-        }
+        self.law_history_len() + self.gradient_activity().history_len()
     }
 
     fn init_history(&self, h: &mut [f64]) {
+        let n = self.law_history_len();
+        self.gradient_activity()
+            .init_history(self.gamma_0(), &mut h[n..]);
+        let h = &mut h[..n];
         match self {
             Material::LinearElastic(m) => m.init_history(h),
             Material::StVenantKirchhoff(m) => m.init_history(h),
@@ -220,13 +266,32 @@ impl Constitutive for Material {
         h_trial: &mut [f64],
         out: &mut Response,
     ) -> Result<(), MaterialError> {
-        match self {
-            Material::LinearElastic(m) => m.update(f, eta_bar, h_n, h_trial, out),
-            Material::StVenantKirchhoff(m) => m.update(f, eta_bar, h_n, h_trial, out),
-            Material::NeoHookean(m) => m.update(f, eta_bar, h_n, h_trial, out),
-            Material::Microplane(m) => m.update(f, eta_bar, h_n, h_trial, out),
-            Material::IsotropicDamage(m) => m.update(f, eta_bar, h_n, h_trial, out),
+        let n = self.law_history_len();
+        let expected = self.history_len();
+        for got in [h_n.len(), h_trial.len()] {
+            if got != expected {
+                return Err(MaterialError::HistoryLength { expected, got });
+            }
         }
+        let (law_n, act_n) = h_n.split_at(n);
+        let (law_trial, act_trial) = h_trial.split_at_mut(n);
+        match self {
+            Material::LinearElastic(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
+            Material::StVenantKirchhoff(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
+            Material::NeoHookean(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
+            Material::Microplane(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
+            Material::IsotropicDamage(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
+        }
+        out.activity = self.gradient_activity().evaluate(
+            self.gradient_parameter(),
+            self.gamma_0(),
+            |g| self.damage_law(g),
+            out.eta,
+            eta_bar,
+            act_n,
+            act_trial,
+        );
+        Ok(())
     }
 }
 
@@ -297,6 +362,53 @@ pub(crate) fn green_lagrange(f: &Matrix3<f64>) -> Sym6 {
         e[a] = 0.5 * (cij - if i == j { 1.0 } else { 0.0 });
     }
     e
+}
+
+/// The logarithmic (Hencky) strain `E_h = ln(C)/2`, `C = F^T F`, with what is needed to pull a gradient
+/// back to the Green-Lagrange strain: `dE_h/dE = d ln C/dC =: L` (as `C = 2E + I`), in the spectral form
+/// `L : G = sum_ab theta_ab (N_a . G . N_b) N_a (x) N_b` over the eigenpairs `(lambda_a, N_a)` of `C`,
+/// `theta_aa = 1/lambda_a`, `theta_ab = (ln lambda_a - ln lambda_b)/(lambda_a - lambda_b)`. `L` is
+/// major-symmetric, so a gradient `G_h = d phi/dE_h` gives `d phi/dE = L : G_h`.
+pub(crate) struct Hencky {
+    q: Matrix3<f64>,
+    theta: [[f64; 3]; 3],
+}
+
+impl Hencky {
+    /// `E_h` as [`Sym6`] and its pull-back operator, for `F` with `det F > 0`.
+    pub(crate) fn new(f: &Matrix3<f64>) -> (Sym6, Self) {
+        let eig = nalgebra::SymmetricEigen::new(f.transpose() * f);
+        let lam = eig.eigenvalues;
+        let q = eig.eigenvectors;
+        let ln = lam.map(f64::ln);
+        let mut theta = [[0.0; 3]; 3];
+        for a in 0..3 {
+            for b in 0..3 {
+                let (la, lb) = (lam[a], lam[b]);
+                theta[a][b] = if (la - lb).abs() <= 1e-9 * la.max(lb) {
+                    // Limit of the divided difference, to second order in (la - lb).
+                    let m = 0.5 * (la + lb);
+                    1.0 / m
+                } else {
+                    (ln[a] - ln[b]) / (la - lb)
+                };
+            }
+        }
+        let eh = q * Matrix3::from_diagonal(&(0.5 * ln)) * q.transpose();
+        (PAIRS.map(|(i, j)| eh[(i, j)]), Self { q, theta })
+    }
+
+    /// `L : G` for a symmetric `G` given as [`Sym6`] tensor components.
+    pub(crate) fn pull(&self, g: &Sym6) -> Sym6 {
+        let mut gq = self.q.transpose() * sym_to_matrix(g) * self.q;
+        for a in 0..3 {
+            for b in 0..3 {
+                gq[(a, b)] *= self.theta[a][b];
+            }
+        }
+        let out = self.q * gq * self.q.transpose();
+        PAIRS.map(|(i, j)| out[(i, j)])
+    }
 }
 
 /// Full matrix of a [`Sym6`].
