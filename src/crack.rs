@@ -12,7 +12,13 @@
 //!   tip, split where consecutive points (sorted by polar angle) are more than `gap_degrees` apart; a band's
 //!   angle is its mean polar angle against the notch axis (+x, counter-clockwise positive);
 //! * classification: two or more bands -> branching; one band with |angle| <= `straight_degrees` ->
-//!   straight; otherwise inclined; no crack -> none.
+//!   straight; otherwise inclined; no crack -> none;
+//! * *band width* is measured across the bands at the stations `r = f * length`, `f` in
+//!   `width_stations`: the crack points within half a point spacing `s` of the circle `r` around the
+//!   notch tip, sorted along the circle and split where two neighbours are more than `2 s` apart; each
+//!   group is one crossing of a band, and its width is its arc extent plus one point spacing (the bands
+//!   leave the notch tip roughly radially, so the circle cuts them nearly square). The median over all
+//!   crossings is the reported band width, the largest one its maximum.
 
 use nalgebra::Vector2;
 use std::collections::{HashMap, HashSet, VecDeque};
@@ -30,6 +36,8 @@ pub struct CrackCriteria {
     pub straight_degrees: f64,
     /// Cracks shorter than this (mm) are not classified.
     pub min_length: f64,
+    /// Radii of the band-width stations as fractions of the crack length.
+    pub width_stations: [f64; 3],
 }
 
 impl Default for CrackCriteria {
@@ -40,6 +48,7 @@ impl Default for CrackCriteria {
             gap_degrees: 20.0,
             straight_degrees: 15.0,
             min_length: 10.0,
+            width_stations: [0.25, 0.5, 0.75],
         }
     }
 }
@@ -51,6 +60,17 @@ pub struct Band {
     pub angle_degrees: f64,
     /// Crack points of the band on the ring.
     pub points: usize,
+}
+
+/// One crossing of a band by a width station.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BandCrossing {
+    /// Station radius around the notch tip (mm).
+    pub radius: f64,
+    /// Polar angle of the crossing's centre against the notch axis (degrees).
+    pub angle_degrees: f64,
+    /// Width of the `d >= damage_threshold` zone across the band (mm).
+    pub width: f64,
 }
 
 /// Crack state at one time.
@@ -66,14 +86,25 @@ pub struct CrackState {
     pub bands: Vec<Band>,
     /// "none", "straight", "inclined" or "branching".
     pub classification: String,
+    /// Band crossings at the width stations (empty for cracks shorter than `min_length`).
+    #[serde(default)]
+    pub crossings: Vec<BandCrossing>,
+    /// Median width of the damage bands over the crossings (mm; 0 without crossings).
+    #[serde(default)]
+    pub band_width: f64,
+    /// Largest crossing width (mm).
+    #[serde(default)]
+    pub band_width_max: f64,
 }
 
-/// Measures the crack grown from `notch_tip` (mm) in the damage field of points at `x` (mm).
+/// Measures the crack grown from `notch_tip` (mm) in the damage field of points at `x` (mm); `h` is the
+/// cell size (mm), `spacing` the distance between neighbouring points (mm).
 pub fn measure(
     x: &[Vector2<f64>],
     damage: &[f64],
     notch_tip: Vector2<f64>,
     h: f64,
+    spacing: f64,
     c: &CrackCriteria,
     time: f64,
 ) -> CrackState {
@@ -146,13 +177,65 @@ pub fn measure(
             _ => "branching".to_owned(),
         }
     };
+    let crossings = if length < c.min_length {
+        Vec::new()
+    } else {
+        c.width_stations
+            .iter()
+            .flat_map(|f| crossings(x, &crack, notch_tip, f * length, spacing))
+            .collect()
+    };
+    let mut widths: Vec<f64> = crossings.iter().map(|b| b.width).collect();
+    widths.sort_by(f64::total_cmp);
+    let band_width = match widths.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => widths[n / 2],
+        n => 0.5 * (widths[n / 2 - 1] + widths[n / 2]),
+    };
     CrackState {
         time,
         length,
         tip: [tip.x, tip.y],
         bands,
         classification,
+        crossings,
+        band_width,
+        band_width_max: widths.last().copied().unwrap_or(0.0),
     }
+}
+
+/// The band crossings of the crack points `crack` on the circle of radius `r` around `centre`.
+fn crossings(
+    x: &[Vector2<f64>],
+    crack: &[usize],
+    centre: Vector2<f64>,
+    r: f64,
+    spacing: f64,
+) -> Vec<BandCrossing> {
+    // Arc length along the circle from the notch axis (+x); the cut of atan2 at +-180 degrees lies in the
+    // notch behind the tip, where no band runs.
+    let mut arcs: Vec<f64> = crack
+        .iter()
+        .filter_map(|&i| {
+            let d = x[i] - centre;
+            ((d.norm() - r).abs() <= 0.5 * spacing).then(|| d.y.atan2(d.x) * r)
+        })
+        .collect();
+    arcs.sort_by(f64::total_cmp);
+    let mut out = Vec::new();
+    let mut start = 0;
+    for k in 1..=arcs.len() {
+        if k == arcs.len() || arcs[k] - arcs[k - 1] > 2.0 * spacing {
+            let (a, b) = (arcs[start], arcs[k - 1]);
+            out.push(BandCrossing {
+                radius: r,
+                angle_degrees: (0.5 * (a + b) / r).to_degrees(),
+                width: b - a + spacing,
+            });
+            start = k;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -186,11 +269,11 @@ mod tests {
     fn straight_inclined_and_branching_cracks_are_told_apart() {
         let c = CrackCriteria::default();
         let (x, d) = field(|p| near_ray(p, TIP, 0.0, 40.0));
-        let s = measure(&x, &d, TIP, 1.0, &c, 0.0);
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert_eq!(s.classification, "straight", "{s:?}");
         assert!((s.length - 41.5).abs() < 1.0, "{s:?}");
         let (x, d) = field(|p| near_ray(p, TIP, -35.0, 40.0));
-        let s = measure(&x, &d, TIP, 1.0, &c, 0.0);
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert_eq!(s.classification, "inclined", "{s:?}");
         assert!((s.bands[0].angle_degrees + 35.0).abs() < 3.0, "{s:?}");
         let (x, d) = field(|p| {
@@ -198,16 +281,44 @@ mod tests {
                 || near_ray(p, TIP + Vector2::new(10.0, 0.0), 30.0, 35.0)
                 || near_ray(p, TIP + Vector2::new(10.0, 0.0), -30.0, 35.0)
         });
-        let s = measure(&x, &d, TIP, 1.0, &c, 0.0);
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert_eq!(s.classification, "branching", "{s:?}");
         assert_eq!(s.bands.len(), 2, "{s:?}");
+    }
+
+    #[test]
+    fn band_width_is_measured_across_the_bands() {
+        let c = CrackCriteria::default();
+        // Straight band 3 mm wide (|y - 50| <= 1.5) on the 0.5 mm lattice: 6 rows of points.
+        let (x, d) = field(|p| p.x >= 30.0 && p.x <= 70.0 && (p.y - 50.0).abs() <= 1.5);
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
+        assert_eq!(s.crossings.len(), 3, "{s:?}");
+        assert!((s.band_width - 3.0).abs() <= 0.3, "{s:?}");
+        assert!(s.crossings.iter().all(|b| b.angle_degrees.abs() < 2.0));
+        // Two branches at +-30 degrees, 1.5 mm from their axis (3 mm wide): two crossings per station
+        // beyond the fork, each about 3 mm wide (the circle cuts them at a small angle).
+        let (x, d) = field(|p| {
+            near_ray(p, TIP, 0.0, 10.0)
+                || near_ray(p, TIP + Vector2::new(10.0, 0.0), 30.0, 35.0)
+                || near_ray(p, TIP + Vector2::new(10.0, 0.0), -30.0, 35.0)
+        });
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
+        let far: Vec<_> = s.crossings.iter().filter(|b| b.radius > 20.0).collect();
+        assert_eq!(far.len(), 4, "{s:?}");
+        for b in far {
+            assert!(b.width > 2.5 && b.width < 4.5, "{b:?}");
+        }
+        // A wider band reads wider.
+        let (x, d) = field(|p| p.x >= 30.0 && p.x <= 70.0 && (p.y - 50.0).abs() <= 5.0);
+        let wide = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
+        assert!((wide.band_width - 10.0).abs() <= 0.6, "{wide:?}");
     }
 
     #[test]
     fn damage_away_from_the_notch_tip_is_not_part_of_the_crack() {
         let c = CrackCriteria::default();
         let (x, d) = field(|p| near_ray(p, Vector2::new(5.0, 10.0), 0.0, 40.0));
-        let s = measure(&x, &d, TIP, 1.0, &c, 0.0);
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert_eq!(s.classification, "none");
         assert_eq!(s.length, 0.0);
     }

@@ -408,6 +408,7 @@ impl RunOutput {
                 &p.damage,
                 *tip,
                 sim.setup.grid.cell_size(),
+                p.point_spacing(),
                 criteria,
                 sim.time,
             );

@@ -314,6 +314,15 @@ impl Particles {
         self.x.is_empty()
     }
 
+    /// Mean distance between neighbouring points in the reference configuration, `sqrt(mean V_p^0)` (mm;
+    /// `V_p^0` per mm of thickness is an area); 0 without points.
+    pub fn point_spacing(&self) -> f64 {
+        if self.vol0.is_empty() {
+            return 0.0;
+        }
+        (self.vol0.iter().sum::<f64>() / self.vol0.len() as f64).sqrt()
+    }
+
     /// Number of history values per point.
     pub fn history_stride(&self) -> usize {
         self.history_stride
