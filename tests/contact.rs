@@ -214,3 +214,86 @@ fn frictionless_block_slides_at_constant_speed() {
     let v = momentum(&sim).x / mass;
     assert!((v - 100.0).abs() < 1e-6 * 100.0, "v = {v}");
 }
+
+/// The rewritten contact rows and their Jacobian agree with central finite differences for every node
+/// status, on a linear "physical" residual `R(x) = K x + c` of two nodes with 3 unknowns each (the
+/// contact rows are linear in the physical rows and in `du`, so the difference is round-off).
+#[test]
+fn contact_rows_match_finite_differences() {
+    use mpm_concrete::contact::{ContactNode, DeviceContact, NodeStatus};
+    use mpm_concrete::petsc::BlockLayout;
+    let (nf, nn) = (3, 2);
+    let n = nf * nn;
+    let k: Vec<f64> = (0..n * n)
+        .map(|i| ((i * 37 % 11) as f64 - 5.0) + if i % (n + 1) == 0 { 20.0 } else { 0.0 })
+        .collect();
+    let c: Vec<f64> = (0..n).map(|i| 0.3 * i as f64 - 1.0).collect();
+    let phys = |x: &[f64]| -> Vec<f64> {
+        (0..n)
+            .map(|i| c[i] + (0..n).map(|j| k[i * n + j] * x[j]).sum::<f64>())
+            .collect()
+    };
+    let normal = nalgebra::Vector2::new(0.6, -0.8);
+    for status in [
+        NodeStatus::Slide,
+        NodeStatus::Stick,
+        NodeStatus::Slip(1),
+        NodeStatus::Slip(-1),
+    ] {
+        let d = DeviceContact {
+            normal,
+            friction: 0.4,
+            nodes: vec![ContactNode {
+                node: 7,
+                row: 1,
+                gap: 0.02,
+                du_device: nalgebra::Vector2::new(0.1, -0.2),
+                status,
+            }],
+        };
+        let s = 250.0;
+        let residual = |x: &[f64]| {
+            let mut r = phys(x);
+            d.residual_rows(x, &mut r, nf, s);
+            r
+        };
+        for layout in [BlockLayout::Rows, BlockLayout::Blocks] {
+            // Dense 2 x 2 block pattern: block row a has block columns 0 and 1.
+            let mut values = vec![0.0; n * n];
+            for a in 0..nn {
+                for i in 0..nf {
+                    for pos in 0..nn {
+                        for kk in 0..nf {
+                            values[a * nn * nf * nf + layout.offset(nn, nf, i, pos, kk)] =
+                                k[(a * nf + i) * n + pos * nf + kk];
+                        }
+                    }
+                }
+            }
+            d.jacobian_rows(
+                nf,
+                s,
+                |a| (a * nn * nf * nf, nn, a),
+                &mut values,
+                |ncols, i, pos, kk| layout.offset(ncols, nf, i, pos, kk),
+            );
+            let x0: Vec<f64> = (0..n).map(|i| 0.01 * (i as f64 + 1.0)).collect();
+            let eps = 1e-6;
+            for j in 0..n {
+                let (mut xp, mut xm) = (x0.clone(), x0.clone());
+                xp[j] += eps;
+                xm[j] -= eps;
+                let (rp, rm) = (residual(&xp), residual(&xm));
+                for i in 0..n {
+                    let fd = (rp[i] - rm[i]) / (2.0 * eps);
+                    let (a, ii, pos, kk) = (i / nf, i % nf, j / nf, j % nf);
+                    let jac = values[a * nn * nf * nf + layout.offset(nn, nf, ii, pos, kk)];
+                    assert!(
+                        (fd - jac).abs() < 1e-6 * (1.0 + jac.abs()),
+                        "{status:?} {layout:?}: J[{i}][{j}] = {jac} vs FD {fd}"
+                    );
+                }
+            }
+        }
+    }
+}
