@@ -662,7 +662,7 @@ impl Simulation {
             if let Some(c) = &rb.contact {
                 let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
                 let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
-                if !prescribed || !unit || !(c.friction.is_finite() && c.friction >= 0.0) {
+                if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
                     return Err(StepError::Setup(format!(
                         "rigid body `{}`: a device in contact needs both motion components prescribed \
                          (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
@@ -1044,7 +1044,9 @@ impl Simulation {
                     continue;
                 };
                 let (f, m) = d.resultant(&phys, nf, |i| grid.node_position(i), pin);
-                let tol = 1e-7 * f.norm() * face_lengths[k] + 1e-12;
+                // Balanced to 1e-5 of the force times the face length (the resultant within 1e-5 of the
+                // face length from the pin).
+                let tol = 1e-5 * f.norm() * face_lengths[k] + 1e-12;
                 if m.abs() <= tol || d.nodes.iter().all(|c| !c.status.closed()) {
                     continue;
                 }

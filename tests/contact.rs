@@ -70,7 +70,7 @@ fn block_bounces_off_a_wall_without_tensile_reaction() {
     let mut contact_ended = None;
     let mut max_push = 0.0_f64;
     let mut energy = 0.0;
-    for step in 0..40 {
+    for _ in 0..40 {
         let r = sim.advance(&s).expect("step converges");
         let f = r.reactions[0].1[0];
         // The wall pushes the block towards -x, never pulls it.
