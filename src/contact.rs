@@ -312,15 +312,19 @@ mod tests {
         // Compressive normal force (+y on the specimen), tangential force inside the cone: stays stuck.
         let mut d = device(NodeStatus::Stick, 0.5);
         assert_eq!(d.update(&[0.2, -0.4], &[0.4, 1.0], 2, 1e-12, 1e-12), 0);
-        // Outside the cone: slips against the force on the specimen.
+        // Outside the cone: slips against the force on the specimen (F_x > 0: slides towards -x = +t).
         assert_eq!(d.update(&[0.2, -0.4], &[0.6, 1.0], 2, 1e-12, 1e-12), 1);
-        assert_eq!(d.nodes[0].status, NodeStatus::Slip(-1));
+        assert_eq!(d.nodes[0].status, NodeStatus::Slip(1));
         // Tensile: opens.
         d.update(&[0.2, -0.4], &[0.0, -1.0], 2, 1e-12, 1e-12);
         assert_eq!(d.nodes[0].status, NodeStatus::Open);
-        // Open and penetrating (gap 0.1 + (-0.5 + 0.3) < 0): closes, sticking with friction.
-        d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        // Open and penetrating (gap 0.1 + (-0.5 + 0.3) < 0) without sliding: closes, sticking.
+        d.update(&[0.2, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
         assert_eq!(d.nodes[0].status, NodeStatus::Stick);
+        // Closing while sliding (t . (du - du_b) = -(0 - 0.2) > 0): slips that way.
+        d.nodes[0].status = NodeStatus::Open;
+        d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        assert_eq!(d.nodes[0].status, NodeStatus::Slip(1));
         // Frictionless: closes sliding.
         let mut d = device(NodeStatus::Open, 0.0);
         d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
