@@ -254,6 +254,12 @@ pub enum Keyword {
     Fixed,
 }
 
+impl From<Keyword> for MotionSpec {
+    fn from(k: Keyword) -> Self {
+        MotionSpec::Keyword(k)
+    }
+}
+
 impl Default for MotionSpec {
     fn default() -> Self {
         MotionSpec::Keyword(Keyword::Free)
@@ -327,6 +333,59 @@ pub struct RigidBodySection {
     /// Prescribed velocities rise linearly from zero over this time (s); default 0 (a step).
     #[serde(default)]
     pub rise_time: f64,
+    /// Unilateral contact with the specimen instead of gluing (default: glued).
+    #[serde(default)]
+    pub contact: Option<ContactSection>,
+}
+
+/// `contact = { normal = [nx, ny], friction = mu, pin = [x, y] }` of a `[[rigid_body]]`: the device pushes
+/// on the specimen through its flat face with the outward normal `normal` (from the device into the
+/// specimen; normalised), never pulls, with Coulomb friction `friction` (-, default 0), and, with `pin`
+/// (mm), is driven at the pin and turns freely about it.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSection {
+    /// Outward normal of the contact face (from the device into the specimen).
+    pub normal: [f64; 2],
+    /// Coulomb friction coefficient (-), default 0 (frictionless).
+    #[serde(default)]
+    pub friction: f64,
+    /// Pin position at t = 0 (mm); none: the device only translates.
+    #[serde(default)]
+    pub pin: Option<[f64; 2]>,
+}
+
+/// How the CT specimen is loaded (`[ct] load_introduction`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum LoadIntroduction {
+    /// Rigid plates glued to the notch faces: every grid node under a plate follows it (pulls as well as
+    /// pushes; the plates do not turn).
+    #[default]
+    Glued,
+    /// Rigid plates in unilateral contact with the notch faces (push only, Coulomb friction), translating
+    /// without rotation.
+    Contact,
+    /// Rigid plates in unilateral contact, each driven at a pin and free to turn about it (a testing
+    /// machine's clevis and pin; the support is a pinned seat).
+    Pin,
+}
+
+impl TryFrom<String> for LoadIntroduction {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<Self, String> {
+        match name.as_str() {
+            "glued" => Ok(Self::Glued),
+            "contact" => Ok(Self::Contact),
+            "pin" => Ok(Self::Pin),
+            _ => Err(format!(
+                "field `ct.load_introduction` = \"{name}\": \"glued\" (plates glued to the notch faces), \
+                 \"contact\" (plates pushing through unilateral contact) or \"pin\" (contact plates \
+                 turning freely about a pin)"
+            )),
+        }
+    }
 }
 
 /// `[ct]`: the compact tension specimen of the source paper (spec 03-ct-test.md; the defaults are the
@@ -359,9 +418,27 @@ pub struct CtSection {
     /// The loading velocity rises linearly from zero over this time (s); default 0 (a velocity step).
     #[serde(default)]
     pub rise_time: f64,
-    /// Load both faces symmetrically (each at half the rate) instead of holding the upper one.
+    /// Load both faces symmetrically (each at half the rate, mirror-identical devices) instead of holding
+    /// the upper one.
     #[serde(default)]
     pub symmetric: bool,
+    /// How the plates act on the notch faces: "glued" (default), "contact" or "pin".
+    #[serde(default)]
+    pub load_introduction: LoadIntroduction,
+    /// Coulomb friction coefficient between the plates and the concrete (-), for "contact" and "pin";
+    /// default 0 (frictionless).
+    #[serde(default)]
+    pub friction: f64,
+    /// x range of the support plate on the upper notch face (mm); default: `load_zone`.
+    #[serde(default)]
+    pub support_zone: Option<[f64; 2]>,
+    /// x of the pins of both plates (mm), for "pin"; default: the middle of each plate.
+    #[serde(default)]
+    pub pin_x: Option<f64>,
+    /// Distance of the pins from the plates' contact faces into the plates (mm), for "pin"; default:
+    /// half the plate thickness.
+    #[serde(default)]
+    pub pin_offset: Option<f64>,
     /// Density of the concrete (t/mm^3).
     #[serde(default = "ct_density")]
     pub density: f64,
@@ -694,6 +771,44 @@ impl RunConfig {
                     "a time >= 0 (s)",
                 ));
             }
+            if let Some(c) = &rb.contact {
+                let norm = (c.normal[0] * c.normal[0] + c.normal[1] * c.normal[1]).sqrt();
+                if !(finite(&c.normal) && norm > 0.0) {
+                    return Err(bad(
+                        &format!("{field}.contact.normal"),
+                        format!("{:?}", c.normal),
+                        "a finite non-zero vector, the outward normal of the contact face (from the \
+                         device into the specimen)",
+                    ));
+                }
+                if !(c.friction.is_finite() && c.friction >= 0.0) {
+                    return Err(bad(
+                        &format!("{field}.contact.friction"),
+                        c.friction.to_string(),
+                        "a Coulomb coefficient >= 0 (0 = frictionless)",
+                    ));
+                }
+                if c.pin.is_some_and(|p| !finite(&p)) {
+                    return Err(bad(
+                        &format!("{field}.contact.pin"),
+                        format!("{:?}", c.pin),
+                        "a finite point (mm)",
+                    ));
+                }
+                for (axis, m) in [("x", &rb.x), ("y", &rb.y)] {
+                    if !matches!(
+                        m,
+                        MotionSpec::Velocity { .. } | MotionSpec::Keyword(Keyword::Fixed)
+                    ) {
+                        return Err(bad(
+                            &format!("{field}.{axis}"),
+                            format!("{m:?}"),
+                            "\"fixed\" or { velocity = v }: a device in contact is driven in both \
+                             directions (a free component would need the device's mass)",
+                        ));
+                    }
+                }
+            }
         }
         for (i, l) in self.load.iter().enumerate() {
             sets.push((format!("load[{i}]"), &l.name));
@@ -744,6 +859,58 @@ impl RunConfig {
                     "ct.load_zone",
                     format!("{:?}", ct.load_zone),
                     "an x range [a, b] on the notch faces: 0 <= a < b <= notch_length (mm)",
+                ));
+            }
+            if let Some(z) = ct.support_zone {
+                let [a, b] = z;
+                if !(a >= 0.0 && a < b && b <= ct.notch_length) {
+                    return Err(bad(
+                        "ct.support_zone",
+                        format!("{z:?}"),
+                        "an x range [a, b] on the upper notch face: 0 <= a < b <= notch_length (mm)",
+                    ));
+                }
+            }
+            if !(ct.friction.is_finite() && ct.friction >= 0.0) {
+                return Err(bad(
+                    "ct.friction",
+                    ct.friction.to_string(),
+                    "a Coulomb coefficient >= 0 (0 = frictionless)",
+                ));
+            }
+            let pinned = ct.load_introduction == LoadIntroduction::Pin;
+            if !pinned && (ct.pin_x.is_some() || ct.pin_offset.is_some()) {
+                return Err(bad(
+                    "ct.pin_x/pin_offset",
+                    format!("{:?}/{:?}", ct.pin_x, ct.pin_offset),
+                    "only with load_introduction = \"pin\"",
+                ));
+            }
+            if ct.load_introduction == LoadIntroduction::Glued && ct.friction != 0.0 {
+                return Err(bad(
+                    "ct.friction",
+                    ct.friction.to_string(),
+                    "only with load_introduction = \"contact\" or \"pin\" (glued plates do not slide)",
+                ));
+            }
+            if let Some(px) = ct.pin_x {
+                let s = ct.support_zone.unwrap_or(ct.load_zone);
+                if !(px > a.max(s[0]) && px < b.min(s[1])) {
+                    return Err(bad(
+                        "ct.pin_x",
+                        px.to_string(),
+                        "an x strictly inside both plates (load_zone and support_zone, mm): a massless \
+                         plate pinned outside its contact face cannot balance its moment and overturns",
+                    ));
+                }
+            }
+            if let Some(o) = ct.pin_offset
+                && !(o.is_finite() && o >= 0.0)
+            {
+                return Err(bad(
+                    "ct.pin_offset",
+                    o.to_string(),
+                    "a distance >= 0 from the contact face into the plate (mm)",
                 ));
             }
             if !(ct.plate_thickness > 0.0 && 2.0 * ct.plate_thickness < ct.notch_width) {

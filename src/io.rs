@@ -339,12 +339,16 @@ impl RunOutput {
 
     fn write_history(&self) -> Result<(), OutputError> {
         let mut s = String::new();
-        s.push_str("# units: time s, dt s, displacement mm, force N per mm thickness, energy N mm per mm thickness, wall s\n");
+        s.push_str("# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s\n");
         s.push_str("step,time,dt,attempts,newton_its,linear_its,reason,residual_initial,residual_final,unknowns");
         if let Some(r) = self.rows.first() {
             for (name, _) in &r.reactions {
                 let _ = write!(s, ",{name}_ux,{name}_uy,{name}_fx,{name}_fy");
             }
+            for (name, _) in &r.rotations {
+                let _ = write!(s, ",{name}_rotation");
+            }
+            s.push_str(",contact_solves");
         }
         s.push_str(",kinetic_energy,stored_energy,external_work,dissipated_energy,wall_setup,wall_assembly,wall_solve,wall_total,new_pattern\n");
         for r in &self.rows {
@@ -366,6 +370,10 @@ impl RunOutput {
             for ((_, f), (_, u)) in r.reactions.iter().zip(&r.displacements) {
                 let _ = write!(s, ",{:.9e},{:.9e},{:.9e},{:.9e}", u[0], u[1], f[0], f[1]);
             }
+            for (_, theta) in &r.rotations {
+                let _ = write!(s, ",{theta:.9e}");
+            }
+            let _ = write!(s, ",{}", r.contact_solves);
             let dissipated = r.external_work - r.kinetic_energy - r.stored_energy;
             let _ = writeln!(
                 s,

@@ -16,6 +16,7 @@ pub mod bench;
 pub mod checkpoint;
 pub mod compare;
 pub mod config;
+pub mod contact;
 pub mod crack;
 pub mod dofs;
 pub mod grid;

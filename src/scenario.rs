@@ -1,7 +1,11 @@
 //! Builds a run ([`Setup`]) from a configuration: seeds the bodies, the rigid bodies and the background
 //! grid, and the compact tension (CT) specimen of the source paper.
 
-use crate::config::{ConstraintSection, MotionSpec, RigidBodySection, RunConfig};
+use crate::config::{
+    ConstraintSection, ContactSection, Keyword, LoadIntroduction, MotionSpec, RigidBodySection,
+    RunConfig,
+};
+use crate::contact::Contact;
 use crate::grid::{Grid, GridError};
 use crate::material::{Material, MaterialError};
 use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
@@ -119,11 +123,37 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             velocity: Vector2::zeros(),
         });
         let [a, b] = ct.load_zone;
+        let [sa, sb] = ct.support_zone.unwrap_or(ct.load_zone);
         let t = ct.plate_thickness;
         let (down, up) = if ct.symmetric {
             (-0.5 * ct.loading_rate, 0.5 * ct.loading_rate)
         } else {
             (-ct.loading_rate, 0.0)
+        };
+        let velocity = |v: f64| MotionSpec::Velocity { velocity: v };
+        // The plates' x motion: glued, the loading plate is x-free and the support holds x (a clamp),
+        // both x-free when symmetric (mirror images of each other); in contact both are driven in x at
+        // zero velocity, which holds nothing unless friction acts (mirror-identical either way).
+        let (x_load, x_support) = match (ct.load_introduction, ct.symmetric) {
+            (LoadIntroduction::Glued, false) => (Keyword::Free.into(), Keyword::Fixed.into()),
+            (LoadIntroduction::Glued, true) => (Keyword::Free.into(), Keyword::Free.into()),
+            _ => (velocity(0.0), velocity(0.0)),
+        };
+        // Contact: outward normals from the plates into the concrete; pins on the plates' mid-lines (or at
+        // pin_x), pin_offset into the plates from their faces.
+        let offset = ct.pin_offset.unwrap_or(0.5 * t);
+        let contact = |normal: [f64; 2], pin: [f64; 2]| match ct.load_introduction {
+            LoadIntroduction::Glued => None,
+            LoadIntroduction::Contact => Some(ContactSection {
+                normal,
+                friction: ct.friction,
+                pin: None,
+            }),
+            LoadIntroduction::Pin => Some(ContactSection {
+                normal,
+                friction: ct.friction,
+                pin: Some(pin),
+            }),
         };
         rigid_defs.push(RigidBodySection {
             name: "loading_plate".into(),
@@ -134,22 +164,30 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
                 }],
                 exclude: vec![],
             },
-            x: MotionSpec::Keyword(crate::config::Keyword::Free),
-            y: MotionSpec::Velocity { velocity: down },
+            x: x_load,
+            y: velocity(down),
             rise_time: ct.rise_time,
+            contact: contact(
+                [0.0, -1.0],
+                [ct.pin_x.unwrap_or(0.5 * (a + b)), lower + offset],
+            ),
         });
         rigid_defs.push(RigidBodySection {
             name: "support_plate".into(),
             geometry: Geometry {
                 include: vec![Region::Rect {
-                    min: [a, upper - t],
-                    max: [b, upper],
+                    min: [sa, upper - t],
+                    max: [sb, upper],
                 }],
                 exclude: vec![],
             },
-            x: MotionSpec::Keyword(crate::config::Keyword::Fixed),
-            y: MotionSpec::Velocity { velocity: up },
+            x: x_support,
+            y: velocity(up),
             rise_time: ct.rise_time,
+            contact: contact(
+                [0.0, 1.0],
+                [ct.pin_x.unwrap_or(0.5 * (sa + sb)), upper - offset],
+            ),
         });
     }
     for (i, b) in cfg.body.iter().enumerate() {
@@ -211,6 +249,11 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             particles: p,
             motion: [r.x.motion(), r.y.motion()],
             rise_time: r.rise_time,
+            contact: r.contact.as_ref().map(|c| Contact {
+                normal: Vector2::from(c.normal).normalize(),
+                friction: c.friction,
+                pin: c.pin.map(Vector2::from),
+            }),
         });
     }
     let mut lo = Vector2::repeat(f64::INFINITY);

@@ -6,6 +6,7 @@
 //! simulation exactly as it was, so it can be retried with a smaller time step.
 
 use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
+use crate::contact::{self, Contact, ContactNode, DeviceContact, NodeStatus};
 use crate::dofs::DofMap;
 use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
@@ -202,8 +203,10 @@ pub struct NodeBox {
     pub rise_time: f64,
 }
 
-/// A rigid body of particles (e.g. a steel loading plate) moving with a prescribed velocity; every grid
-/// node in the support of its particles follows it in the constrained components each step.
+/// A rigid body of particles (e.g. a steel loading plate) moving with a prescribed velocity. Glued
+/// (`contact = None`): every grid node in the support of its particles follows it in the constrained
+/// components each step. In contact ([`Contact`]): it pushes on the specimen through unilateral contact
+/// on its face (and, with a pin, turns freely about the pin).
 #[derive(Debug, Clone)]
 pub struct RigidBody {
     /// Name used in reports.
@@ -214,6 +217,8 @@ pub struct RigidBody {
     pub motion: [Motion; 2],
     /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
     pub rise_time: f64,
+    /// Unilateral contact instead of gluing (both motion components must then be prescribed).
+    pub contact: Option<Contact>,
 }
 
 /// Displacement of a component moving with velocity `v` that rises linearly over `rise` from 0, between
@@ -240,6 +245,9 @@ pub fn prescribed_acceleration(v: f64, rise: f64, t: f64) -> f64 {
         0.0
     }
 }
+
+/// Most SNES solves of one step attempt while the contact active set and the pin rotations settle.
+const MAX_CONTACT_SOLVES: usize = 30;
 
 /// Scale of constrained rows and of the Helmholtz rows (MPa): the largest P-wave modulus `K + 4G/3`.
 fn row_scale(materials: &[Material]) -> f64 {
@@ -367,6 +375,14 @@ pub struct StepReport {
     /// SNES, preconditioner) were built anew; false if they were reused.
     #[serde(default)]
     pub new_pattern: bool,
+    /// Rotation of every pinned device about its pin since t = 0, `(name, theta)` (rad,
+    /// counter-clockwise positive).
+    #[serde(default)]
+    pub rotations: Vec<(String, f64)>,
+    /// SNES solves of the converged attempt (more than 1 while a contact active set or a pin rotation
+    /// was being settled).
+    #[serde(default)]
+    pub contact_solves: usize,
 }
 
 /// The counters of a running simulation besides the particles (for checkpoints).
@@ -384,6 +400,12 @@ pub struct Counters {
     pub accumulated: Vec<[f64; 2]>,
     /// Last reactions per constraint set (N per mm thickness).
     pub last_reactions: Vec<[f64; 2]>,
+    /// Rotation of each rigid body about its pin (rad; 0 without a pin).
+    #[serde(default)]
+    pub rotations: Vec<f64>,
+    /// Rotation rate of each rigid body in the last step (rad/s).
+    #[serde(default)]
+    pub rotation_rates: Vec<f64>,
 }
 
 /// A running simulation: the committed state and the reusable per-step workspace.
@@ -402,6 +424,13 @@ pub struct Simulation {
     accumulated: Vec<[f64; 2]>,
     /// Last reactions (for the trapezoidal work increment).
     last_reactions: Vec<[f64; 2]>,
+    /// Rotation of each rigid body about its pin since t = 0 (rad; 0 without a pin).
+    rotations: Vec<f64>,
+    /// Rotation rate of each rigid body in the last step (rad/s), the first guess of the next step.
+    rotation_rates: Vec<f64>,
+    /// Per rigid body in contact, the statuses of its contact nodes at the end of the last step (the
+    /// first guess of the next step's active set).
+    contact_warm: Vec<Vec<(usize, NodeStatus)>>,
     table: ShapeTable,
     rigid_tables: Vec<ShapeTable>,
     /// Node shares of every load (see [`NodalLoad::shares`]).
@@ -445,6 +474,10 @@ struct StepProblem<'a, 'b> {
     /// Residual and Jacobian evaluations.
     residuals: usize,
     jacobians: usize,
+    /// The contact devices of the step (closed nodes get constraint rows).
+    contact: &'a [Option<DeviceContact>],
+    /// Scale of the constraint rows (MPa).
+    row_scale: f64,
 }
 
 impl NonlinearProblem for StepProblem<'_, '_> {
@@ -453,15 +486,25 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input) = (&mut *self.assembler, self.input);
+        let (contact, s) = (self.contact, self.row_scale);
+        let nf = input.dofs.fields();
         let r = x
             .read(|xs| asm.evaluate(input, xs))
             .map_err(fatal)?
             .map_err(|e| CallbackError::Domain(e.to_string()))
             .and_then(|()| {
-                x.read(|xs| f.write(|out| asm.residual(input, xs, out, false)))
-                    .map_err(fatal)?
-                    .map_err(fatal)?
-                    .map_err(|e| CallbackError::Domain(e.to_string()))
+                x.read(|xs| {
+                    f.write(|out| {
+                        asm.residual(input, xs, out, false)?;
+                        for d in contact.iter().flatten() {
+                            d.residual_rows(xs, out, nf, s);
+                        }
+                        Ok(())
+                    })
+                })
+                .map_err(fatal)?
+                .map_err(fatal)?
+                .map_err(|e: AssemblyError| CallbackError::Domain(e.to_string()))
             });
         self.assembly_time += t.elapsed().as_secs_f64();
         self.residuals += 1;
@@ -476,9 +519,24 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         x.read(|xs| asm.evaluate(input, xs))
             .map_err(fatal)?
             .map_err(|e| CallbackError::Domain(e.to_string()))?;
+        let (contact, s) = (self.contact, self.row_scale);
+        let pattern = asm.block_pattern(0);
         let r = jac
-            .fill_block_rows(&asm.block_pattern(0), |values, layout| {
-                asm.jacobian_into(input, values, layout)
+            .fill_block_rows(&pattern, |values, layout| {
+                asm.jacobian_into(input, values, layout);
+                let nf = input.dofs.fields();
+                let row_of = |a: usize| {
+                    let (lo, hi) = (pattern.row_ptr[a], pattern.row_ptr[a + 1]);
+                    let diag = pattern.cols[lo..hi]
+                        .binary_search(&(a as u32))
+                        .expect("diagonal block in the pattern");
+                    (lo * nf * nf, hi - lo, diag)
+                };
+                for d in contact.iter().flatten() {
+                    d.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
+                        layout.offset(ncols, nf, i, pos, k)
+                    });
+                }
             })
             .map_err(fatal);
         self.assembly_time += t.elapsed().as_secs_f64();
@@ -599,6 +657,20 @@ impl Simulation {
             m.init_history(&mut h[..m.history_len()]);
         }
         let nsets = setup.boxes.len() + setup.rigid.len() + setup.loads.len();
+        let nrigid = setup.rigid.len();
+        for rb in &setup.rigid {
+            if let Some(c) = &rb.contact {
+                let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
+                let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
+                if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
+                    return Err(StepError::Setup(format!(
+                        "rigid body `{}`: a device in contact needs both motion components prescribed \
+                         (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
+                        rb.name
+                    )));
+                }
+            }
+        }
         let dt = setup.time.dt;
         let load_shares = setup
             .loads
@@ -641,6 +713,9 @@ impl Simulation {
             external_work: 0.0,
             accumulated: vec![[0.0; 2]; nsets],
             last_reactions: vec![[0.0; 2]; nsets],
+            rotations: vec![0.0; nrigid],
+            rotation_rates: vec![0.0; nrigid],
+            contact_warm: vec![Vec::new(); nrigid],
             table: ShapeTable::new(),
             grid_state: GridState::new(),
             dofs: DofMap::default(),
@@ -659,6 +734,8 @@ impl Simulation {
             external_work: self.external_work,
             accumulated: self.accumulated.clone(),
             last_reactions: self.last_reactions.clone(),
+            rotations: self.rotations.clone(),
+            rotation_rates: self.rotation_rates.clone(),
         }
     }
 
@@ -670,6 +747,11 @@ impl Simulation {
         self.external_work = c.external_work;
         self.accumulated = c.accumulated;
         self.last_reactions = c.last_reactions;
+        let nr = self.setup.rigid.len();
+        self.rotations = c.rotations;
+        self.rotations.resize(nr, 0.0);
+        self.rotation_rates = c.rotation_rates;
+        self.rotation_rates.resize(nr, 0.0);
     }
 
     /// FEM mode: the nodal velocity (mm/s) and acceleration (mm/s^2) carried to the next step (None in
@@ -780,6 +862,23 @@ impl Simulation {
         // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
         let set_du = self.constraint_values(|v, rise| prescribed_increment(v, rise, self.time, dt));
         let sets = self.constrain(&set_du)?;
+        // Contact devices: translation from the prescribed motion, rotation about the pin first guessed as
+        // the last step's rate.
+        let nb = self.setup.boxes.len();
+        let translations: Vec<Vector2<f64>> = set_du[nb..]
+            .iter()
+            .map(|d| Vector2::new(d[0].unwrap_or(0.0), d[1].unwrap_or(0.0)))
+            .collect();
+        let pins: Vec<Option<Vector2<f64>>> = (0..self.setup.rigid.len())
+            .map(|k| self.pin_of(k))
+            .collect();
+        let mut dtheta: Vec<f64> = (0..self.setup.rigid.len())
+            .map(|k| match pins[k] {
+                Some(_) => self.rotation_rates[k] * dt,
+                None => 0.0,
+            })
+            .collect();
+        let (mut devices, face_lengths) = self.contact_devices(&translations, &pins, &dtheta, dt);
         let t_new = self.time + dt;
         // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
         let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
@@ -853,11 +952,26 @@ impl Simulation {
                     }
                 }
             }
+            for d in devices.iter().flatten() {
+                d.project_guess(xs, nf);
+            }
         })?;
         drop(setup_guard);
         let setup_time = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let (info, assembly_time, evaluations) = {
+        // The contact active set (and the rotation of pinned devices) is settled by repeated solves, each
+        // starting from the last solution (see `docs/theory.md`, "Contact with rigid devices").
+        let row_s = row_scale(&s.materials);
+        let h = grid.cell_size();
+        let mut info_total: Option<SolveInfo> = None;
+        let (mut assembly_time, mut evaluations) = (0.0, [0usize; 2]);
+        let mut contact_iterations = 0;
+        let mut seen: Vec<Vec<NodeStatus>> = Vec::new();
+        let mut frozen = false;
+        let mut secant: Vec<Option<(f64, f64)>> = vec![None; devices.len()];
+        let mut phys = vec![0.0; n];
+        loop {
+            contact_iterations += 1;
             let mut problem = StepProblem {
                 input: &input,
                 event: assembly_event,
@@ -865,28 +979,114 @@ impl Simulation {
                 assembly_time: 0.0,
                 residuals: 0,
                 jacobians: 0,
+                contact: &devices,
+                row_scale: row_s,
             };
             let info = snes.solve(&mut problem, x, jac)?;
-            (
-                info,
-                problem.assembly_time,
-                [problem.residuals, problem.jacobians],
-            )
-        };
-        let solve_time = t1.elapsed().as_secs_f64();
-        if !info.converged() {
-            let why = info.domain_errors.last().cloned().unwrap_or_default();
-            return Ok(Err(format!(
-                "SNES {} after {} iterations {why}",
-                info.reason_name, info.iterations
-            )));
+            assembly_time += problem.assembly_time;
+            evaluations[0] += problem.residuals;
+            evaluations[1] += problem.jacobians;
+            if !info.converged() {
+                let why = info.domain_errors.last().cloned().unwrap_or_default();
+                return Ok(Err(format!(
+                    "SNES {} after {} iterations {why}",
+                    info.reason_name, info.iterations
+                )));
+            }
+            info_total = Some(match info_total.take() {
+                None => info,
+                Some(mut t) => {
+                    t.iterations += info.iterations;
+                    t.linear_iterations += info.linear_iterations;
+                    t.residual_norms = info.residual_norms;
+                    t
+                }
+            });
+            if devices.iter().all(Option::is_none) {
+                break;
+            }
+            // Physical residual: the force of the devices on the specimen at the contact nodes.
+            let xs = x.read(|v| v.to_vec())?;
+            self.assembler.evaluate(&input, &xs)?;
+            self.assembler.residual(&input, &xs, &mut phys, true)?;
+            let force_scale = devices
+                .iter()
+                .flatten()
+                .flat_map(|d| d.nodes.iter())
+                .filter(|c| c.status.closed())
+                .map(|c| Vector2::new(phys[c.row * nf], phys[c.row * nf + 1]).norm())
+                .fold(0.0, f64::max);
+            let (force_tol, gap_tol) = (1e-9 * force_scale.max(1e-300), 1e-9 * h);
+            let mut changes = 0;
+            if !frozen {
+                for d in devices.iter_mut().flatten() {
+                    changes += d.update(&xs, &phys, nf, force_tol, gap_tol);
+                }
+                let statuses: Vec<NodeStatus> = devices
+                    .iter()
+                    .flatten()
+                    .flat_map(|d| d.nodes.iter().map(|c| c.status))
+                    .collect();
+                if changes > 0 && seen.contains(&statuses) {
+                    // A cycle of sets: keep the current one (only the pin rotations may still change).
+                    tracing::warn!(
+                        "step {}: the contact active set cycles; kept after {contact_iterations} solves",
+                        self.step + 1
+                    );
+                    frozen = true;
+                }
+                seen.push(statuses);
+            }
+            // Pinned devices: the moment of the contact forces about the pin must vanish (secant in dtheta).
+            let mut moments_ok = true;
+            for (k, d) in devices.iter_mut().enumerate() {
+                let (Some(d), Some(pin)) = (d.as_mut(), pins[k]) else {
+                    continue;
+                };
+                let (f, m) = d.resultant(&phys, nf, |i| grid.node_position(i), pin);
+                // Balanced to 1e-5 of the force times the face length (the resultant within 1e-5 of the
+                // face length from the pin).
+                let tol = 1e-5 * f.norm() * face_lengths[k] + 1e-12;
+                if m.abs() <= tol || d.nodes.iter().all(|c| !c.status.closed()) {
+                    continue;
+                }
+                moments_ok = false;
+                let th = dtheta[k];
+                let next = match secant[k] {
+                    Some((th0, m0)) if m != m0 => th - m * (th - th0) / (m - m0),
+                    _ => th + (0.1 * th.abs()).max(1e-9),
+                };
+                secant[k] = Some((th, m));
+                dtheta[k] = next;
+                let r = contact::rotation(next) - nalgebra::Matrix2::identity();
+                let du_t = translations[k];
+                for c in &mut d.nodes {
+                    c.du_device = du_t + r * (grid.node_position(c.node) - pin);
+                }
+            }
+            if (changes == 0 || frozen) && moments_ok {
+                break;
+            }
+            if contact_iterations >= MAX_CONTACT_SOLVES {
+                return Ok(Err(format!(
+                    "contact not settled after {contact_iterations} solves ({changes} status changes, \
+                     moment balance {})",
+                    if moments_ok { "met" } else { "not met" }
+                )));
+            }
+            x.write(|xs| {
+                for d in devices.iter().flatten() {
+                    d.project_guess(xs, nf);
+                }
+            })?;
         }
+        let info = info_total.expect("at least one solve");
+        let solve_time = t1.elapsed().as_secs_f64();
         // Converged: reactions from the unconstrained residual, then G2P and commit.
         let xs = x.read(|v| v.to_vec())?;
         self.assembler.evaluate(&input, &xs)?;
-        let mut phys = vec![0.0; n];
         self.assembler.residual(&input, &xs, &mut phys, true)?;
-        let reactions: Vec<[f64; 2]> = sets
+        let mut reactions: Vec<[f64; 2]> = sets
             .iter()
             .map(|dofs| {
                 let mut r = [0.0; 2];
@@ -896,6 +1096,13 @@ impl Simulation {
                 r
             })
             .collect();
+        for (k, d) in devices.iter().enumerate() {
+            if let Some(d) = d {
+                let pin = pins[k].unwrap_or_else(Vector2::zeros);
+                let (f, _) = d.resultant(&phys, nf, |i| grid.node_position(i), pin);
+                reactions[s.boxes.len() + k] = [f.x, f.y];
+            }
+        }
         let nodes = grid.num_nodes();
         let du_nodes = self.assembler.nodal_du().to_vec();
         let mut acc_nodes = vec![Vector2::zeros(); nodes];
@@ -926,7 +1133,6 @@ impl Simulation {
         };
         let mut displacements: Vec<[f64; 2]> =
             set_du.iter().map(|d| d.map(|v| v.unwrap_or(0.0))).collect();
-        let mut reactions = reactions;
         for (load, nodes) in s.loads.iter().zip(&load_nodes) {
             // A load reports its resultant and the share-weighted mean displacement of its nodes.
             let f = load.force * load.factor(t_new);
@@ -960,13 +1166,27 @@ impl Simulation {
             s.particles.a.iter_mut().for_each(|a| *a = Vector2::zeros());
         }
         let stored = self.assembler.commit(&mut s.particles);
-        for (rb, du) in s.rigid.iter_mut().zip(&displacements[s.boxes.len()..]) {
+        for (k, (rb, du)) in s
+            .rigid
+            .iter_mut()
+            .zip(&displacements[s.boxes.len()..])
+            .enumerate()
+        {
+            // x' = x + du + (R(dtheta) - I) (x - pin): translation with the pin, rotation about it.
             let dx = Vector2::new(du[0], du[1]);
-            rb.particles.x.iter_mut().for_each(|x| *x += dx);
+            let pin = pins[k].unwrap_or_else(Vector2::zeros);
+            let r = contact::rotation(dtheta[k]) - nalgebra::Matrix2::identity();
+            let moved = |x: &mut Vector2<f64>| *x += dx + r * (*x - pin);
+            rb.particles.x.iter_mut().for_each(moved);
             rb.particles
                 .corners
                 .iter_mut()
-                .for_each(|cs| cs.iter_mut().for_each(|c| *c += dx));
+                .for_each(|cs| cs.iter_mut().for_each(moved));
+            self.rotations[k] += dtheta[k];
+            self.rotation_rates[k] = dtheta[k] / dt;
+            if let Some(d) = &devices[k] {
+                self.contact_warm[k] = d.nodes.iter().map(|c| (c.node, c.status)).collect();
+            }
         }
         for (acc, du) in self.accumulated.iter_mut().zip(&displacements) {
             acc[0] += du[0];
@@ -1022,6 +1242,14 @@ impl Simulation {
             evaluations,
             wall_total: t0.elapsed().as_secs_f64(),
             new_pattern,
+            rotations: s
+                .rigid
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| r.contact.as_ref().is_some_and(|c| c.pin.is_some()))
+                .map(|(k, r)| (r.name.clone(), self.rotations[k]))
+                .collect(),
+            contact_solves: contact_iterations,
         }))
     }
 
@@ -1096,6 +1324,11 @@ impl Simulation {
             .zip(self.rigid_tables.iter_mut())
             .zip(&values[s.boxes.len()..])
         {
+            if rb.contact.is_some() {
+                // In contact: constrained by the active set of the step, not here.
+                sets.push(Vec::new());
+                continue;
+            }
             if self.fem.is_none() {
                 rt.compute(s.shape, grid, &rb.particles)?;
             }
@@ -1120,6 +1353,132 @@ impl Simulation {
             sets.push(dofs_of_set);
         }
         Ok(sets)
+    }
+
+    /// Current pin (mm) of rigid body `k`: its pin at t = 0 moved with the accumulated translation;
+    /// `None` without a pin.
+    fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
+        let s = &self.setup;
+        let pin = s.rigid[k].contact.as_ref()?.pin?;
+        let acc = self.accumulated[s.boxes.len() + k];
+        Some(pin + Vector2::new(acc[0], acc[1]))
+    }
+
+    /// The contact devices of a step (`None` for glued rigid bodies) and the length of each device's
+    /// face (mm): the contact nodes (active, unconstrained grid nodes of the node layer nearest to the
+    /// face and within its extent) with their gaps at the start of the step, their first status (that of
+    /// the last step, or closed if the node touches) and the device increment at the node for the
+    /// translation `translations[k]` (mm) and the rotation `dtheta[k]` (rad) about `pins[k]` in a step of
+    /// `dt` (s).
+    fn contact_devices(
+        &self,
+        translations: &[Vector2<f64>],
+        pins: &[Option<Vector2<f64>>],
+        dtheta: &[f64],
+        dt: f64,
+    ) -> (Vec<Option<DeviceContact>>, Vec<f64>) {
+        let s = &self.setup;
+        let grid = &s.grid;
+        let h = grid.cell_size();
+        let nf = self.dofs.fields();
+        let mut devices = Vec::with_capacity(s.rigid.len());
+        let mut lengths = Vec::with_capacity(s.rigid.len());
+        let mut index = vec![usize::MAX; grid.num_nodes()];
+        for (k, rb) in s.rigid.iter().enumerate() {
+            let Some(c) = &rb.contact else {
+                devices.push(None);
+                lengths.push(0.0);
+                continue;
+            };
+            let n = contact::rotation(self.rotations[k]) * c.normal;
+            let t = Vector2::new(-n.y, n.x);
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for x in rb.particles.corners.iter().flatten() {
+                for (j, v) in [n.dot(x), t.dot(x)].into_iter().enumerate() {
+                    lo[j] = lo[j].min(v);
+                    hi[j] = hi[j].max(v);
+                }
+            }
+            // Face plane n . x = c_f; depth of the device along n.
+            let (cf, depth) = (hi[0], hi[0] - lo[0]);
+            let r = contact::rotation(dtheta[k]) - nalgebra::Matrix2::identity();
+            let device_du = |x: Vector2<f64>| match pins[k] {
+                Some(pin) => translations[k] + r * (x - pin),
+                None => translations[k],
+            };
+            let warm = &self.contact_warm[k];
+            let mut nodes = Vec::new();
+            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+                let node = node as usize;
+                let x = grid.node_position(node);
+                let tx = t.dot(&x);
+                if (n.dot(&x) - cf).abs() > 0.5 * h + 1e-9
+                    || tx < lo[1] - 1e-9
+                    || tx > hi[1] + 1e-9
+                    || (0..2).any(|c| self.dofs.is_constrained(a * nf + c))
+                {
+                    continue;
+                }
+                index[node] = nodes.len();
+                nodes.push(ContactNode {
+                    node,
+                    row: a,
+                    gap: f64::INFINITY,
+                    du_device: device_du(x),
+                    status: NodeStatus::Open,
+                });
+            }
+            // Gap: from the face to the nearest corner of the specimen points (in front of the device's
+            // back face) interpolating to the node.
+            let p = &s.particles;
+            for q in 0..p.len() {
+                if n.dot(&p.x[q]) < cf - depth {
+                    continue;
+                }
+                let near = p.corners[q]
+                    .iter()
+                    .map(|c| n.dot(c))
+                    .fold(f64::INFINITY, f64::min);
+                for w in self.table.weights(q) {
+                    let i = index[w.node as usize];
+                    if w.value > 1e-12 && i != usize::MAX {
+                        nodes[i].gap = nodes[i].gap.min(near - cf);
+                    }
+                }
+            }
+            let mut device = DeviceContact {
+                normal: n,
+                friction: c.friction,
+                nodes,
+            };
+            let closed = device.closed_status();
+            for c in &mut device.nodes {
+                index[c.node] = usize::MAX;
+                // A node that closes with friction slips if its predicted motion slides along the device
+                // (sticking it would reverse its tangential velocity in the trapezoidal rule).
+                let (v, a) = (
+                    self.grid_state.velocity[c.node],
+                    self.grid_state.acceleration[c.node],
+                );
+                let slide = t.dot(&(dt * v + 0.5 * dt * dt * a - c.du_device));
+                let fresh = if closed == NodeStatus::Stick && slide.abs() > 1e-9 * h {
+                    NodeStatus::Slip(if slide > 0.0 { 1 } else { -1 })
+                } else {
+                    closed
+                };
+                c.status = match warm.iter().find(|(node, _)| *node == c.node) {
+                    Some(&(_, status)) => status,
+                    None if c.gap <= 1e-9 * h => fresh,
+                    None => NodeStatus::Open,
+                };
+                if device.friction == 0.0 && c.status.closed() {
+                    c.status = NodeStatus::Slide;
+                }
+            }
+            devices.push(Some(device));
+            lengths.push(hi[1] - lo[1]);
+        }
+        (devices, lengths)
     }
 
     /// The loads at time `t` on the active nodes: the nodal forces (one per grid node; empty without
@@ -1224,6 +1583,30 @@ impl Simulation {
                 self.dofs.prescribed(d).unwrap_or(-r[d] / m)
             });
         }
+        // Devices in contact: a touching node whose free acceleration would carry it into the device takes
+        // the device's normal acceleration (node by node: the lumped mass decouples them; friction is not
+        // applied at t = 0).
+        let nb = s.boxes.len();
+        let device_acc: Vec<Vector2<f64>> = prescribed[nb..]
+            .iter()
+            .map(|d| Vector2::new(d[0].unwrap_or(0.0), d[1].unwrap_or(0.0)))
+            .collect();
+        let pins: Vec<Option<Vector2<f64>>> = (0..s.rigid.len()).map(|k| self.pin_of(k)).collect();
+        let (devices, _) = self.contact_devices(&device_acc, &pins, &vec![0.0; s.rigid.len()], 0.0);
+        let mut contact_forces = vec![Vector2::zeros(); devices.len()];
+        for (k, d) in devices.iter().enumerate() {
+            let Some(d) = d else { continue };
+            let n = d.normal;
+            for c in d.nodes.iter().filter(|c| c.status.closed()) {
+                let push = n.dot(&(c.du_device - acc[c.node]));
+                if push > 0.0 {
+                    acc[c.node] += push * n;
+                    let b = c.row * nf;
+                    let m = self.grid_state.mass[c.node];
+                    contact_forces[k] += Vector2::new(r[b], r[b + 1]) + m * acc[c.node];
+                }
+            }
+        }
         // The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
         // with the initial inertia in each constrained set, the applied resultant of each load.
         for (reaction, dofs) in self.last_reactions.iter_mut().zip(&sets) {
@@ -1231,6 +1614,11 @@ impl Simulation {
             for &d in dofs {
                 let (node, c) = (self.dofs.node(d / nf), d % nf);
                 reaction[c] += r[d] + self.grid_state.mass[node] * acc[node][c];
+            }
+        }
+        for (k, f) in contact_forces.iter().enumerate() {
+            if devices[k].is_some() {
+                self.last_reactions[nb + k] = [f.x, f.y];
             }
         }
         for (reaction, load) in self.last_reactions[sets.len()..].iter_mut().zip(&s.loads) {

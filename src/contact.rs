@@ -1,0 +1,345 @@
+//! Unilateral contact between rigid loading devices and the deformable bodies on the background grid
+//! (`docs/theory.md`, "Contact with rigid devices").
+//!
+//! A device has a flat contact face with the unit normal `n` (pointing from the device into the
+//! specimen) and the tangent `t = (-n_y, n_x)`. Its contact nodes are the active grid nodes of the node
+//! layer nearest to the face plane (`|n . x_I - c_f| <= h/2`) within the face's tangential extent. Each
+//! has a gap `g_I >= 0` at the start of the step: the distance along `n` from the face to the nearest
+//! corner of the specimen points interpolating to the node. With the device's increment `du_b(x_I)` the
+//! condition after the step is `g_I + n . (du_I - du_b(x_I)) >= 0` and the contact force on the specimen
+//! `F_I = R_I` (the unbalanced physical residual at the node, N per mm thickness) must push:
+//! `lambda_I = n . F_I >= 0`.
+//!
+//! The condition is enforced with an active set of nodal constraints settled within the step: an active
+//! node's block row is replaced by the constraint `s (n . du_I - n . du_b + g_I) = 0` and, in `t`, by
+//! free sliding `t . R_I = 0`, sticking `s (t . du_I - t . du_b) = 0` or Coulomb slip
+//! `t . R_I + mu sigma n . R_I = 0` (sigma = +-1, the assumed slip direction). All rows are linear in
+//! the physical rows or in `du`, so the Jacobian is the exact derivative (linear combinations of the
+//! physical block rows), and Newton converges quadratically for a fixed set. After each solve the set
+//! is updated (tensile nodes released, penetrating nodes added, stick/slip switched by the Coulomb
+//! cone and the slip direction) until it does not change.
+
+use nalgebra::{Matrix2, Vector2};
+
+/// The contact law of a rigid device (`[[rigid_body]] contact = {...}`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Contact {
+    /// Unit normal of the contact face at t = 0, from the device into the specimen.
+    pub normal: Vector2<f64>,
+    /// Coulomb friction coefficient mu (-), 0 = frictionless.
+    pub friction: f64,
+    /// Pin (mm) at t = 0: the device is driven at this point and turns freely about it (massless: the
+    /// moment of the contact forces about the pin vanishes). `None`: the device translates only.
+    pub pin: Option<Vector2<f64>>,
+}
+
+/// The state of a contact node within a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum NodeStatus {
+    /// Not in contact: the node is free.
+    Open,
+    /// In contact, no tangential force (frictionless).
+    Slide,
+    /// In contact and sticking to the device.
+    Stick,
+    /// In contact and slipping; friction force `t . F = -mu lambda sigma` with `sigma` the sign of the
+    /// tangential slip `t . (du - du_b)`.
+    Slip(i8),
+}
+
+impl NodeStatus {
+    /// True if the normal constraint is active.
+    pub fn closed(self) -> bool {
+        self != NodeStatus::Open
+    }
+}
+
+/// One contact node of a device in a step.
+#[derive(Debug, Clone)]
+pub struct ContactNode {
+    /// Grid node.
+    pub node: usize,
+    /// Active-node index (block row).
+    pub row: usize,
+    /// Gap at the start of the step (mm), >= 0 unless the specimen overlaps the device.
+    pub gap: f64,
+    /// Increment of the device at this node in the step (mm).
+    pub du_device: Vector2<f64>,
+    /// Status.
+    pub status: NodeStatus,
+}
+
+/// The contact nodes of one device in a step.
+#[derive(Debug, Clone)]
+pub struct DeviceContact {
+    /// Unit normal (from the device into the specimen) at the start of the step.
+    pub normal: Vector2<f64>,
+    /// Friction coefficient (-).
+    pub friction: f64,
+    /// The nodes.
+    pub nodes: Vec<ContactNode>,
+}
+
+impl DeviceContact {
+    /// Unit tangent `t = (-n_y, n_x)`.
+    pub fn tangent(&self) -> Vector2<f64> {
+        Vector2::new(-self.normal.y, self.normal.x)
+    }
+
+    /// The status of a node that just closed: sliding without friction, else sticking.
+    pub fn closed_status(&self) -> NodeStatus {
+        if self.friction > 0.0 {
+            NodeStatus::Stick
+        } else {
+            NodeStatus::Slide
+        }
+    }
+
+    /// The block-row components of the normal and the tangential row and their signs: the normal
+    /// constraint takes the component in which `n` is largest, each row is signed so that its diagonal
+    /// entry is positive (pivoting-free factorisations need non-zero pivots).
+    fn row_order(&self) -> ((usize, f64), (usize, f64)) {
+        let (n, t) = (self.normal, self.tangent());
+        let rn = if n.y.abs() > n.x.abs() { 1 } else { 0 };
+        let rt = 1 - rn;
+        ((rn, n[rn].signum()), (rt, t[rt].signum()))
+    }
+
+    /// Rewrites the residual block rows of the closed nodes (`r`: the physical residual, `nf` unknowns
+    /// per node, `x` the iterate, `s` the row scale in MPa).
+    pub fn residual_rows(&self, x: &[f64], r: &mut [f64], nf: usize, s: f64) {
+        let (n, t) = (self.normal, self.tangent());
+        let ((rn, sn), (rt, st)) = self.row_order();
+        for c in &self.nodes {
+            if !c.status.closed() {
+                continue;
+            }
+            let b = c.row * nf;
+            let du = Vector2::new(x[b], x[b + 1]);
+            let rp = Vector2::new(r[b], r[b + 1]);
+            r[b + rn] = sn * s * (n.dot(&(du - c.du_device)) + c.gap);
+            r[b + rt] = st
+                * match c.status {
+                    NodeStatus::Stick => s * t.dot(&(du - c.du_device)),
+                    NodeStatus::Slip(sigma) => {
+                        t.dot(&rp) + self.friction * f64::from(sigma) * n.dot(&rp)
+                    }
+                    _ => t.dot(&rp),
+                };
+        }
+    }
+
+    /// Rewrites the Jacobian block rows of the closed nodes in place: `row_of(a)` gives the start of
+    /// block row `a` in `values`, its number of block columns and the position of its diagonal block;
+    /// `offset(ncols, i, pos, k)` the position of entry (row component `i`, block column `pos`, column
+    /// component `k`) within the block row.
+    pub fn jacobian_rows(
+        &self,
+        nf: usize,
+        s: f64,
+        row_of: impl Fn(usize) -> (usize, usize, usize),
+        values: &mut [f64],
+        offset: impl Fn(usize, usize, usize, usize) -> usize,
+    ) {
+        let (n, t) = (self.normal, self.tangent());
+        let ((rn, sn), (rt, st)) = self.row_order();
+        let mut tangential = Vec::new();
+        for c in &self.nodes {
+            if !c.status.closed() {
+                continue;
+            }
+            let (start, ncols, diag) = row_of(c.row);
+            let at = |i, pos, k| start + offset(ncols, i, pos, k);
+            // The tangential row from the physical rows, before they are overwritten.
+            tangential.clear();
+            let w = match c.status {
+                NodeStatus::Slip(sigma) => t + self.friction * f64::from(sigma) * n,
+                _ => t,
+            };
+            for pos in 0..ncols {
+                for k in 0..nf {
+                    let v = match c.status {
+                        NodeStatus::Stick => 0.0,
+                        _ => w.x * values[at(0, pos, k)] + w.y * values[at(1, pos, k)],
+                    };
+                    tangential.push(st * v);
+                }
+            }
+            for pos in 0..ncols {
+                for k in 0..nf {
+                    values[at(rt, pos, k)] = tangential[pos * nf + k];
+                    values[at(rn, pos, k)] = 0.0;
+                }
+            }
+            if c.status == NodeStatus::Stick {
+                values[at(rt, diag, 0)] = st * s * t.x;
+                values[at(rt, diag, 1)] = st * s * t.y;
+            }
+            values[at(rn, diag, 0)] = sn * s * n.x;
+            values[at(rn, diag, 1)] = sn * s * n.y;
+        }
+    }
+
+    /// Projects the initial guess of the closed nodes onto their constraints.
+    pub fn project_guess(&self, x: &mut [f64], nf: usize) {
+        let (n, t) = (self.normal, self.tangent());
+        for c in &self.nodes {
+            if !c.status.closed() {
+                continue;
+            }
+            let b = c.row * nf;
+            let mut du = Vector2::new(x[b], x[b + 1]);
+            du += n * (n.dot(&(c.du_device - du)) - c.gap);
+            if c.status == NodeStatus::Stick {
+                du += t * t.dot(&(c.du_device - du));
+            }
+            x[b] = du.x;
+            x[b + 1] = du.y;
+        }
+    }
+
+    /// Updates the statuses from a converged solve (`x` the solution, `phys` the physical residual,
+    /// i.e. the force of the device on the specimen at the contact nodes, N per mm thickness):
+    /// tensile nodes open, penetrating open nodes close (slipping in the direction they slide, or
+    /// sticking), sticking nodes outside the Coulomb cone slip, slipping nodes whose slip reverses stick.
+    /// Returns the number of changes.
+    ///
+    /// `force_tol` (N per mm thickness) and `gap_tol` (mm) are the tolerances of the sign tests.
+    pub fn update(
+        &mut self,
+        x: &[f64],
+        phys: &[f64],
+        nf: usize,
+        force_tol: f64,
+        gap_tol: f64,
+    ) -> usize {
+        let (n, t, mu) = (self.normal, self.tangent(), self.friction);
+        let closed = self.closed_status();
+        let mut changes = 0;
+        for c in &mut self.nodes {
+            let b = c.row * nf;
+            let du = Vector2::new(x[b], x[b + 1]);
+            let f = Vector2::new(phys[b], phys[b + 1]);
+            let (lambda, ft) = (n.dot(&f), t.dot(&f));
+            let slip = t.dot(&(du - c.du_device));
+            let next = match c.status {
+                NodeStatus::Open => {
+                    if c.gap + n.dot(&(du - c.du_device)) < -gap_tol {
+                        // Closing while sliding along the device: slip that way (sticking would reverse
+                        // the node's tangential velocity in the trapezoidal rule).
+                        if closed == NodeStatus::Stick && slip.abs() > gap_tol {
+                            NodeStatus::Slip(if slip > 0.0 { 1 } else { -1 })
+                        } else {
+                            closed
+                        }
+                    } else {
+                        NodeStatus::Open
+                    }
+                }
+                _ if lambda < -force_tol => NodeStatus::Open,
+                NodeStatus::Slide => NodeStatus::Slide,
+                NodeStatus::Stick => {
+                    if ft.abs() > mu * lambda.max(0.0) + force_tol {
+                        NodeStatus::Slip(if ft > 0.0 { -1 } else { 1 })
+                    } else {
+                        NodeStatus::Stick
+                    }
+                }
+                NodeStatus::Slip(sigma) => {
+                    if slip * f64::from(sigma) < -gap_tol {
+                        NodeStatus::Stick
+                    } else {
+                        NodeStatus::Slip(sigma)
+                    }
+                }
+            };
+            if next != c.status {
+                changes += 1;
+                c.status = next;
+            }
+        }
+        changes
+    }
+
+    /// Sum of the contact forces on the specimen over the closed nodes (N per mm thickness) and their
+    /// moment about `pin` (N mm per mm thickness, counter-clockwise positive).
+    pub fn resultant(
+        &self,
+        phys: &[f64],
+        nf: usize,
+        grid_x: impl Fn(usize) -> Vector2<f64>,
+        pin: Vector2<f64>,
+    ) -> (Vector2<f64>, f64) {
+        let mut f = Vector2::zeros();
+        let mut m = 0.0;
+        for c in self.nodes.iter().filter(|c| c.status.closed()) {
+            let b = c.row * nf;
+            let fi = Vector2::new(phys[b], phys[b + 1]);
+            let r = grid_x(c.node) - pin;
+            f += fi;
+            m += r.x * fi.y - r.y * fi.x;
+        }
+        (f, m)
+    }
+}
+
+/// Rotation by the angle `theta` (rad, counter-clockwise).
+pub fn rotation(theta: f64) -> Matrix2<f64> {
+    let (s, c) = theta.sin_cos();
+    Matrix2::new(c, -s, s, c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn device(status: NodeStatus, friction: f64) -> DeviceContact {
+        DeviceContact {
+            normal: Vector2::new(0.0, 1.0),
+            friction,
+            nodes: vec![ContactNode {
+                node: 0,
+                row: 0,
+                gap: 0.1,
+                du_device: Vector2::new(0.2, -0.3),
+                status,
+            }],
+        }
+    }
+
+    #[test]
+    fn statuses_follow_the_sign_tests() {
+        // Compressive normal force (+y on the specimen), tangential force inside the cone: stays stuck.
+        let mut d = device(NodeStatus::Stick, 0.5);
+        assert_eq!(d.update(&[0.2, -0.4], &[0.4, 1.0], 2, 1e-12, 1e-12), 0);
+        // Outside the cone: slips against the force on the specimen (F_x > 0: slides towards -x = +t).
+        assert_eq!(d.update(&[0.2, -0.4], &[0.6, 1.0], 2, 1e-12, 1e-12), 1);
+        assert_eq!(d.nodes[0].status, NodeStatus::Slip(1));
+        // Tensile: opens.
+        d.update(&[0.2, -0.4], &[0.0, -1.0], 2, 1e-12, 1e-12);
+        assert_eq!(d.nodes[0].status, NodeStatus::Open);
+        // Open and penetrating (gap 0.1 + (-0.5 + 0.3) < 0) without sliding: closes, sticking.
+        d.update(&[0.2, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        assert_eq!(d.nodes[0].status, NodeStatus::Stick);
+        // Closing while sliding (t . (du - du_b) = -(0 - 0.2) > 0): slips that way.
+        d.nodes[0].status = NodeStatus::Open;
+        d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        assert_eq!(d.nodes[0].status, NodeStatus::Slip(1));
+        // Frictionless: closes sliding.
+        let mut d = device(NodeStatus::Open, 0.0);
+        d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        assert_eq!(d.nodes[0].status, NodeStatus::Slide);
+    }
+
+    #[test]
+    fn constraint_rows_vanish_on_the_constraint() {
+        let d = device(NodeStatus::Stick, 0.3);
+        let mut x = vec![1.0, 2.0];
+        d.project_guess(&mut x, 2);
+        let mut r = vec![5.0, 7.0];
+        d.residual_rows(&x, &mut r, 2, 1e3);
+        assert!(r.iter().all(|v| v.abs() < 1e-12), "{r:?}");
+        // The new gap is zero: the node sits on the device face.
+        assert!((x[1] - (-0.3 - 0.1)).abs() < 1e-15);
+    }
+}
