@@ -383,6 +383,22 @@ impl Assembler {
                     geb += w.grad * eb[n];
                 }
                 let fn2 = particles.f[p];
+                let material = &materials[particles.body[p] as usize];
+                if material.is_eroded(particles.damage[p]) {
+                    // A void that keeps its mass: no stress or stiffness, F frozen (the solver restores
+                    // it after G2P), and in the Helmholtz rows an anchor `eta_bar_p -> eta_bar_p^n`
+                    // without diffusion, so the nonlocal field does not spread through the crack.
+                    h_trial[..hs].copy_from_slice(&particles.history(p)[..hs]);
+                    *ev = PointEval {
+                        eta: if nonlocal { particles.eta_bar[p] } else { 0.0 },
+                        eta_bar: if nonlocal { ebp } else { 0.0 },
+                        grad_eta_bar: geb,
+                        damage: particles.damage[p],
+                        det: fn2.determinant(),
+                        ..PointEval::default()
+                    };
+                    return Ok(());
+                }
                 let f2 = (Matrix2::identity() + grad_du) * fn2;
                 let det = f2.determinant();
                 if det.is_nan() || det <= 0.0 {
@@ -399,7 +415,6 @@ impl Assembler {
                     0.0,
                     1.0,
                 );
-                let material = &materials[particles.body[p] as usize];
                 let h_n = particles.history(p);
                 let h_trial = &mut h_trial[..hs];
                 let mut r = Response::zeros();

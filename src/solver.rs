@@ -1146,7 +1146,33 @@ impl Simulation {
             }
         }
         let s = &mut self.setup;
+        // Eroded points (material `erosion_damage`) move with the grid but keep their deformation
+        // gradient, volume and domain: a void does not deform, so it never inverts.
+        let frozen: Vec<_> = (0..s.particles.len())
+            .filter(|&p| s.materials[s.particles.body[p] as usize].is_eroded(s.particles.damage[p]))
+            .map(|p| {
+                let ps = &s.particles;
+                (
+                    p,
+                    ps.x[p],
+                    ps.f[p],
+                    ps.r1[p],
+                    ps.r2[p],
+                    ps.vol[p],
+                    ps.corners[p],
+                )
+            })
+            .collect();
         transfer::grid_to_particles(&self.table, &s.grid, &sol, &mut s.particles)?;
+        for (p, x, f, r1, r2, vol, corners) in frozen {
+            let ps = &mut s.particles;
+            let shift = ps.x[p] - x;
+            ps.f[p] = f;
+            ps.r1[p] = r1;
+            ps.r2[p] = r2;
+            ps.vol[p] = vol;
+            ps.corners[p] = corners.map(|c| c + shift);
+        }
         if let Some(fem) = &mut self.fem {
             let (mut v, a) = (self.grid_state.velocity.clone(), acc_nodes.clone());
             if let Some(nm) = newmark {

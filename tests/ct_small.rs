@@ -75,3 +75,39 @@ fn damage_starts_at_the_notch_tip_and_the_opening_force_is_positive() {
         );
     }
 }
+
+#[test]
+fn eroded_points_carry_no_stress_and_keep_their_deformation_gradient() {
+    // The localizing gradient activity concentrates the band into a cell or two, where points would
+    // otherwise stretch until they invert; with `erosion_damage` they turn into voids that keep their
+    // mass: no stress, F frozen from the step they erode.
+    let s = Session::get().expect("PETSc");
+    petsc::apply_default_options(&s, "-er_ksp_type preonly -er_pc_type lu -er_pc_factor_mat_solver_type mumps -er_snes_rtol 1e-8 -er_snes_atol 1e-8")
+        .expect("options");
+    let text = CONFIG.replace(
+        "material = { model = \"microplane\", preset = \"paper\" }",
+        "material = { model = \"microplane\", preset = \"paper\", erosion_damage = 0.9, \
+         gradient_activity = { kind = \"localizing\", residual = 0.01, decay = 0.0 } }",
+    );
+    let cfg = RunConfig::from_str_named(&text, "ct-small-erosion").expect("config");
+    let mut setup = scenario::build(&cfg).expect("model");
+    setup.options_prefix = Some("er_".into());
+    let mut sim = Simulation::new(setup).expect("simulation");
+    // F of each point when it first counts as eroded (committed damage >= 0.9).
+    let mut frozen: Vec<Option<nalgebra::Matrix2<f64>>> = vec![None; sim.setup.particles.len()];
+    for _ in 0..160 {
+        sim.advance(&s).expect("step converges");
+        let p = &sim.setup.particles;
+        for (i, fz) in frozen.iter_mut().enumerate() {
+            if let Some(f) = fz {
+                assert_eq!(*f, p.f[i], "point {i}: F changed after erosion");
+                assert_eq!(p.stress[i], nalgebra::Matrix3::zeros(), "point {i}: stress");
+            } else if p.damage[i] >= 0.9 {
+                *fz = Some(p.f[i]);
+            }
+        }
+    }
+    let eroded = frozen.iter().filter(|f| f.is_some()).count();
+    eprintln!("{eroded} eroded points after 160 us");
+    assert!(eroded > 10, "the band must erode ({eroded} points)");
+}

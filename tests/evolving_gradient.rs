@@ -37,6 +37,9 @@ fn onset_width() -> f64 {
 
 /// What a bar run records.
 struct Run {
+    /// Width of the zone with d >= 0.25 when the first point reaches d = 0.5 (mm; 0 if none did): the
+    /// half-height width of the first localised damage profile.
+    onset_width: f64,
     /// (dL, width of the d >= 0.9 zone) at the requested openings (mm).
     widths: Vec<(f64, f64)>,
     /// Dissipated energy per mm^2 of section at the end, `(W_ext - Psi - K)/h` (N mm / mm^2).
@@ -86,6 +89,18 @@ const DT: f64 = 1e-5;
 /// (mm), with the activity `activity` (TOML inline table), recording the band width whenever dL passes
 /// one of `marks`.
 fn run_bar(s: &SessionGuard, h: f64, dl: f64, activity: &str, marks: &[f64]) -> Run {
+    run_bar_with(s, h, dl, activity, marks, (GAMMA_0, BETA))
+}
+
+/// [`run_bar`] with the damage law's `(gamma_0, beta)`.
+fn run_bar_with(
+    s: &SessionGuard,
+    h: f64,
+    dl: f64,
+    activity: &str,
+    marks: &[f64],
+    (gamma_0, beta): (f64, f64),
+) -> Run {
     let geometry = Geometry {
         include: vec![Region::Rect {
             min: [0.0, 0.0],
@@ -114,8 +129,8 @@ fn run_bar(s: &SessionGuard, h: f64, dl: f64, activity: &str, marks: &[f64]) -> 
     }
     let x0: Vec<f64> = particles.x.iter().map(|x| x.x - 0.5 * L).collect();
     let cfg: MaterialConfig = toml::from_str(&format!(
-        "model = \"isotropic_damage\"\nyoungs_modulus = {E}\npoisson_ratio = 0.0\ngamma_0 = {GAMMA_0}\n\
-         alpha = {ALPHA}\nbeta = {BETA}\nc = {C0}\nequivalent_strain = \"axial\"\nkinematics = \"small\"\n\
+        "model = \"isotropic_damage\"\nyoungs_modulus = {E}\npoisson_ratio = 0.0\ngamma_0 = {gamma_0}\n\
+         alpha = {ALPHA}\nbeta = {beta}\nc = {C0}\nequivalent_strain = \"axial\"\nkinematics = \"small\"\n\
          gradient_activity = {activity}\n"
     ))
     .expect("material");
@@ -186,12 +201,16 @@ fn run_bar(s: &SessionGuard, h: f64, dl: f64, activity: &str, marks: &[f64]) -> 
         pts
     };
     let (mut widths, mut next, mut last) = (Vec::new(), 0, None);
+    let mut onset = None;
     let mut d = 0.0;
     while d < dl - 1e-9 {
         let r = sim
             .advance(s)
             .unwrap_or_else(|e| panic!("h = {h}, {activity}: step failed: {e}"));
         d = r.displacements[0].1[0];
+        if onset.is_none() && sim.setup.particles.damage.iter().any(|&v| v >= 0.5) {
+            onset = Some(zone_width(&profile(&sim), 0.25));
+        }
         if next < marks.len() && d >= marks[next] - 1e-12 {
             widths.push((d, zone_width(&profile(&sim), 0.9)));
             next += 1;
@@ -200,6 +219,7 @@ fn run_bar(s: &SessionGuard, h: f64, dl: f64, activity: &str, marks: &[f64]) -> 
     }
     let r = last.expect("at least one step");
     Run {
+        onset_width: onset.unwrap_or(0.0),
         widths,
         dissipated: (r.external_work - r.stored_energy - r.kinetic_energy) / h,
         stress: r.reactions[0].1[0] / h,
@@ -301,4 +321,53 @@ fn activity_held_at_its_reference_value_reproduces_the_constant_model_exactly() 
         assert_eq!(a.damage, other.damage);
         assert_eq!(a.stress.to_bits(), other.stress.to_bits());
     }
+}
+
+#[test]
+fn onset_width_is_kept_when_beta_scales_with_one_over_gamma_0() {
+    // The onset half-wavelength pi sqrt(c/(alpha beta gamma_0)) depends on beta gamma_0 only: a ten times
+    // larger threshold with beta / 10 localises over the same width; with beta kept it localises over a
+    // sqrt(10) times narrower one.
+    let s = session();
+    let base = run_bar_with(
+        &s,
+        0.5,
+        0.02,
+        "{ kind = \"constant\" }",
+        &[],
+        (GAMMA_0, BETA),
+    );
+    let scaled = run_bar_with(
+        &s,
+        0.5,
+        0.15,
+        "{ kind = \"constant\" }",
+        &[],
+        (10.0 * GAMMA_0, BETA / 10.0),
+    );
+    let kept = run_bar_with(
+        &s,
+        0.5,
+        0.15,
+        "{ kind = \"constant\" }",
+        &[],
+        (10.0 * GAMMA_0, BETA),
+    );
+    eprintln!(
+        "width of the damaged zone at onset: {:.2} mm (gamma_0), {:.2} mm (10 gamma_0, beta/10), {:.2} mm (10 gamma_0, beta)",
+        base.onset_width, scaled.onset_width, kept.onset_width
+    );
+    assert!(base.onset_width > 0.0 && scaled.onset_width > 0.0 && kept.onset_width > 0.0);
+    assert!(
+        (scaled.onset_width - base.onset_width).abs() <= 0.1 * base.onset_width,
+        "scaled beta: {:.2} against {:.2} mm",
+        scaled.onset_width,
+        base.onset_width
+    );
+    assert!(
+        kept.onset_width < 0.7 * base.onset_width,
+        "kept beta: {:.2} against {:.2} mm",
+        kept.onset_width,
+        base.onset_width
+    );
 }

@@ -86,6 +86,12 @@ pub enum Preset {
     #[serde(rename = "paper_gamma0_1.25e-4")]
     #[value(name = "paper_gamma0_1.25e-4")]
     PaperGamma0Low,
+    /// Table 1 with gamma_0 = 1.25e-4 and beta = 6500: beta scaled with 1/gamma_0 so that the onset
+    /// half-wavelength `pi sqrt(c/(alpha beta gamma_0))` (3.5 mm) and so the width over which damage first
+    /// localises stay those of Table 1 (see [`MicroplaneParams::onset_half_wavelength`]).
+    #[serde(rename = "paper_gamma0_1.25e-4_scaled")]
+    #[value(name = "paper_gamma0_1.25e-4_scaled")]
+    PaperGamma0LowScaled,
 }
 
 impl Preset {
@@ -94,6 +100,7 @@ impl Preset {
         match self {
             Preset::Paper => "paper",
             Preset::PaperGamma0Low => "paper_gamma0_1.25e-4",
+            Preset::PaperGamma0LowScaled => "paper_gamma0_1.25e-4_scaled",
         }
     }
 
@@ -112,11 +119,17 @@ impl Preset {
             eta_mode: EtaMode::Max,
             gradient_activity: GradientActivity::Constant,
             strain_measure: StrainMeasure::GreenLagrange,
+            erosion_damage: None,
         };
         match self {
             Preset::Paper => paper,
             Preset::PaperGamma0Low => MicroplaneParams {
                 gamma_0: 1.25e-4,
+                ..paper
+            },
+            Preset::PaperGamma0LowScaled => MicroplaneParams {
+                gamma_0: 1.25e-4,
+                beta: 6500.0,
                 ..paper
             },
         }
@@ -154,6 +167,9 @@ pub struct MicroplaneConfig {
     pub gradient_activity: Option<GradientActivity>,
     /// Strain projected for `eta_mic`: `"green_lagrange"` (default, the paper) or `"hencky"`.
     pub strain_measure: Option<StrainMeasure>,
+    /// Damage `d_e` (0 < d_e < 1) at which a point erodes into a void (see `docs/theory.md`, "Eroded
+    /// points"); default: never.
+    pub erosion_damage: Option<f64>,
 }
 
 /// Complete, validated microplane parameters.
@@ -183,6 +199,8 @@ pub struct MicroplaneParams {
     pub gradient_activity: GradientActivity,
     /// Strain tensor of the equivalent strains.
     pub strain_measure: StrainMeasure,
+    /// Damage at which a point erodes (None: never).
+    pub erosion_damage: Option<f64>,
 }
 
 impl MicroplaneConfig {
@@ -216,6 +234,7 @@ impl MicroplaneConfig {
             eta_mode: self.eta_mode.unwrap_or_default(),
             gradient_activity: self.gradient_activity.unwrap_or_default(),
             strain_measure: self.strain_measure.unwrap_or_default(),
+            erosion_damage: self.erosion_damage.or(base.and_then(|b| b.erosion_damage)),
         };
         p.validate()?;
         Ok(p)
@@ -223,6 +242,14 @@ impl MicroplaneConfig {
 }
 
 impl MicroplaneParams {
+    /// Onset half-wavelength `pi sqrt(c/(alpha beta gamma_0))` (mm): the width over which softening first
+    /// localises in the 1D gradient problem linearised at `gamma_0` (softening slope `alpha beta gamma_0`
+    /// relative to the elastic one). It depends on `beta gamma_0` only, so a threshold changed by a factor
+    /// keeps it when `beta` changes by the inverse factor. Infinite for `c > 0` without softening.
+    pub fn onset_half_wavelength(&self) -> f64 {
+        std::f64::consts::PI * (self.c / (self.alpha * self.beta * self.gamma_0)).sqrt()
+    }
+
     /// Checks every parameter range.
     pub fn validate(&self) -> Result<(), MaterialError> {
         let bad = |field, value, allowed| {
@@ -250,6 +277,11 @@ impl MicroplaneParams {
         }
         if !(self.c.is_finite() && self.c >= 0.0) {
             return bad("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
+        }
+        if let Some(de) = self.erosion_damage
+            && !(de > 0.0 && de < 1.0)
+        {
+            return bad("erosion_damage", de, "0 < erosion_damage < 1");
         }
         self.gradient_activity.validate()
     }
@@ -775,6 +807,21 @@ mod tests {
                 assert_eq!(n_loading_states, 4);
             }
         }
+    }
+
+    #[test]
+    fn scaled_preset_keeps_the_onset_half_wavelength() {
+        let w = |p: Preset| p.params().onset_half_wavelength();
+        assert!(
+            (w(Preset::Paper) - 3.5).abs() < 0.05,
+            "{}",
+            w(Preset::Paper)
+        );
+        assert!((w(Preset::PaperGamma0LowScaled) - w(Preset::Paper)).abs() < 1e-12);
+        assert!((w(Preset::PaperGamma0Low) / w(Preset::Paper) - 10f64.sqrt()).abs() < 1e-12);
+        let cfg: MicroplaneConfig =
+            toml::from_str("preset = \"paper_gamma0_1.25e-4_scaled\"").unwrap();
+        assert_eq!(cfg.resolve().unwrap().beta, 6500.0);
     }
 
     #[test]

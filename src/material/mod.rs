@@ -201,6 +201,15 @@ impl Material {
         }
     }
 
+    /// Whether a point with committed damage `damage` has eroded into a void: no stress, no stiffness, its
+    /// deformation gradient frozen and no nonlocal diffusion through it (`erosion_damage` of the config).
+    pub fn is_eroded(&self, damage: f64) -> bool {
+        match self {
+            Material::Microplane(m) => m.params().erosion_damage.is_some_and(|de| damage >= de),
+            _ => false,
+        }
+    }
+
     /// History slots of the constitutive law itself (before the activity's).
     fn law_history_len(&self) -> usize {
         match self {
