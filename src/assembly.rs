@@ -138,6 +138,8 @@ struct PointEval {
     damage: f64,
     /// det F.
     det: f64,
+    /// Dissipation density of the step under tensile / compressive plane strain (MPa).
+    dissipation: [f64; 2],
     /// Gradient activity `c_p` (mm^2) and its derivatives `dc/d eta`, `dc/d eta_bar` at the iterate.
     c: f64,
     dc_deta: f64,
@@ -157,6 +159,7 @@ impl Default for PointEval {
             energy: 0.0,
             damage: 0.0,
             det: 1.0,
+            dissipation: [0.0; 2],
             c: 0.0,
             dc_deta: 0.0,
             dc_deb: 0.0,
@@ -441,6 +444,7 @@ impl Assembler {
                     energy: r.energy,
                     damage: r.damage,
                     det,
+                    dissipation: r.dissipation,
                     c: r.activity.c,
                     dc_deta: r.activity.dc_deta,
                     dc_deb: r.activity.dc_deta_bar,
@@ -541,9 +545,10 @@ impl Assembler {
     }
 
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
-    /// `sigma = P F^T / det F`, `eta_bar_p`, damage. Returns the stored energy `sum_p V^0 Psi_p` (N mm).
-    /// `particles.f` must already hold the converged deformation gradients (after G2P).
-    pub fn commit(&self, particles: &mut Particles) -> f64 {
+    /// `sigma = P F^T / det F`, `eta_bar_p`, damage, the dissipation split and the damage gained while
+    /// the local `eta < gamma_0` of the point's material. Returns the stored energy `sum_p V^0 Psi_p`
+    /// (N mm). `particles.f` must already hold the converged deformation gradients (after G2P).
+    pub fn commit(&self, particles: &mut Particles, materials: &[Material]) -> f64 {
         let hs = particles.history_stride();
         if hs > 0 {
             let n = particles.len() * hs;
@@ -565,7 +570,14 @@ impl Assembler {
             );
             particles.stress[p] = ev.p * f3.transpose() / ev.det;
             particles.eta_bar[p] = ev.eta_bar;
+            let gained = ev.damage - particles.damage[p];
+            if gained > 0.0 && ev.eta < materials[particles.body[p] as usize].gamma_0() {
+                particles.nonlocal_damage[p] += gained;
+            }
             particles.damage[p] = ev.damage;
+            for (acc, d) in particles.dissipated[p].iter_mut().zip(ev.dissipation) {
+                *acc += particles.vol0[p] * d;
+            }
             energy += particles.vol0[p] * ev.energy;
         }
         energy

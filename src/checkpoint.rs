@@ -139,6 +139,11 @@ fn write(
     put("history".into(), &p.history)?;
     put("eta_bar".into(), &p.eta_bar)?;
     put("damage".into(), &p.damage)?;
+    put(
+        "dissipated".into(),
+        &p.dissipated.iter().flatten().copied().collect::<Vec<_>>(),
+    )?;
+    put("nonlocal_damage".into(), &p.nonlocal_damage)?;
     for (k, rb) in sim.setup.rigid.iter().enumerate() {
         put(format!("rigid{k}_x"), &flat2(&rb.particles.x))?;
         put(
@@ -322,6 +327,8 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
         ("history", header.history_stride),
         ("eta_bar", 1),
         ("damage", 1),
+        ("dissipated", 2),
+        ("nonlocal_damage", 1),
     ]
     .into_iter()
     .map(|(name, per)| (name.to_owned(), per * n))
@@ -369,6 +376,11 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
     p.history = take("history");
     p.eta_bar = take("eta_bar");
     p.damage = take("damage");
+    p.dissipated = take("dissipated")
+        .chunks_exact(2)
+        .map(|c| [c[0], c[1]])
+        .collect();
+    p.nonlocal_damage = take("nonlocal_damage");
     for (k, rb) in sim.setup.rigid.iter_mut().enumerate() {
         rb.particles.x = unflat2(&take(&format!("rigid{k}_x")));
         rb.particles.corners = unflat_corners(&take(&format!("rigid{k}_corners")));

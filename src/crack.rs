@@ -95,6 +95,15 @@ pub struct CrackState {
     /// Largest crossing width (mm).
     #[serde(default)]
     pub band_width_max: f64,
+    /// Energy dissipated in the whole specimen so far by microplanes under tensile and under
+    /// compressive normal strain (N mm per mm of thickness; filled in by the output writer).
+    #[serde(default)]
+    pub dissipated: [f64; 2],
+    /// Points with damage >= `damage_threshold` that gained at least half of it while their local
+    /// equivalent strain was below gamma_0 (damage carried in by the nonlocal field; filled in by the
+    /// output writer).
+    #[serde(default)]
+    pub nonlocal_points: usize,
 }
 
 /// Measures the crack grown from `notch_tip` (mm) in the damage field of points at `x` (mm); `h` is the
@@ -201,6 +210,8 @@ pub fn measure(
         crossings,
         band_width,
         band_width_max: widths.last().copied().unwrap_or(0.0),
+        dissipated: [0.0; 2],
+        nonlocal_points: 0,
     }
 }
 

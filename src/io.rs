@@ -104,7 +104,7 @@ pub const CONNECTIVITY: Field = Field {
 };
 
 /// The point fields of a snapshot (float64); `position` is the XDMF geometry, the others its attributes.
-pub const FIELDS: [Field; 10] = [
+pub const FIELDS: [Field; 13] = [
     Field {
         name: "position",
         kind: Kind::Vector,
@@ -165,6 +165,26 @@ pub const FIELDS: [Field; 10] = [
         units: "-",
         description: "largest history variable of the material law (microplane: max over the \
                       microplanes of the history strain gamma_I; 0 for history-free laws)",
+    },
+    Field {
+        name: "dissipated_tension",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "energy dissipated per reference volume by microplanes under tensile normal strain",
+    },
+    Field {
+        name: "dissipated_compression",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "energy dissipated per reference volume by microplanes under compressive normal \
+                      strain",
+    },
+    Field {
+        name: "nonlocal_damage",
+        kind: Kind::Scalar,
+        units: "-",
+        description: "damage gained while the local equivalent strain was below gamma_0 (carried in by \
+                      the nonlocal field only)",
     },
 ];
 
@@ -411,7 +431,7 @@ impl RunOutput {
         self.write_xdmf(sim.setup.particles.len())?;
         if let Some((tip, criteria)) = &self.crack {
             let p = &sim.setup.particles;
-            let state = crack::measure(
+            let mut state = crack::measure(
                 &p.x,
                 &p.damage,
                 *tip,
@@ -420,6 +440,16 @@ impl RunOutput {
                 criteria,
                 sim.time,
             );
+            state.dissipated = p
+                .dissipated
+                .iter()
+                .fold([0.0; 2], |a, d| [a[0] + d[0], a[1] + d[1]]);
+            state.nonlocal_points = (0..p.len())
+                .filter(|&i| {
+                    p.damage[i] >= criteria.damage_threshold
+                        && p.nonlocal_damage[i] >= 0.5 * p.damage[i]
+                })
+                .count();
             self.cracks.retain(|c| c.time != state.time);
             self.cracks.push(state);
             self.write_cracks()?;
@@ -499,6 +529,17 @@ impl RunOutput {
             (0..p.len())
                 .map(|i| p.history(i).iter().copied().fold(0.0, f64::max))
                 .collect(),
+            p.dissipated
+                .iter()
+                .zip(&p.vol0)
+                .map(|(d, v)| d[0] / v)
+                .collect(),
+            p.dissipated
+                .iter()
+                .zip(&p.vol0)
+                .map(|(d, v)| d[1] / v)
+                .collect(),
+            p.nonlocal_damage.clone(),
         ]
     }
 

@@ -293,6 +293,12 @@ pub struct Particles {
     pub eta_bar: Vec<f64>,
     /// Scalar damage (output) [-].
     pub damage: Vec<f64>,
+    /// Energy dissipated by the point's microplanes under tensile and under compressive normal strain
+    /// since the start (N mm per mm of thickness).
+    pub dissipated: Vec<[f64; 2]>,
+    /// Damage gained in steps where the point's local equivalent strain stayed below gamma_0: damage
+    /// carried in by the nonlocal field only [-].
+    pub nonlocal_damage: Vec<f64>,
     /// Cauchy stress `sigma_p` (MPa), 3x3 with `sigma_13 = sigma_23 = 0` (plane strain, `sigma_33` for output).
     pub stress: Vec<Matrix3<f64>>,
     history_stride: usize,
@@ -373,6 +379,8 @@ impl Particles {
             .extend(std::iter::repeat_n(0.0, self.history_stride));
         self.eta_bar.push(0.0);
         self.damage.push(0.0);
+        self.dissipated.push([0.0; 2]);
+        self.nonlocal_damage.push(0.0);
         self.stress.push(Matrix3::zeros());
     }
 
@@ -493,6 +501,9 @@ impl Particles {
         self.history.extend_from_slice(&other.history);
         self.eta_bar.extend_from_slice(&other.eta_bar);
         self.damage.extend_from_slice(&other.damage);
+        self.dissipated.extend_from_slice(&other.dissipated);
+        self.nonlocal_damage
+            .extend_from_slice(&other.nonlocal_damage);
         self.stress.extend_from_slice(&other.stress);
         Ok(())
     }

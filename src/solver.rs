@@ -1191,7 +1191,7 @@ impl Simulation {
             s.particles.v.iter_mut().for_each(|v| *v = Vector2::zeros());
             s.particles.a.iter_mut().for_each(|a| *a = Vector2::zeros());
         }
-        let stored = self.assembler.commit(&mut s.particles);
+        let stored = self.assembler.commit(&mut s.particles, &s.materials);
         for (k, (rb, du)) in s
             .rigid
             .iter_mut()

@@ -543,6 +543,7 @@ impl Constitutive for Microplane {
         let mut v: Sym6 = [0.0; 6]; // coefficient of the rank-one term v (x) d eta/dE
         let mut ds_deb: Sym6 = [0.0; 6];
         let (mut psi, mut psi0, mut d_mean) = (0.0, 0.0, 0.0);
+        let mut dissipation = [0.0; 2];
         for (i, dir) in self.dirs.iter().enumerate() {
             let eb_mic = if ratio_mode { q * eta_mic[i] } else { eta_bar };
             let g_n = h_n[i];
@@ -584,6 +585,14 @@ impl Constitutive for Microplane {
                 mm[a] += wd * dir.nn[a];
             }
             if loading {
+                // Dissipation psi_0 (d - d_n) of this plane, by the sign of its normal strain.
+                let d_n = if g_n > gamma_0 {
+                    1.0 - self.integrity(g_n).0
+                } else {
+                    0.0
+                };
+                let normal = ev + ned;
+                dissipation[usize::from(normal < 0.0)] += dir.w6 * p0 * (d - d_n);
                 let coef = dir.w6 * dd;
                 if ratio_mode {
                     // d eta_bar_mic/dE = q (d eta_mic/dE - (eta_mic/eta) d eta/dE)
@@ -632,6 +641,7 @@ impl Constitutive for Microplane {
         out.eta = eta;
         out.deta_df = f * super::sym_to_matrix(&g_eta);
         out.energy = psi;
+        out.dissipation = dissipation;
         out.damage = if psi0 > 0.0 { 1.0 - psi / psi0 } else { d_mean };
         Ok(())
     }
@@ -822,6 +832,39 @@ mod tests {
         let cfg: MicroplaneConfig =
             toml::from_str("preset = \"paper_gamma0_1.25e-4_scaled\"").unwrap();
         assert_eq!(cfg.resolve().unwrap().beta, 6500.0);
+    }
+
+    #[test]
+    fn dissipation_is_the_released_energy_split_by_the_sign_of_the_normal_strain() {
+        let m = paper();
+        // At fixed F, raising eta_bar releases exactly the dissipated energy: sum w6 psi_0 (d - d_n).
+        for f in [
+            Matrix3::from_diagonal(&nalgebra::Vector3::new(1.004, 1.0, 1.0)),
+            Matrix3::from_diagonal(&nalgebra::Vector3::new(0.99, 1.0, 1.0)),
+            generic_f(3e-3),
+        ] {
+            let (r1, h1) = eval(&m, &f, 3e-3, &fresh(&m));
+            let (r2, _) = eval(&m, &f, 6e-3, &h1);
+            let released = r1.energy - r2.energy;
+            let total = r2.dissipation[0] + r2.dissipation[1];
+            assert!(released > 0.0);
+            assert!(
+                (total - released).abs() < 1e-12 * released.max(1e-12),
+                "{total} {released}"
+            );
+        }
+        // Uniaxial stretch: every damaging plane with a negative normal strain is in the second bucket.
+        let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(1.004, 1.0, 1.0));
+        let (r, _) = eval(&m, &f, 6e-3, &fresh(&m));
+        assert!(
+            r.dissipation[0] > 0.0 && r.dissipation[1] == 0.0,
+            "{:?}",
+            r.dissipation
+        );
+        // Uniaxial compression: the lateral planes see no normal strain, the axial ones a negative one.
+        let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(0.99, 1.0, 1.0));
+        let (r, _) = eval(&m, &f, 6e-3, &fresh(&m));
+        assert!(r.dissipation[1] > 0.0, "{:?}", r.dissipation);
     }
 
     #[test]

@@ -53,6 +53,10 @@ pub struct Response {
     pub damage: f64,
     /// Stored (free) energy density `Psi` per reference volume (MPa).
     pub energy: f64,
+    /// Energy density dissipated over the step (MPa = mJ/mm^3 per reference volume), split into the
+    /// microplanes under tensile `[0]` and compressive `[1]` normal strain `n . E . n` (microplane model;
+    /// zero for the other laws): `sum_I 6 w_I psi_0,I (d_I - d_I^n)`.
+    pub dissipation: [f64; 2],
     /// Gradient activity `c` of the Helmholtz equation at this state (mm^2) and its derivatives
     /// `dc/d eta`, `dc/d eta_bar` (see [`activity`]); 0 for local and elastic materials.
     pub activity: Activity,
@@ -69,6 +73,7 @@ impl Response {
             deta_df: Matrix3::zeros(),
             damage: 0.0,
             energy: 0.0,
+            dissipation: [0.0; 2],
             activity: Activity::default(),
         }
     }
@@ -193,7 +198,8 @@ impl Material {
         }
     }
 
-    fn gamma_0(&self) -> f64 {
+    /// Damage threshold `gamma_0` of a damage model (0 for elastic laws).
+    pub fn gamma_0(&self) -> f64 {
         match self {
             Material::Microplane(m) => m.params().gamma_0,
             Material::IsotropicDamage(m) => m.config().gamma_0,

@@ -1,0 +1,96 @@
+#!/usr/bin/env python3
+"""Side-by-side summary of finished CT runs (docs/results.md).
+
+Usage:
+    python3 tools/ct_compare/compare_ct_runs.py OUT_PREFIX LABEL=RUN_DIR [LABEL=RUN_DIR ...]
+
+Reads each run's history.csv and crack.json and writes
+    OUT_PREFIX-force.png       opening force of the loading plate against time (N per mm of thickness)
+    OUT_PREFIX-width.png       median width of the d >= 0.9 bands against time (mm)
+    OUT_PREFIX-table.md        a Markdown table of the final crack metrics, energies and wall time
+Units: mm, s, N, MPa, t; forces and energies per mm of thickness.
+"""
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def read_history(run: Path):
+    with open(run / "history.csv", newline="") as f:
+        lines = [line for line in f if not line.startswith("#")]
+    rows = list(csv.DictReader(lines))
+    return rows
+
+
+def col(rows, name):
+    return [float(r[name]) for r in rows if r.get(name) not in (None, "")]
+
+
+def main(argv):
+    if len(argv) < 3:
+        print(__doc__)
+        return 2
+    prefix = Path(argv[1])
+    runs = []
+    for arg in argv[2:]:
+        label, _, path = arg.partition("=")
+        run = Path(path)
+        runs.append((label, run, read_history(run), json.loads((run / "crack.json").read_text())))
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for label, _, rows, _ in runs:
+        t = [1e6 * v for v in col(rows, "time")]
+        ax.plot(t, [-v for v in col(rows, "loading_plate_fy")], label=label)
+    ax.set_xlabel("time [us]")
+    ax.set_ylabel("opening force of the loading plate [N/mm]")
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(f"{prefix}-force.png", dpi=110)
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for label, _, _, crack in runs:
+        st = [s for s in crack["states"] if s.get("band_width", 0) > 0]
+        ax.plot([1e6 * s["time"] for s in st], [s["band_width"] for s in st], "o-", label=label)
+    ax.set_xlabel("time [us]")
+    ax.set_ylabel("median width of the d >= 0.9 bands [mm]")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(f"{prefix}-width.png", dpi=110)
+
+    out = [
+        "| run | classification | bands (deg) | length (mm) | band width median / max (mm) | "
+        "peak opening force (N/mm) | min opening force after the peak (N/mm) | dissipated tension / "
+        "compression (N mm/mm) | nonlocal-only points | steps | wall (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for label, run, rows, crack in runs:
+        last = crack["states"][-1]
+        force = [-v for v in col(rows, "loading_plate_fy")]
+        k = max(range(len(force)), key=lambda i: force[i])
+        after = min(force[k:]) if force else float("nan")
+        diss = last.get("dissipated", [float("nan")] * 2)
+        wall = sum(col(rows, "wall_total"))
+        bands = ", ".join(f"{b['angle_degrees']:.0f}" for b in last["bands"])
+        out.append(
+            f"| {label} | {last['classification']} | {bands} | {last['length']:.1f} | "
+            f"{last.get('band_width', float('nan')):.1f} / {last.get('band_width_max', float('nan')):.1f} | "
+            f"{force[k]:.0f} at {1e6 * float(rows[k]['time']):.0f} us | {after:.0f} | "
+            f"{diss[0]:.1f} / {diss[1]:.1f} | {last.get('nonlocal_points', 0)} | {len(rows)} | {wall:.0f} |"
+        )
+    Path(f"{prefix}-table.md").write_text("\n".join(out) + "\n")
+    print("\n".join(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
