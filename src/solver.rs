@@ -1115,6 +1115,40 @@ impl Simulation {
                     self.grid_state.acceleration[node],
                 );
             }
+            // Closed contact nodes leave the step with the device's velocity in the constrained
+            // directions (a perfectly inelastic impact at the node, as in the grid contact of Bardenhagen
+            // et al.). The trapezoidal rule alone would give `v_n+1 = 2 du/dt - v_n`: a node arriving at
+            // the relative speed w would bounce off at -w, and the chatter of the face nodes against a
+            // moving device pumped energy into the specimen (kinetic energy twice the device's work).
+            // The device's reaction includes the impulse of that correction, m (a - a_Newmark), which
+            // the following step's Newmark acceleration cancels again, so that the trapezoidal impulse
+            // and work of the reaction stay the block's change of momentum and the device's work.
+            let first = s.boxes.len();
+            for (k, d) in devices.iter().enumerate() {
+                let Some(d) = d else { continue };
+                let (n, t) = (d.normal, d.tangent());
+                for c in d.nodes.iter().filter(|c| c.status.closed()) {
+                    let (v, a) = (
+                        self.grid_state.velocity[c.node],
+                        self.grid_state.acceleration[c.node],
+                    );
+                    let target = c.du_device / dt;
+                    // The acceleration that makes v_n + dt ((1 - gamma) a_n + gamma a) equal the target.
+                    let fit = |e: Vector2<f64>| {
+                        (e.dot(&target) - e.dot(&v) - dt * (1.0 - nm.gamma) * e.dot(&a))
+                            / (nm.gamma * dt)
+                    };
+                    let acc = &mut acc_nodes[c.node];
+                    let before = *acc;
+                    *acc += (fit(n) - n.dot(acc)) * n;
+                    if c.status == NodeStatus::Stick {
+                        *acc += (fit(t) - t.dot(acc)) * t;
+                    }
+                    let f = self.grid_state.mass[c.node] * (*acc - before);
+                    reactions[first + k][0] += f.x;
+                    reactions[first + k][1] += f.y;
+                }
+            }
         }
         // Work of the constraints (trapezoidal in the set's reaction; every node of a set moves by the same
         // prescribed du) and of the body force (b . du weighted by nodal mass).
@@ -1471,6 +1505,12 @@ impl Simulation {
                         nodes[i].gap = nodes[i].gap.min(near - cf);
                     }
                 }
+            }
+            // An overlap found at the start of a step is held, not pushed back: a negative gap in the
+            // constraint would move the node out by |g| within one step, work that no reaction force
+            // accounts for (it made the kinetic and stored energy exceed the device's work in the CT).
+            for c in &mut nodes {
+                c.gap = c.gap.max(0.0);
             }
             let mut device = DeviceContact {
                 normal: n,

@@ -111,3 +111,44 @@ fn eroded_points_carry_no_stress_and_keep_their_deformation_gradient() {
     eprintln!("{eroded} eroded points after 160 us");
     assert!(eroded > 10, "the band must erode ({eroded} points)");
 }
+
+#[test]
+fn contact_plates_do_no_more_work_than_the_specimen_takes_up() {
+    // Energy balance with unilateral contact: the device's work must cover the kinetic and stored energy
+    // at every step (W - K - Psi >= 0 is the dissipation: damage, eroded points, inelastic node impacts).
+    // Nodes bouncing elastically off the moving plate, and overlaps pushed back within one step, made
+    // K + Psi exceed W by half of W in the CT demo.
+    let s = Session::get().expect("PETSc");
+    petsc::apply_default_options(&s, "-en_ksp_type preonly -en_pc_type lu -en_pc_factor_mat_solver_type mumps -en_snes_rtol 1e-8 -en_snes_atol 1e-8")
+        .expect("options");
+    let text = CONFIG.replace(
+        "material = { model = \"microplane\", preset = \"paper\" }",
+        "material = { model = \"microplane\", preset = \"paper\", erosion_damage = 0.95 }\n\
+         load_introduction = \"contact\"",
+    );
+    let cfg = RunConfig::from_str_named(&text, "ct-small-contact").expect("config");
+    let mut setup = scenario::build(&cfg).expect("model");
+    setup.options_prefix = Some("en_".into());
+    let mut sim = Simulation::new(setup).expect("simulation");
+    let mut pushed = false;
+    for _ in 0..120 {
+        let r = sim.advance(&s).expect("step converges");
+        let w = r.external_work;
+        let balance = w - r.kinetic_energy - r.stored_energy;
+        assert!(
+            balance >= -1e-3 * w.abs().max(1e-6),
+            "step {}: work {w:.4e} < kinetic {:.4e} + stored {:.4e} N mm/mm",
+            r.step,
+            r.kinetic_energy,
+            r.stored_energy
+        );
+        let fy = r.reactions[0].1[1];
+        assert!(
+            fy <= 1e-9,
+            "step {}: the loading plate pulls ({fy} N/mm)",
+            r.step
+        );
+        pushed |= fy < 0.0;
+    }
+    assert!(pushed, "the plate must push");
+}
