@@ -6,7 +6,9 @@
 //! * a point is *cracked* when its damage is at least `damage_threshold`;
 //! * the *crack* is the set of cracked points connected to the notch tip: cracked points are binned into
 //!   cells of size `h`, and cells are connected through their 8 neighbours, starting from the cells within
-//!   `2 h` of the tip (damage under the loading plates or at other edges is not part of it);
+//!   `max(seed_radius, 2 h)` of the tip (the CT run sets half the notch width plus `2 h`, so that bands
+//!   leaving the notch's corners count; damage under the loading plates or at other edges is not part of
+//!   it);
 //! * *length* is the largest distance of a crack point from the notch tip, the *tip* is that point;
 //! * *bands* are the groups of crack points on the ring `r = ring_fraction * length` (+- h) around the notch
 //!   tip, split where consecutive points (sorted by polar angle) are more than `gap_degrees` apart; a band's
@@ -24,7 +26,7 @@ use nalgebra::Vector2;
 use std::collections::{HashMap, HashSet, VecDeque};
 
 /// Thresholds of the crack metrics.
-#[derive(Debug, Clone, Copy, serde::Serialize)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct CrackCriteria {
     /// Damage at and above which a point counts as cracked.
     pub damage_threshold: f64,
@@ -38,6 +40,9 @@ pub struct CrackCriteria {
     pub min_length: f64,
     /// Radii of the band-width stations as fractions of the crack length.
     pub width_stations: [f64; 3],
+    /// Cracked cells within this distance of the notch tip (mm; at least `2 h`) start the crack.
+    #[serde(default)]
+    pub seed_radius: f64,
 }
 
 impl Default for CrackCriteria {
@@ -49,6 +54,18 @@ impl Default for CrackCriteria {
             straight_degrees: 15.0,
             min_length: 10.0,
             width_stations: [0.25, 0.5, 0.75],
+            seed_radius: 0.0,
+        }
+    }
+}
+
+impl CrackCriteria {
+    /// The criteria of a CT run: the default thresholds, seeded within half the notch width `notch_width`
+    /// plus `2 h` of the tip (mm), so that bands leaving the notch's corners belong to the crack.
+    pub fn for_notch(notch_width: f64, h: f64) -> Self {
+        Self {
+            seed_radius: 0.5 * notch_width + 2.0 * h,
+            ..Self::default()
         }
     }
 }
@@ -128,7 +145,8 @@ pub fn measure(
     let mut seen: HashSet<(i64, i64)> = HashSet::new();
     let mut queue: VecDeque<(i64, i64)> = VecDeque::new();
     for (&k, pts) in &cells {
-        if pts.iter().any(|&i| (x[i] - notch_tip).norm() <= 2.0 * h) {
+        let seed = c.seed_radius.max(2.0 * h);
+        if pts.iter().any(|&i| (x[i] - notch_tip).norm() <= seed) {
             seen.insert(k);
             queue.push_back(k);
         }
@@ -323,6 +341,22 @@ mod tests {
         let (x, d) = field(|p| p.x >= 30.0 && p.x <= 70.0 && (p.y - 50.0).abs() <= 5.0);
         let wide = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert!((wide.band_width - 10.0).abs() <= 0.6, "{wide:?}");
+    }
+
+    #[test]
+    fn bands_leaving_the_notch_corners_are_found_with_the_seed_radius() {
+        // A notch 10 mm wide: a band from its lower corner (5 mm below the tip's centre) going down.
+        let corner = TIP - Vector2::new(0.0, 5.0);
+        let (x, d) = field(|p| near_ray(p, corner, -80.0, 40.0));
+        let near = measure(&x, &d, TIP, 1.0, 0.5, &CrackCriteria::default(), 0.0);
+        assert_eq!(near.classification, "none", "{near:?}");
+        let c = CrackCriteria {
+            seed_radius: 5.0 + 2.0,
+            ..CrackCriteria::default()
+        };
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
+        assert_eq!(s.classification, "inclined", "{s:?}");
+        assert!(s.length > 40.0, "{s:?}");
     }
 
     #[test]

@@ -28,6 +28,14 @@ pub enum OutputError {
         /// Cause.
         source: std::io::Error,
     },
+    /// The run directory cannot be re-measured (not a CT run, no snapshots, unreadable config).
+    #[error("{path}: {message}")]
+    Run {
+        /// File or directory.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
     /// HDF5 error.
     #[error("{path}: HDF5: {message}")]
     Hdf5 {
@@ -188,6 +196,131 @@ pub const FIELDS: [Field; 13] = [
     },
 ];
 
+/// Writes `crack.json` of the crack states `cracks` into `dir` (write, then rename).
+fn write_crack_json(
+    dir: &Path,
+    tip: Vector2<f64>,
+    criteria: &CrackCriteria,
+    cracks: &[CrackState],
+) -> Result<(), OutputError> {
+    let speeds: Vec<f64> = cracks
+        .windows(2)
+        .map(|w| {
+            if w[1].time > w[0].time {
+                (w[1].length - w[0].length) / (w[1].time - w[0].time)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let json = serde_json::json!({
+        "units": "length mm, time s, speed mm/s, angles degrees against the notch axis (+x), counter-clockwise \
+                  positive, energies N mm per mm of thickness",
+        "notch_tip": [tip.x, tip.y],
+        "criteria": criteria,
+        "states": cracks,
+        "tip_speed_between_states": speeds,
+        "final_classification": cracks.last().map(|c| c.classification.clone()),
+    });
+    let path = dir.join("crack.json");
+    let text = serde_json::to_string_pretty(&json).map_err(|e| OutputError::Plot {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    write_atomic(&path, text.as_bytes())
+}
+
+/// Re-measures the crack metrics of a finished CT run in `dir` from its snapshots `fields_*.h5` with the
+/// criteria of this version (`config.toml` of the run gives the notch and the grid) and rewrites
+/// `crack.json`. The specimen's dissipation totals need the points' volumes, which the snapshots do not
+/// hold: they are kept from the old `crack.json` (matched by time) when it has them.
+pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
+    let run_err = |path: &Path, message: String| OutputError::Run {
+        path: path.display().to_string(),
+        message,
+    };
+    let config_path = dir.join("config.toml");
+    let text = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
+    let cfg = crate::config::RunConfig::from_str_named(&text, &config_path.display().to_string())
+        .map_err(|e| run_err(&config_path, e.to_string()))?;
+    let Some(ct) = &cfg.ct else {
+        return Err(run_err(
+            &config_path,
+            "not a CT run (no [ct] section): crack metrics need the notch".into(),
+        ));
+    };
+    let h = cfg.grid.cell_size;
+    let tip = Vector2::new(ct.notch_length, 0.5 * ct.height);
+    let criteria = CrackCriteria::for_notch(ct.notch_width, h);
+    let spacing = h / cfg.shape.points_per_cell as f64;
+    let old: Vec<CrackState> = std::fs::read_to_string(dir.join("crack.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| serde_json::from_value(v["states"].clone()).ok())
+        .unwrap_or_default();
+    let mut files: Vec<(f64, PathBuf)> = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io_err(dir))? {
+        let path = entry.map_err(io_err(dir))?.path();
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+        if !name.is_some_and(|n| n.starts_with("fields_") && n.ends_with(".h5")) {
+            continue;
+        }
+        let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        };
+        let time: f64 = hdf5_metno::File::open(&path)
+            .and_then(|f| f.attr("time_s")?.read_scalar())
+            .map_err(h5)?;
+        files.push((time, path));
+    }
+    if files.is_empty() {
+        return Err(run_err(dir, "no snapshots fields_*.h5".into()));
+    }
+    files.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut states = Vec::new();
+    for (time, path) in files {
+        let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        };
+        let file = hdf5_metno::File::open(&path).map_err(h5)?;
+        let position: Vec<f64> = file
+            .dataset("position")
+            .and_then(|d| d.read_raw())
+            .map_err(h5)?;
+        let damage: Vec<f64> = file
+            .dataset("damage")
+            .and_then(|d| d.read_raw())
+            .map_err(h5)?;
+        let width = position.len() / damage.len().max(1);
+        let x: Vec<Vector2<f64>> = position
+            .chunks_exact(width.max(1))
+            .map(|c| Vector2::new(c[0], c[1]))
+            .collect();
+        let mut state = crack::measure(&x, &damage, tip, h, spacing, &criteria, time);
+        if let Ok(nonlocal) = file
+            .dataset("nonlocal_damage")
+            .and_then(|d| d.read_raw::<f64>())
+        {
+            state.nonlocal_points = damage
+                .iter()
+                .zip(&nonlocal)
+                .filter(|&(&d, &n)| d >= criteria.damage_threshold && n >= 0.5 * d)
+                .count();
+        }
+        if let Some(o) = old
+            .iter()
+            .find(|o| (o.time - time).abs() <= 1e-12 * time.abs().max(1.0))
+        {
+            state.dissipated = o.dissipated;
+        }
+        states.push(state);
+    }
+    write_crack_json(dir, tip, &criteria, &states)?;
+    Ok(states)
+}
+
 /// The XDMF index of the snapshots of `n` points: a temporal collection of point clouds, one vertex cell
 /// per point (explicit connectivity), vectors with 3 components.
 fn xdmf(snapshots: &[Snapshot], n: usize) -> String {
@@ -314,31 +447,7 @@ impl RunOutput {
         let Some((tip, criteria)) = &self.crack else {
             return Ok(());
         };
-        let speeds: Vec<f64> = self
-            .cracks
-            .windows(2)
-            .map(|w| {
-                if w[1].time > w[0].time {
-                    (w[1].length - w[0].length) / (w[1].time - w[0].time)
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let json = serde_json::json!({
-            "units": "length mm, time s, speed mm/s, angles degrees against the notch axis (+x), counter-clockwise positive",
-            "notch_tip": [tip.x, tip.y],
-            "criteria": criteria,
-            "states": self.cracks,
-            "tip_speed_between_states": speeds,
-            "final_classification": self.cracks.last().map(|c| c.classification.clone()),
-        });
-        let path = self.dir.join("crack.json");
-        let text = serde_json::to_string_pretty(&json).map_err(|e| OutputError::Plot {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
-        write_atomic(&path, text.as_bytes())
+        write_crack_json(&self.dir, *tip, criteria, &self.cracks)
     }
 
     /// Output directory.

@@ -105,6 +105,12 @@ enum Command {
     /// relative errors; exit code 0 when all are within --tolerance, 1 when one exceeds it, 2 on bad
     /// input (docs/cross-check.md).
     Compare(mpm_concrete::compare::CompareArgs),
+    /// Re-measure the crack metrics of a finished CT run from its snapshots with this version's criteria
+    /// and rewrite its crack.json (prints the final state).
+    Crack {
+        /// Run directory (`config.toml`, `fields_*.h5`).
+        run_dir: PathBuf,
+    },
     /// Material-point driver: strain or mixed paths through one constitutive law (CSV + PNG); prints the
     /// implied uniaxial strengths. No PETSc involved.
     MaterialDriver(mpm_concrete::material::driver::DriverArgs),
@@ -213,6 +219,32 @@ fn no_petsc_options(command: &str, hint: &str, petsc_args: &[String]) -> Result<
 
 fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
     match cli.command {
+        Command::Crack { run_dir } => {
+            no_petsc_options("crack", "", petsc_args)?;
+            use mpm_concrete::io::OutputError;
+            // A directory that is no CT run (or no run at all) is bad input; unreadable snapshots are not.
+            let states = mpm_concrete::io::remeasure_cracks(&run_dir).map_err(|e| match e {
+                OutputError::Run { .. } | OutputError::Io { .. } => bad(e),
+                other => other.into(),
+            })?;
+            for s in &states {
+                let bands: Vec<String> = s
+                    .bands
+                    .iter()
+                    .map(|b| format!("{:.0}", b.angle_degrees))
+                    .collect();
+                println!(
+                    "t = {:8.1} us: {:<10} length {:6.1} mm, bands [{}] deg, band width {:.1} mm (max {:.1})",
+                    s.time * 1e6,
+                    s.classification,
+                    s.length,
+                    bands.join(", "),
+                    s.band_width,
+                    s.band_width_max
+                );
+            }
+            Ok(())
+        }
         Command::MaterialDriver(args) => {
             no_petsc_options("material-driver", "", petsc_args)?;
             let summary = mpm_concrete::material::driver::run_driver(&args)?;
@@ -802,7 +834,7 @@ fn simulate(
     if let Some(ct) = &cfg.ct {
         out.track_crack(
             nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
-            Default::default(),
+            mpm_concrete::crack::CrackCriteria::for_notch(ct.notch_width, cfg.grid.cell_size),
         );
     }
     let mut record = RunRecord {

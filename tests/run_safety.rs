@@ -585,3 +585,52 @@ fn a_run_that_ended_early_says_so() {
     assert!(r.time_reached < r.time_requested);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
+    let dir = scratch("crack");
+    succeeds(&run_tiny(&dir, &[]));
+    let states = |d: &Path| -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(d.join("crack.json")).expect("crack.json");
+        let v: serde_json::Value = serde_json::from_str(&text).expect("crack.json parses");
+        v["states"].as_array().expect("states").clone()
+    };
+    let written = states(&dir.join("d"));
+    std::fs::remove_file(dir.join("d/crack.json")).expect("remove crack.json");
+    let o = run(&dir, &["crack", "d"]);
+    succeeds(&o);
+    let remeasured = states(&dir.join("d"));
+    // Same criteria, same snapshots: the same states as the run wrote (one per snapshot).
+    let snapshots = std::fs::read_dir(dir.join("d"))
+        .expect("dir")
+        .filter(|e| {
+            let name = e
+                .as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .into_owned();
+            name.starts_with("fields_") && name.ends_with(".h5")
+        })
+        .count();
+    assert_eq!(remeasured.len(), snapshots);
+    assert_eq!(written.len(), remeasured.len());
+    for (a, b) in written.iter().zip(&remeasured) {
+        for key in ["time", "classification", "length", "points", "band_width"] {
+            assert_eq!(a[key], b[key], "{key}: {a} vs {b}");
+        }
+    }
+    assert_eq!(
+        String::from_utf8_lossy(&o.stdout).lines().count(),
+        snapshots,
+        "one line per state"
+    );
+    // A run without a notch, and a directory that is no run, are refused with the file named.
+    succeeds(&run(
+        &dir,
+        &["run", "block.toml", "--quiet", "--output", "b"],
+    ));
+    refused(&run(&dir, &["crack", "b"]), &["config.toml", "[ct]"]);
+    refused(&run(&dir, &["crack", "nowhere"]), &["nowhere"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
