@@ -34,7 +34,7 @@ pub struct Contact {
 }
 
 /// The state of a contact node within a step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum NodeStatus {
     /// Not in contact: the node is free.
     Open,

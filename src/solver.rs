@@ -406,6 +406,10 @@ pub struct Counters {
     /// Rotation rate of each rigid body in the last step (rad/s).
     #[serde(default)]
     pub rotation_rates: Vec<f64>,
+    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step: the
+    /// first guess of the next step's active set, so that a resumed run takes the same steps.
+    #[serde(default)]
+    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
 }
 
 /// A running simulation: the committed state and the reusable per-step workspace.
@@ -736,6 +740,7 @@ impl Simulation {
             last_reactions: self.last_reactions.clone(),
             rotations: self.rotations.clone(),
             rotation_rates: self.rotation_rates.clone(),
+            contact_statuses: self.contact_warm.clone(),
         }
     }
 
@@ -752,6 +757,8 @@ impl Simulation {
         self.rotations.resize(nr, 0.0);
         self.rotation_rates = c.rotation_rates;
         self.rotation_rates.resize(nr, 0.0);
+        self.contact_warm = c.contact_statuses;
+        self.contact_warm.resize(nr, Vec::new());
     }
 
     /// FEM mode: the nodal velocity (mm/s) and acceleration (mm/s^2) carried to the next step (None in

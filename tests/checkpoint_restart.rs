@@ -69,6 +69,18 @@ fn resumed_fem_mode_run_matches_the_uninterrupted_one_bit_for_bit() {
     check_restart(&fem, "fem");
 }
 
+/// Contact plates: the statuses of the contact nodes (the next step's first guess of the active set) are
+/// part of the state.
+#[test]
+fn resumed_contact_run_matches_the_uninterrupted_one_bit_for_bit() {
+    let contact = CONFIG.replace(
+        "rise_time = 1.0e-5",
+        "rise_time = 1.0e-5\nload_introduction = \"contact\"",
+    );
+    assert_ne!(contact, CONFIG);
+    check_restart(&contact, "contact");
+}
+
 fn check_restart(config: &str, tag: &str) {
     let s = Session::get().expect("PETSc");
     petsc::apply_default_options(
