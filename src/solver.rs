@@ -989,7 +989,16 @@ impl Simulation {
                 contact: &devices,
                 row_scale: row_s,
             };
-            let info = snes.solve(&mut problem, x, jac)?;
+            let info = match snes.solve(&mut problem, x, jac) {
+                Ok(info) => info,
+                // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails
+                // this attempt like a diverged solve; the objects are rebuilt for the next attempt.
+                Err(e) if e.is_numerical() => {
+                    self.system = None;
+                    return Ok(Err(format!("SNES failed: {e}")));
+                }
+                Err(e) => return Err(e.into()),
+            };
             assembly_time += problem.assembly_time;
             evaluations[0] += problem.residuals;
             evaluations[1] += problem.jacobians;

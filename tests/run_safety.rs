@@ -634,3 +634,27 @@ fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
     refused(&run(&dir, &["crack", "nowhere"]), &["nowhere"]);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A numerical failure raised inside PETSc's solve (here SNES told to raise an error when it does not
+/// converge, as MUMPS does when it fails on a nearly singular matrix) fails the attempt, not the run: the
+/// step is retried with the fallback solver and reported.
+#[test]
+fn a_petsc_error_inside_a_solve_fails_the_attempt_not_the_run() {
+    let dir = scratch("petsc-error");
+    let o = run_tiny(&dir, &["-snes_max_it", "1", "-snes_error_if_not_converged"]);
+    succeeds(&o);
+    let err = stderr(&o);
+    assert!(
+        err.contains("PETSc error 91") && err.contains("retrying with the fallback solver"),
+        "{err}"
+    );
+    let summary = String::from_utf8_lossy(&o.stdout).into_owned();
+    let retried = summary
+        .lines()
+        .find(|l| l.starts_with("| steps |"))
+        .unwrap_or_default()
+        .to_owned();
+    assert!(retried.contains("4 (4 retried"), "{summary}");
+    assert_eq!(record(&dir.join("d")).steps_done, 4);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -41,6 +41,17 @@ pub struct PetscError {
     pub message: String,
 }
 
+impl PetscError {
+    /// True for the failures of a numerical method on the data it was given, which another solver or a
+    /// smaller time step may avoid: a zero pivot (`PETSC_ERR_MAT_LU_ZRPVT` 71), a floating-point exception
+    /// (`PETSC_ERR_FP` 72), an error of an external library such as MUMPS (`PETSC_ERR_LIB` 76), a failed
+    /// iterative method (`PETSC_ERR_CONV_FAILED` 82, `PETSC_ERR_NOT_CONVERGED` 91). Other codes (unknown
+    /// types, wrong arguments, memory) are not the data's fault.
+    pub fn is_numerical(&self) -> bool {
+        matches!(self.code, 71 | 72 | 76 | 82 | 91)
+    }
+}
+
 /// Result of a PETSc wrapper call.
 pub type Result<T> = std::result::Result<T, PetscError>;
 
