@@ -995,8 +995,11 @@ fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
         newton as f64 / rows.len().max(1) as f64
     );
     println!("| linear iterations | {linear} |");
+    // The steps' times cover the whole run, also the part before a resume; `wall` is this process's.
+    let steps_wall: f64 = rows.iter().map(|r| r.wall_total).sum();
     println!(
-        "| wall time | {wall:.1} s (set-up {setup:.1} s, assembly {assembly:.1} s, PETSc solve {solve:.1} s) |"
+        "| wall time | {steps_wall:.1} s in the steps (set-up {setup:.1} s, assembly {assembly:.1} s, PETSc solve \
+         {solve:.1} s); {wall:.1} s in this process |"
     );
     println!("| peak memory | {peak:.0} MB |");
     if let Some(last) = rows.last() {
