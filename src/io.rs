@@ -258,7 +258,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .and_then(|v| serde_json::from_value(v["states"].clone()).ok())
         .unwrap_or_default();
-    let mut files: Vec<(f64, PathBuf)> = Vec::new();
+    let mut states = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io_err(dir))? {
         let path = entry.map_err(io_err(dir))?.path();
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
@@ -269,22 +269,11 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
             path: path.display().to_string(),
             message: e.to_string(),
         };
-        let time: f64 = hdf5_metno::File::open(&path)
-            .and_then(|f| f.attr("time_s")?.read_scalar())
-            .map_err(h5)?;
-        files.push((time, path));
-    }
-    if files.is_empty() {
-        return Err(run_err(dir, "no snapshots fields_*.h5".into()));
-    }
-    files.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut states = Vec::new();
-    for (time, path) in files {
-        let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        };
         let file = hdf5_metno::File::open(&path).map_err(h5)?;
+        let time: f64 = file
+            .attr("time_s")
+            .and_then(|a| a.read_scalar())
+            .map_err(h5)?;
         let position: Vec<f64> = file
             .dataset("position")
             .and_then(|d| d.read_raw())
@@ -317,6 +306,10 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         }
         states.push(state);
     }
+    if states.is_empty() {
+        return Err(run_err(dir, "no snapshots fields_*.h5".into()));
+    }
+    states.sort_by(|a, b| a.time.total_cmp(&b.time));
     write_crack_json(dir, tip, &criteria, &states)?;
     Ok(states)
 }
