@@ -436,6 +436,7 @@ pub(crate) fn sym_to_matrix(s: &Sym6) -> Matrix3<f64> {
 /// `d[a][b] = C_IJKL` with `(I, J) = PAIRS[a]`, `(K, L) = PAIRS[b]`, minor-symmetric in both pairs
 /// (need not be major-symmetric). Then `P = F S` and
 /// `A_iJkL = delta_ik S_JL + F_iI C_IJML F_kM`.
+#[inline(always)]
 pub(crate) fn first_piola_from_pk2(
     f: &Matrix3<f64>,
     s: &Sym6,
