@@ -70,8 +70,27 @@ fn block_bounces_off_a_wall_without_tensile_reaction() {
     let mut contact_ended = None;
     let mut max_push = 0.0_f64;
     let mut energy = 0.0;
+    let mut resolved_steps = 0;
     for _ in 0..40 {
         let r = sim.advance(&s).expect("step converges");
+        // Every step, re-solves after a change of the active set included, ends within the step's
+        // tolerance max(atol, rtol |R_0|), R_0 the residual at the start of its first solve.
+        let norms = &r.solve.residual_norms;
+        let (first, last) = (norms[0], norms[norms.len() - 1]);
+        assert!(
+            last <= 1e-9_f64.max(1e-10 * first),
+            "step {}: final residual {last:e} above the step's tolerance (initial {first:e})",
+            r.step
+        );
+        assert!(
+            norms.len() == r.solve.iterations + r.contact_solves,
+            "step {}: {} norms for {} Newton iterations in {} solves",
+            r.step,
+            norms.len(),
+            r.solve.iterations,
+            r.contact_solves
+        );
+        resolved_steps += usize::from(r.contact_solves > 1);
         let f = r.reactions[0].1[0];
         // The wall pushes the block towards -x, never pulls it.
         assert!(
@@ -87,6 +106,10 @@ fn block_bounces_off_a_wall_without_tensile_reaction() {
         }
         energy = r.kinetic_energy + r.stored_energy;
     }
+    assert!(
+        resolved_steps > 0,
+        "the active set changed within a step at least once"
+    );
     let end = contact_ended.expect("the wall pushes");
     assert!(
         end < 35,

@@ -20,7 +20,7 @@ pub use options::{
     apply_default_options, has_option, option_string, set_default_option, set_option,
     unused_options,
 };
-pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo};
+pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo, Tolerances};
 pub use vector::Vector;
 
 use std::ffi::{CStr, CString, c_char, c_int, c_void};

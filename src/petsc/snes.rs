@@ -53,6 +53,22 @@ impl SolveInfo {
     }
 }
 
+/// SNES convergence tolerances (`-snes_atol`, `-snes_rtol`, `-snes_stol`, `-snes_max_it`,
+/// `-snes_max_funcs`); residual norms in the units of the scaled residual.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerances {
+    /// Absolute tolerance on the residual norm.
+    pub atol: f64,
+    /// Tolerance on the residual norm relative to the solve's initial one.
+    pub rtol: f64,
+    /// Tolerance on the Newton update relative to the solution.
+    pub stol: f64,
+    /// Most Newton iterations.
+    pub max_it: sys::PetscInt,
+    /// Most residual evaluations.
+    pub max_f: sys::PetscInt,
+}
+
 /// A PETSc SNES with its options prefix.
 pub struct Snes {
     raw: sys::SNES,
@@ -117,6 +133,78 @@ impl Snes {
         )?;
         self.configured = true;
         Ok(())
+    }
+
+    /// The convergence tolerances in use (after [`Snes::set_from_options`]).
+    pub fn tolerances(&self) -> Result<Tolerances> {
+        let (mut atol, mut rtol, mut stol, mut max_it, mut max_f) = (0.0, 0.0, 0.0, 0, 0);
+        // SAFETY: valid SNES, out-parameters.
+        check(
+            unsafe {
+                sys::SNESGetTolerances(
+                    self.raw,
+                    &mut atol,
+                    &mut rtol,
+                    &mut stol,
+                    &mut max_it,
+                    &mut max_f,
+                )
+            },
+            "SNESGetTolerances",
+        )?;
+        Ok(Tolerances {
+            atol,
+            rtol,
+            stol,
+            max_it,
+            max_f,
+        })
+    }
+
+    /// Sets all convergence tolerances (each value explicitly, so the meaning of `PETSC_DEFAULT`, which
+    /// changed between PETSc versions, never matters).
+    pub fn set_tolerances(&mut self, t: &Tolerances) -> Result<()> {
+        // SAFETY: valid SNES.
+        check(
+            unsafe { sys::SNESSetTolerances(self.raw, t.atol, t.rtol, t.stol, t.max_it, t.max_f) },
+            "SNESSetTolerances",
+        )
+    }
+
+    /// The lag of the preconditioner (`-snes_lag_preconditioner`): 1 builds it at every Newton
+    /// iteration, `k > 1` at every k-th, -1 never again.
+    pub fn lag_preconditioner(&self) -> Result<sys::PetscInt> {
+        let mut lag = 0;
+        // SAFETY: valid SNES, out-parameter.
+        check(
+            unsafe { sys::SNESGetLagPreconditioner(self.raw, &mut lag) },
+            "SNESGetLagPreconditioner",
+        )?;
+        Ok(lag)
+    }
+
+    /// Sets the lag of the preconditioner (see [`Snes::lag_preconditioner`]).
+    pub fn set_lag_preconditioner(&mut self, lag: sys::PetscInt) -> Result<()> {
+        // SAFETY: valid SNES.
+        check(
+            unsafe { sys::SNESSetLagPreconditioner(self.raw, lag) },
+            "SNESSetLagPreconditioner",
+        )
+    }
+
+    /// Whether the lag of the preconditioner (`-snes_lag_preconditioner`) counts on through the next
+    /// solves instead of restarting, with a fresh preconditioner, at each solve.
+    pub fn set_lag_preconditioner_persists(&mut self, persists: bool) -> Result<()> {
+        let flag = if persists {
+            sys::PetscBool_PETSC_TRUE
+        } else {
+            sys::PetscBool_PETSC_FALSE
+        };
+        // SAFETY: valid SNES.
+        check(
+            unsafe { sys::SNESSetLagPreconditionerPersists(self.raw, flag) },
+            "SNESSetLagPreconditionerPersists",
+        )
     }
 
     /// Names the fields for `-pc_type fieldsplit` (ignored by other preconditioners).
