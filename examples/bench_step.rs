@@ -13,12 +13,13 @@
 //! (`-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps`) and GMRES with hypre BoomerAMG
 //! (`-ksp_type gmres -pc_type hypre -ksp_rtol 1e-8`); Newton to `-snes_rtol 1e-8`.
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, StepReport, TimeIntegration};
+use mpm_concrete::solver::{Setup, Simulation, StepReport, TimeIntegration};
 use nalgebra::Vector2;
 use serde::Serialize;
 

@@ -21,6 +21,7 @@
 //!    point; without it the local model softens homogeneously over the whole weak zone (its points are
 //!    identical in exact arithmetic), which hides its mesh dependence.
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::material::isotropic::peerlings::Bar;
@@ -28,7 +29,7 @@ use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::LinePlot;
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, StepError, TimeIntegration};
+use mpm_concrete::solver::{Setup, Simulation, StepError, TimeIntegration};
 use nalgebra::Vector2;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};

@@ -9,13 +9,14 @@
 //! problems at smaller size with asserted bounds. Units: mm, s, N, MPa, t unless stated otherwise (V2's
 //! large-deformation column uses AMPLE's numbers, which are only consistent among themselves).
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::{LinePlot, Series};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
 use nalgebra::Vector2;
 use serde_json::{Value, json};
 use std::f64::consts::PI;

@@ -268,8 +268,8 @@ impl Default for MotionSpec {
 
 impl MotionSpec {
     /// As the solver's motion.
-    pub fn motion(self) -> crate::solver::Motion {
-        use crate::solver::Motion;
+    pub fn motion(self) -> crate::boundary::Motion {
+        use crate::boundary::Motion;
         match self {
             MotionSpec::Keyword(Keyword::Free) => Motion::Free,
             MotionSpec::Keyword(Keyword::Fixed) => Motion::Velocity(0.0),

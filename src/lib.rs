@@ -8,11 +8,13 @@
 //! the material point method". Units everywhere: mm, s, N, MPa, t (tonne).
 //!
 //! Dependencies point one way:
-//! `cli -> io -> scenario -> solver -> {assembly, transfer, material, shape} -> {grid, particles} -> tensor`,
+//! `cli -> io -> scenario -> solver -> {boundary, assembly, transfer, material, shape} -> {grid, particles}
+//! -> tensor`,
 //! and only `assembly`/`solver` talk to [`petsc`], the one module with `unsafe` FFI.
 
 pub mod assembly;
 pub mod bench;
+pub mod boundary;
 pub mod checkpoint;
 pub mod compare;
 pub mod config;

@@ -1,6 +1,7 @@
 //! Builds a run ([`Setup`]) from a configuration: seeds the bodies, the rigid bodies and the background
 //! grid, and the compact tension (CT) specimen of the source paper.
 
+use crate::boundary::{NodalLoad, NodeBox, RigidBody};
 use crate::config::{
     ConstraintSection, ContactSection, Keyword, LoadIntroduction, MotionSpec, RigidBodySection,
     RunConfig,
@@ -9,7 +10,7 @@ use crate::contact::Contact;
 use crate::grid::{Grid, GridError};
 use crate::material::{Material, MaterialError};
 use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
-use crate::solver::{Method, NodalLoad, NodeBox, RigidBody, Setup, TimeIntegration};
+use crate::solver::{Method, Setup, TimeIntegration};
 use nalgebra::Vector2;
 
 /// Failure to build a run from a valid configuration.

@@ -6,7 +6,10 @@
 //! simulation exactly as it was, so it can be retried with a smaller time step.
 
 use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
-use crate::contact::{self, Contact, ContactNode, DeviceContact, NodeStatus};
+use crate::boundary::{
+    Motion, NodalLoad, NodeBox, RigidBody, prescribed_acceleration, prescribed_increment,
+};
+use crate::contact::{self, ContactNode, DeviceContact, NodeStatus};
 use crate::dofs::DofMap;
 use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
@@ -92,158 +95,6 @@ pub enum Method {
     /// grad_X N_I`, total Lagrangian) and nodal velocity and acceleration carried from step to step
     /// (no grid reset).
     Fem,
-}
-
-/// A force on the grid nodes of a segment, distributed as a uniform traction (consistent nodal forces of
-/// the bilinear shape functions along the grid line).
-#[derive(Debug, Clone, PartialEq)]
-pub struct NodalLoad {
-    /// Name (history columns).
-    pub name: String,
-    /// Segment end points (mm), on one grid line.
-    pub from: Vector2<f64>,
-    /// See `from`.
-    pub to: Vector2<f64>,
-    /// Resultant force (N per mm thickness).
-    pub force: Vector2<f64>,
-    /// Linear rise from zero over this time (s); 0 = applied at once.
-    pub rise_time: f64,
-}
-
-impl NodalLoad {
-    /// The load factor in [0, 1] at time `t` (s).
-    pub fn factor(&self, t: f64) -> f64 {
-        if self.rise_time > 0.0 {
-            (t / self.rise_time).clamp(0.0, 1.0)
-        } else {
-            1.0
-        }
-    }
-
-    /// Share of the resultant carried by each grid node on the segment: the integral of the node's hat
-    /// function along the segment divided by the segment length. Grid nodes only (the shares of nodes
-    /// without unknowns are redistributed by the caller).
-    pub fn shares(&self, grid: &Grid) -> Result<Vec<(usize, f64)>, String> {
-        let h = grid.cell_size();
-        let o = grid.origin();
-        let d = self.to - self.from;
-        let (along, across) = if d.y == 0.0 { (0, 1) } else { (1, 0) };
-        let line = (self.from[across] - o[across]) / h;
-        if d[across] != 0.0 || (line - line.round()).abs() > 1e-6 {
-            return Err(format!(
-                "load `{}`: the segment from {:?} to {:?} must lie on a grid line (a coordinate that is \
-                 a multiple of h = {h} mm from the grid origin)",
-                self.name,
-                [self.from.x, self.from.y],
-                [self.to.x, self.to.y]
-            ));
-        }
-        let (a, b) = (
-            self.from[along].min(self.to[along]),
-            self.from[along].max(self.to[along]),
-        );
-        let line = line.round() as i64;
-        let count = [grid.nx() as i64, grid.ny() as i64];
-        if line < 0 || line > count[across] {
-            return Err(format!(
-                "load `{}`: the segment lies outside the grid",
-                self.name
-            ));
-        }
-        let first = (((a - o[along]) / h).floor() as i64).max(0);
-        let last = (((b - o[along]) / h).ceil() as i64).min(count[along]);
-        let mut shares = Vec::new();
-        for k in first..=last {
-            let c = o[along] + k as f64 * h;
-            let w = hat_integral(a, b, c, h) / (b - a);
-            if w > 0.0 {
-                let (i, j) = if along == 0 { (k, line) } else { (line, k) };
-                shares.push((grid.node_index(i as usize, j as usize), w));
-            }
-        }
-        Ok(shares)
-    }
-}
-
-/// `int_a^b max(0, 1 - |s - c| / h) ds`.
-fn hat_integral(a: f64, b: f64, c: f64, h: f64) -> f64 {
-    // Antiderivative of the hat, G(s) = int_{c-h}^{s} hat, for s clamped to [c - h, c + h].
-    let g = |s: f64| {
-        let t = ((s - c) / h).clamp(-1.0, 1.0);
-        if t <= 0.0 {
-            0.5 * h * (1.0 + t) * (1.0 + t)
-        } else {
-            h - 0.5 * h * (1.0 - t) * (1.0 - t)
-        }
-    };
-    g(b) - g(a)
-}
-
-/// Which velocity a constrained component follows.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Motion {
-    /// Not constrained.
-    Free,
-    /// Prescribed velocity (mm/s); 0 = fixed.
-    Velocity(f64),
-}
-
-/// Grid nodes inside an axis-aligned box (mm), constrained per component.
-#[derive(Debug, Clone, PartialEq)]
-pub struct NodeBox {
-    /// Name used in reports (reaction force columns).
-    pub name: String,
-    /// Lower-left corner (mm).
-    pub min: Vector2<f64>,
-    /// Upper-right corner (mm).
-    pub max: Vector2<f64>,
-    /// Motion of the x and y components.
-    pub motion: [Motion; 2],
-    /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
-    pub rise_time: f64,
-}
-
-/// A rigid body of particles (e.g. a steel loading plate) moving with a prescribed velocity. Glued
-/// (`contact = None`): every grid node in the support of its particles follows it in the constrained
-/// components each step. In contact ([`Contact`]): it pushes on the specimen through unilateral contact
-/// on its face (and, with a pin, turns freely about the pin).
-#[derive(Debug, Clone)]
-pub struct RigidBody {
-    /// Name used in reports.
-    pub name: String,
-    /// Its particles (only positions and domains are used).
-    pub particles: Particles,
-    /// Motion of the x and y components.
-    pub motion: [Motion; 2],
-    /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
-    pub rise_time: f64,
-    /// Unilateral contact instead of gluing (both motion components must then be prescribed).
-    pub contact: Option<Contact>,
-}
-
-/// Displacement of a component moving with velocity `v` that rises linearly over `rise` from 0, between
-/// `t` and `t + dt`: `v (g(t + dt) - g(t))` with `g(t) = t^2/(2 rise)` for `t < rise`, else `t - rise/2`.
-pub fn prescribed_increment(v: f64, rise: f64, t: f64, dt: f64) -> f64 {
-    let g = |t: f64| {
-        if rise > 0.0 && t < rise {
-            t * t / (2.0 * rise)
-        } else {
-            t - 0.5 * rise.max(0.0)
-        }
-    };
-    v * (g(t + dt) - g(t))
-}
-
-/// Acceleration (mm/s^2) just after `t` of a component whose velocity rises linearly from 0 to `v` over
-/// `rise`: `v / rise` during the rise, 0 after it. A velocity step (`rise = 0`) gets 0: its jump at t = 0
-/// is an impulse that no finite acceleration represents (the prescribed increments carry it), and 0 is
-/// the acceleration just after the jump.
-pub fn prescribed_acceleration(v: f64, rise: f64, t: f64) -> f64 {
-    if rise > 0.0 && t < rise {
-        v / rise
-    } else {
-        0.0
-    }
 }
 
 /// Most SNES solves of one step attempt while the contact active set and the pin rotations settle.
@@ -465,6 +316,51 @@ struct FemState {
     /// Nodal velocity (mm/s) and acceleration (mm/s^2) at the end of the last step; `None` before the
     /// first step (the initial state is projected from the points).
     nodal: Option<NodalState>,
+}
+
+/// What [`Simulation::prepare`] sets up for one step attempt, owned so that the later phases can borrow
+/// the simulation freely.
+struct StepPlan {
+    /// Time step of the attempt (s) and the time it reaches.
+    dt: f64,
+    t_new: f64,
+    /// Prescribed increment per constraint set and component (mm), boxes first, then rigid bodies.
+    set_du: Vec<[Option<f64>; 2]>,
+    /// The constrained unknowns of each set.
+    sets: Vec<Vec<usize>>,
+    /// Per rigid body: translation increment (mm), pin position (mm; `None` without a pin) and rotation
+    /// increment about the pin (rad; settled with the contact active set).
+    translations: Vec<Vector2<f64>>,
+    pins: Vec<Option<Vector2<f64>>>,
+    dtheta: Vec<f64>,
+    /// Per rigid body, its contact with the specimen (`None` without contact) and its face length (mm).
+    devices: Vec<Option<DeviceContact>>,
+    face_lengths: Vec<f64>,
+    /// Applied nodal forces at `t_n+1` (N per mm thickness, one per grid node) and the nodes of each load.
+    nodal_force: Vec<Vector2<f64>>,
+    load_nodes: LoadNodes,
+    /// Newmark parameters (`None`: quasi-static) and the body-force factor of a quasi-static ramp.
+    newmark: Option<Newmark>,
+    load_factor: f64,
+    /// Whether the PETSc objects were built anew for this step.
+    new_pattern: bool,
+    /// Wall time of the preparation (s).
+    setup_time: f64,
+}
+
+/// What [`Simulation::solve`] hands to [`Simulation::finish`].
+struct Solved {
+    /// SNES statistics over all solves of the step.
+    info: SolveInfo,
+    /// Physical residual `f_int + M a - f_ext` at the solution, per unknown (N per mm thickness).
+    phys: Vec<f64>,
+    /// Wall time of the solves (s) and of the residual and Jacobian evaluations in them (s).
+    solve_time: f64,
+    assembly_time: f64,
+    /// Residual and Jacobian evaluations.
+    evaluations: [usize; 2],
+    /// SNES solves of the step (more than one while a contact active set or a pin rotation settles).
+    contact_solves: usize,
 }
 
 /// The nonlinear problem of one step, handed to SNES.
@@ -860,7 +756,10 @@ impl Simulation {
     }
 
     /// One attempt: `Ok(Ok(report))` converged and committed, `Ok(Err(reason))` did not converge
-    /// (nothing changed), `Err` a failure that a smaller step cannot fix.
+    /// (nothing changed), `Err` a failure that a smaller step cannot fix. The attempt runs in three
+    /// phases: [`Simulation::prepare`] (grid, unknowns, constraints, devices, loads, PETSc objects, first
+    /// guess), [`Simulation::solve`] (SNES, repeated while the contact active set and the pin rotations
+    /// settle) and [`Simulation::finish`] (reactions, accelerations, G2P, commit, report).
     fn try_step(
         &mut self,
         session: &SessionGuard,
@@ -868,7 +767,7 @@ impl Simulation {
         prefix: Option<&str>,
     ) -> Result<Result<StepReport, String>, StepError> {
         let t0 = Instant::now();
-        let [setup_event, assembly_event] = match self.events {
+        let events = match self.events {
             Some(e) => e,
             None => {
                 let e = [
@@ -878,7 +777,52 @@ impl Simulation {
                 *self.events.insert(e)
             }
         };
-        let setup_guard = setup_event.begin();
+        let setup_guard = events[0].begin();
+        let mut plan = self.prepare(session, dt, prefix)?;
+        drop(setup_guard);
+        plan.setup_time = t0.elapsed().as_secs_f64();
+        let solved = match self.solve(&mut plan, events[1])? {
+            Ok(solved) => solved,
+            Err(reason) => return Ok(Err(reason)),
+        };
+        Ok(Ok(self.finish(plan, solved, t0)?))
+    }
+
+    /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
+    /// assembler and the PETSc objects stay free to be borrowed mutably beside it).
+    fn step_input<'a>(
+        setup: &'a Setup,
+        table: &'a ShapeTable,
+        dofs: &'a DofMap,
+        grid_state: &'a GridState,
+        newmark: Option<Newmark>,
+        load_factor: f64,
+        nodal_force: &'a [Vector2<f64>],
+    ) -> StepInput<'a> {
+        StepInput {
+            table,
+            particles: &setup.particles,
+            materials: &setup.materials,
+            dofs,
+            mass: &grid_state.mass,
+            velocity: &grid_state.velocity,
+            acceleration: &grid_state.acceleration,
+            newmark,
+            body_force: setup.body_force * load_factor,
+            nodal_force,
+            row_scale: row_scale(&setup.materials),
+        }
+    }
+
+    /// First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the
+    /// contact devices and loads at `t_n+1`, the PETSc objects (kept if the pattern is unchanged) and the
+    /// first guess of the solution.
+    fn prepare(
+        &mut self,
+        session: &SessionGuard,
+        dt: f64,
+        prefix: Option<&str>,
+    ) -> Result<StepPlan, StepError> {
         self.project_to_grid()?;
         // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
         let set_du = self.constraint_values(|v, rise| prescribed_increment(v, rise, self.time, dt));
@@ -893,20 +837,18 @@ impl Simulation {
         let pins: Vec<Option<Vector2<f64>>> = (0..self.setup.rigid.len())
             .map(|k| self.pin_of(k))
             .collect();
-        let mut dtheta: Vec<f64> = (0..self.setup.rigid.len())
+        let dtheta: Vec<f64> = (0..self.setup.rigid.len())
             .map(|k| match pins[k] {
                 Some(_) => self.rotation_rates[k] * dt,
                 None => 0.0,
             })
             .collect();
-        let (mut devices, face_lengths) = self.contact_devices(&translations, &pins, &dtheta, dt);
+        let (devices, face_lengths) = self.contact_devices(&translations, &pins, &dtheta, dt);
         let t_new = self.time + dt;
         // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
         let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
         let eta_bar = self.nodal_eta_bar();
-        let nf = self.dofs.fields();
         let s = &self.setup;
-        let grid = &s.grid;
         let newmark = (!s.time.quasi_static).then_some(Newmark {
             beta: s.time.beta,
             gamma: s.time.gamma,
@@ -917,22 +859,34 @@ impl Simulation {
         } else {
             1.0
         };
-        let input = StepInput {
-            table: &self.table,
-            particles: &s.particles,
-            materials: &s.materials,
-            dofs: &self.dofs,
-            mass: &self.grid_state.mass,
-            velocity: &self.grid_state.velocity,
-            acceleration: &self.grid_state.acceleration,
+        let plan = StepPlan {
+            dt,
+            t_new,
+            set_du,
+            sets,
+            translations,
+            pins,
+            dtheta,
+            devices,
+            face_lengths,
+            nodal_force,
+            load_nodes,
             newmark,
-            body_force: s.body_force * load_factor,
-            nodal_force: &nodal_force,
-            row_scale: row_scale(&s.materials),
+            load_factor,
+            new_pattern: false,
+            setup_time: 0.0,
         };
+        let input = Self::step_input(
+            s,
+            &self.table,
+            &self.dofs,
+            &self.grid_state,
+            newmark,
+            load_factor,
+            &plan.nodal_force,
+        );
         self.assembler.begin_step(&input);
         // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged.
-        let n = self.dofs.len();
         let new_pattern = !self
             .system
             .as_ref()
@@ -942,14 +896,13 @@ impl Simulation {
             self.system = Some(LinearSystem::new(
                 session,
                 prefix,
-                grid,
+                &s.grid,
                 &self.dofs,
                 &self.assembler,
             )?);
         }
         let LinearSystem {
             x,
-            jac,
             snes,
             tolerances,
             lag_persists,
@@ -966,6 +919,7 @@ impl Simulation {
         // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
         // increments into the body); eta_bar from the particles (mass-weighted projection).
+        let nf = self.dofs.fields();
         x.write(|xs| {
             for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
                 let node = node as usize;
@@ -987,15 +941,67 @@ impl Simulation {
                     }
                 }
             }
-            for d in devices.iter().flatten() {
+            for d in plan.devices.iter().flatten() {
                 d.project_guess(xs, nf);
             }
         })?;
-        drop(setup_guard);
-        let setup_time = t0.elapsed().as_secs_f64();
+        Ok(StepPlan {
+            new_pattern,
+            ..plan
+        })
+    }
+
+    /// Second phase: SNES from the prepared guess, repeated from the last solution while the contact
+    /// active set and the rotation of pinned devices settle (`docs/theory.md`, "Contact with rigid
+    /// devices"). `Ok(Err(reason))` if a solve fails (nothing committed).
+    fn solve(
+        &mut self,
+        plan: &mut StepPlan,
+        assembly_event: LogEvent,
+    ) -> Result<Result<Solved, String>, StepError> {
         let t1 = Instant::now();
-        // The contact active set (and the rotation of pinned devices) is settled by repeated solves, each
-        // starting from the last solution (see `docs/theory.md`, "Contact with rigid devices").
+        let step = self.step;
+        let Self {
+            setup: s,
+            table,
+            dofs,
+            grid_state,
+            assembler,
+            system,
+            ..
+        } = self;
+        let StepPlan {
+            devices,
+            dtheta,
+            pins,
+            translations,
+            face_lengths,
+            nodal_force,
+            newmark,
+            load_factor,
+            ..
+        } = plan;
+        let input = Self::step_input(
+            s,
+            table,
+            dofs,
+            grid_state,
+            *newmark,
+            *load_factor,
+            nodal_force,
+        );
+        let grid = &s.grid;
+        let nf = dofs.fields();
+        let n = dofs.len();
+        let LinearSystem {
+            x,
+            jac,
+            snes,
+            tolerances,
+            lag_persists,
+            lag,
+            ..
+        } = system.as_mut().expect("prepared linear system");
         let row_s = row_scale(&s.materials);
         let h = grid.cell_size();
         let mut info_total: Option<SolveInfo> = None;
@@ -1010,11 +1016,11 @@ impl Simulation {
             let mut problem = StepProblem {
                 input: &input,
                 event: assembly_event,
-                assembler: &mut self.assembler,
+                assembler: &mut *assembler,
                 assembly_time: 0.0,
                 residuals: 0,
                 jacobians: 0,
-                contact: &devices,
+                contact: devices.as_slice(),
                 row_scale: row_s,
             };
             let info = match snes.solve(&mut problem, x, jac) {
@@ -1022,7 +1028,7 @@ impl Simulation {
                 // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails
                 // this attempt like a diverged solve; the objects are rebuilt for the next attempt.
                 Err(e) if e.is_numerical() => {
-                    self.system = None;
+                    *system = None;
                     return Ok(Err(format!("SNES failed: {e}")));
                 }
                 Err(e) => return Err(e.into()),
@@ -1071,8 +1077,8 @@ impl Simulation {
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
             let xs = x.read(|v| v.to_vec())?;
-            self.assembler.evaluate(&input, &xs)?;
-            self.assembler.residual(&input, &xs, &mut phys, true)?;
+            assembler.evaluate(&input, &xs)?;
+            assembler.residual(&input, &xs, &mut phys, true)?;
             let force_scale = devices
                 .iter()
                 .flatten()
@@ -1095,7 +1101,7 @@ impl Simulation {
                     // A cycle of sets: keep the current one (only the pin rotations may still change).
                     tracing::warn!(
                         "step {}: the contact active set cycles; kept after {contact_iterations} solves",
-                        self.step + 1
+                        step + 1
                     );
                     frozen = true;
                 }
@@ -1144,12 +1150,59 @@ impl Simulation {
                 }
             })?;
         }
+
         let info = info_total.expect("at least one solve");
         let solve_time = t1.elapsed().as_secs_f64();
-        // Converged: reactions from the unconstrained residual, then G2P and commit.
+        // Converged: the physical residual (device forces, reactions) at the solution; the assembler keeps
+        // the nodal increments of this evaluation for `finish`.
         let xs = x.read(|v| v.to_vec())?;
-        self.assembler.evaluate(&input, &xs)?;
-        self.assembler.residual(&input, &xs, &mut phys, true)?;
+        assembler.evaluate(&input, &xs)?;
+        assembler.residual(&input, &xs, &mut phys, true)?;
+        Ok(Ok(Solved {
+            info,
+            phys,
+            solve_time,
+            assembly_time,
+            evaluations,
+            contact_solves: contact_iterations,
+        }))
+    }
+
+    /// Third phase: reactions and device forces, the new nodal accelerations, the work of the
+    /// constraints, G2P and the commit of the material state, the motion of the rigid bodies; the report.
+    fn finish(
+        &mut self,
+        plan: StepPlan,
+        solved: Solved,
+        t0: Instant,
+    ) -> Result<StepReport, StepError> {
+        let StepPlan {
+            dt,
+            t_new,
+            set_du,
+            sets,
+            pins,
+            dtheta,
+            devices,
+            load_nodes,
+            newmark,
+            load_factor,
+            new_pattern,
+            setup_time,
+            ..
+        } = plan;
+        let Solved {
+            info,
+            phys,
+            solve_time,
+            assembly_time,
+            evaluations,
+            contact_solves,
+        } = solved;
+        let nf = self.dofs.fields();
+        let n = self.dofs.len();
+        let s = &self.setup;
+        let grid = &s.grid;
         let mut reactions: Vec<[f64; 2]> = sets
             .iter()
             .map(|dofs| {
@@ -1340,7 +1393,7 @@ impl Simulation {
             .chain(s.rigid.iter().map(|r| r.name.clone()))
             .chain(s.loads.iter().map(|l| l.name.clone()))
             .collect();
-        Ok(Ok(StepReport {
+        Ok(StepReport {
             step: self.step,
             time: self.time,
             dt,
@@ -1373,8 +1426,8 @@ impl Simulation {
                 .filter(|(_, r)| r.contact.as_ref().is_some_and(|c| c.pin.is_some()))
                 .map(|(k, r)| (r.name.clone(), self.rotations[k]))
                 .collect(),
-            contact_solves: contact_iterations,
-        }))
+            contact_solves,
+        })
     }
 
     /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and
@@ -1769,79 +1822,6 @@ impl Simulation {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn hat_integral_matches_quadrature() {
-        let h = 2.0;
-        for &(a, b, c) in &[
-            (0.0, 10.0, 4.0),
-            (0.0, 10.0, 0.0),
-            (0.0, 10.0, 10.0),
-            (0.5, 3.0, 2.0),
-            (3.1, 3.3, 2.0),
-            (0.0, 1.0, 5.0),
-        ] {
-            let n = 200_000;
-            let ds = (b - a) / n as f64;
-            let q: f64 = (0..n)
-                .map(|k| {
-                    let s = a + (k as f64 + 0.5) * ds;
-                    (1.0 - (s - c).abs() / h).max(0.0) * ds
-                })
-                .sum();
-            assert!((hat_integral(a, b, c, h) - q).abs() < 1e-6, "{a} {b} {c}");
-        }
-    }
-
-    #[test]
-    fn prescribed_acceleration_is_that_of_the_prescribed_increments() {
-        let (v, rise, dt) = (4300.0, 1e-5, 1e-6);
-        // From rest with constant acceleration a: du = a dt^2 / 2 in the first step.
-        let a = prescribed_acceleration(v, rise, 0.0);
-        assert!((a - v / rise).abs() < 1e-9 * a);
-        let du = prescribed_increment(v, rise, 0.0, dt);
-        assert!((du - 0.5 * a * dt * dt).abs() < 1e-12 * du);
-        // Inside the rise: the second difference of the prescribed path.
-        let t = 4e-6;
-        let d2 = (prescribed_increment(v, rise, t, dt) - prescribed_increment(v, rise, t - dt, dt))
-            / (dt * dt);
-        assert!((d2 - prescribed_acceleration(v, rise, t)).abs() < 1e-6 * a);
-        // After the rise and for a velocity step: constant velocity.
-        assert_eq!(prescribed_acceleration(v, rise, 2.0 * rise), 0.0);
-        assert_eq!(prescribed_acceleration(v, 0.0, 0.0), 0.0);
-    }
-
-    #[test]
-    fn load_shares_are_the_consistent_nodal_forces() {
-        let grid = Grid::new(Vector2::new(-2.0, -2.0), 1.0, 14, 8).unwrap();
-        let load = |from: [f64; 2], to: [f64; 2]| NodalLoad {
-            name: "tip".into(),
-            from: Vector2::from(from),
-            to: Vector2::from(to),
-            force: Vector2::new(0.0, -1.0),
-            rise_time: 0.0,
-        };
-        // A vertical edge of 4 cells: end nodes 1/8, inner nodes 1/4.
-        let shares = load([10.0, 0.0], [10.0, 4.0]).shares(&grid).unwrap();
-        assert_eq!(shares.len(), 5);
-        let sum: f64 = shares.iter().map(|s| s.1).sum();
-        assert!((sum - 1.0).abs() < 1e-14);
-        for &(node, w) in &shares {
-            let x = grid.node_position(node);
-            assert_eq!(x.x, 10.0);
-            let end = x.y == 0.0 || x.y == 4.0;
-            assert!(
-                (w - if end { 0.125 } else { 0.25 }).abs() < 1e-14,
-                "{x:?} {w}"
-            );
-        }
-        // Reversed end points, horizontal: the same shares.
-        let h = load([4.0, 2.0], [0.0, 2.0]).shares(&grid).unwrap();
-        assert_eq!(h.len(), 5);
-        // Off a grid line: an error naming the load.
-        let e = load([10.5, 0.0], [10.5, 4.0]).shares(&grid).unwrap_err();
-        assert!(e.contains("tip") && e.contains("grid line"), "{e}");
-    }
 
     #[test]
     fn pushed_forward_gradients_reproduce_the_deformed_configuration() {

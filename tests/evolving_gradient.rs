@@ -14,12 +14,13 @@
 //! damaged zone falls to `c_0 R`, the flanks unload, and the `d >= 0.9` zone must stay within the onset
 //! half-wavelength (plus one cell for the point sampling) at every opening.
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
 use nalgebra::Vector2;
 
 const E: f64 = 20000.0;

@@ -3,12 +3,13 @@
 //!
 //! Units: mm, s, N, MPa, t.
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
 use nalgebra::Vector2;
 
 fn material(toml_text: &str) -> Material {

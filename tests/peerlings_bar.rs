@@ -11,13 +11,14 @@
 //! [`mpm_concrete::material::isotropic::peerlings`]) and reports the distance to the spec's closed form
 //! (`kappa = 1`, continuous `eta_bar'`).
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::isotropic::peerlings::{Bar, Solution};
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Motion, NodeBox, Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
 use nalgebra::Vector2;
 
 /// E (MPa), gamma_0, L and W (mm), density (t/mm^3; irrelevant quasi-statically).

@@ -4,13 +4,12 @@
 mod common;
 
 use common::{Column, material};
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{
-    InitialAcceleration, Method, Motion, NodeBox, Setup, Simulation, TimeIntegration,
-};
+use mpm_concrete::solver::{InitialAcceleration, Method, Setup, Simulation, TimeIntegration};
 use nalgebra::Vector2;
 
 /// V1: bar L = 25, E = 100, rho = 1, nu = 0, fixed at x = 0, lateral rollers, v(x, 0) = v0 sin(b1 x).

@@ -4,11 +4,12 @@
 //!
 //! Units: mm, s, N, MPa, t (density t/mm^3, gravity mm/s^2).
 
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Method, Motion, NodeBox, Setup, TimeIntegration};
+use mpm_concrete::solver::{Method, Setup, TimeIntegration};
 use nalgebra::Vector2;
 
 /// A constitutive law from its TOML section.
