@@ -29,7 +29,7 @@
 //! results do not depend on the number of threads. The block sparsity pattern (the union of the supports
 //! of the particles around each node) is built once per step and reused by every Newton iteration.
 
-use crate::dofs::DofMap;
+use crate::dofs::{DofMap, FieldLayout};
 use crate::material::{Constitutive, Material, MaterialError, Response};
 use crate::particles::Particles;
 use crate::petsc::{BlockCsr, BlockLayout};
@@ -174,7 +174,7 @@ impl Default for PointEval {
 /// Buffers are reused from step to step; nothing is allocated per Newton iteration.
 #[derive(Default)]
 pub struct Assembler {
-    fields: usize,
+    layout: FieldLayout,
     /// Node -> (particle, slot in its weight list), CSR over grid nodes.
     inc_offsets: Vec<usize>,
     inc_entries: Vec<(u32, u8)>,
@@ -206,7 +206,7 @@ impl Assembler {
     /// unknown numbering of the step are known.
     pub fn begin_step(&mut self, input: &StepInput<'_>) {
         let (table, particles, dofs) = (input.table, input.particles, input.dofs);
-        self.fields = dofs.fields();
+        self.layout = dofs.layout();
         let nodes = dofs.node_indices().len();
         let np = particles.len();
         // Incidence (counting sort by node).
@@ -316,7 +316,7 @@ impl Assembler {
 
     /// Number of nonzero entries of the Jacobian (blocks times fields^2).
     pub fn nonzeros(&self) -> usize {
-        self.cols.len() * self.fields * self.fields
+        self.cols.len() * self.layout.per_node() * self.layout.per_node()
     }
 
     /// The block pattern of the Jacobian (block rows = active nodes, global block columns offset by
@@ -325,7 +325,7 @@ impl Assembler {
         debug_assert_eq!(first, 0, "block columns are numbered from 0 on one process");
         BlockCsr {
             first,
-            bs: self.fields,
+            bs: self.layout.per_node(),
             row_ptr: &self.row_ptr,
             cols: &self.cols,
         }
@@ -334,7 +334,7 @@ impl Assembler {
     /// The pattern as (row, column) pairs in the order of [`Assembler::jacobian_into`]'s values (for
     /// tests and dense checks).
     pub fn pattern(&self) -> (Vec<usize>, Vec<usize>) {
-        let nf = self.fields;
+        let nf = self.layout.per_node();
         let n = self.nonzeros();
         let (mut rows, mut cols) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for a in 0..self.row_ptr.len() - 1 {
@@ -358,7 +358,7 @@ impl Assembler {
             return Ok(());
         }
         self.key_valid = false;
-        let nf = self.fields;
+        let nf = self.layout.per_node();
         let dofs = input.dofs;
         // Scatter the unknowns to grid nodes (inactive nodes stay zero).
         self.du.iter_mut().for_each(|d| *d = Vector2::zeros());
@@ -366,14 +366,14 @@ impl Assembler {
         for (a, &node) in dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
             self.du[node] = Vector2::new(x[a * nf], x[a * nf + 1]);
-            if nf == 3 {
-                self.eb[node] = x[a * nf + 2];
+            if let Some(e) = self.layout.eta_bar() {
+                self.eb[node] = x[a * nf + e];
             }
         }
         let (du, eb) = (&self.du, &self.eb);
         let (table, particles, materials) = (input.table, input.particles, input.materials);
         let hs = particles.history_stride();
-        let nonlocal = nf == 3;
+        let nonlocal = self.layout.eta_bar().is_some();
         self.evals
             .par_iter_mut()
             .zip(self.trial_history.par_chunks_mut(hs.max(1)))
@@ -473,7 +473,8 @@ impl Assembler {
         out: &mut [f64],
         physical: bool,
     ) -> Result<(), AssemblyError> {
-        let nf = self.fields;
+        let nf = self.layout.per_node();
+        let eta_bar = self.layout.eta_bar();
         let (table, particles, dofs) = (input.table, input.particles, input.dofs);
         let stride = table.stride();
         let s = input.row_scale;
@@ -487,7 +488,7 @@ impl Assembler {
                 let g0 = self.g0[p * stride + k];
                 let pp = ev.p.fixed_view::<2, 2>(0, 0);
                 ru += particles.vol0[p] * (pp * g0);
-                if nf == 3 {
+                if eta_bar.is_some() {
                     let w = &table.weights(p)[k];
                     reb += particles.vol[p]
                         * if ev.eroded {
@@ -516,8 +517,8 @@ impl Assembler {
             }
             r[0] = ru.x;
             r[1] = ru.y;
-            if nf == 3 {
-                r[2] = s * reb;
+            if let Some(e) = eta_bar {
+                r[e] = s * reb;
             }
             if !physical {
                 for (c, rc) in r.iter_mut().enumerate() {
@@ -537,7 +538,7 @@ impl Assembler {
     /// ordered by `layout` for [`Assembler::block_pattern`]: in parallel, block rows owning disjoint
     /// ranges.
     pub fn jacobian_into(&self, input: &StepInput<'_>, values: &mut [f64], layout: BlockLayout) {
-        let nf = self.fields;
+        let nf = self.layout.per_node();
         assert_eq!(values.len(), self.nonzeros(), "Jacobian value array length");
         let rows = self.row_ptr.len() - 1;
         let asm = AssemblerView {
@@ -673,8 +674,8 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
         let ws = table.weights(p);
         if ev.eroded {
             // No stiffness; the lumped anchor of eta_bar on the diagonal (see `Assembler::residual`).
-            if let (3, Some(d)) = (nf, diag) {
-                row[at(2, d, 2)] += s * particles.vol[p] * ws[k].value;
+            if let (Some(e), Some(d)) = (dofs.layout().eta_bar(), diag) {
+                row[at(e, d, e)] += s * particles.vol[p] * ws[k].value;
             }
             continue;
         }
@@ -708,14 +709,14 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
                     row[at(i, pos, kk)] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
                 }
             }
-            if nf == 3 {
+            if let Some(e) = dofs.layout().eta_bar() {
                 let (sj, gj) = (wj.value, wj.grad);
-                row[at(0, pos, 2)] += v0 * q.x * sj;
-                row[at(1, pos, 2)] += v0 * q.y * sj;
+                row[at(0, pos, e)] += v0 * q.x * sj;
+                row[at(1, pos, e)] += v0 * q.y * sj;
                 let h = ev.deta_dx * gj;
-                row[at(2, pos, 0)] -= s * vn * (si - dc_deta) * h.x;
-                row[at(2, pos, 1)] -= s * vn * (si - dc_deta) * h.y;
-                row[at(2, pos, 2)] += s * vn * (si * sj + c * gi.dot(&gj) + dc_deb * sj);
+                row[at(e, pos, 0)] -= s * vn * (si - dc_deta) * h.x;
+                row[at(e, pos, 1)] -= s * vn * (si - dc_deta) * h.y;
+                row[at(e, pos, e)] += s * vn * (si * sj + c * gi.dot(&gj) + dc_deb * sj);
             }
         }
     }

@@ -10,7 +10,7 @@ use crate::boundary::{
     Motion, NodalLoad, NodeBox, RigidBody, prescribed_acceleration, prescribed_increment,
 };
 use crate::contact::{self, ContactNode, DeviceContact, NodeStatus};
-use crate::dofs::DofMap;
+use crate::dofs::{DofMap, FieldLayout};
 use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
 use crate::particles::Particles;
@@ -524,11 +524,11 @@ impl LinearSystem {
         jac.set_near_null_space(&mut modes)?;
         let mut snes = Snes::new(session, prefix)?;
         snes.set_from_options()?;
-        if nf == 3 {
+        if let Some(e) = dofs.layout().eta_bar() {
             // Field index sets for `-pc_type fieldsplit` (names: `-fieldsplit_u_*`, `-fieldsplit_eta_bar_*`).
             let (u, eb): (Vec<i32>, Vec<i32>) = (0..n)
                 .map(|i| (first + i) as i32)
-                .partition(|i| (*i as usize - first) % nf != 2);
+                .partition(|i| (*i as usize - first) % nf != e);
             let is_u = IndexSet::new(session, &u)?;
             let is_eb = IndexSet::new(session, &eb)?;
             snes.set_fieldsplit(&[("u", &is_u), ("eta_bar", &is_eb)])?;
@@ -688,13 +688,15 @@ impl Simulation {
         }
     }
 
+    /// The unknowns of a node: the plane displacement, and `eta_bar` if any material is
+    /// gradient-enhanced.
+    pub fn layout(&self) -> FieldLayout {
+        FieldLayout::new(2, self.setup.materials.iter().any(Material::is_nonlocal))
+    }
+
     /// Unknowns per node: 3 if any material is gradient-enhanced, else 2.
     pub fn fields(&self) -> usize {
-        if self.setup.materials.iter().any(Material::is_nonlocal) {
-            3
-        } else {
-            2
-        }
+        self.layout().per_node()
     }
 
     /// Advances one step of (at most) `self.dt`, halving the step on failure down to `dt_min`; after a
@@ -932,8 +934,8 @@ impl Simulation {
                 };
                 xs[a * nf] = du.x;
                 xs[a * nf + 1] = du.y;
-                if nf == 3 {
-                    xs[a * nf + 2] = eta_bar[node];
+                if let Some(e) = self.dofs.layout().eta_bar() {
+                    xs[a * nf + e] = eta_bar[node];
                 }
                 for c in 0..nf {
                     if let (Some(v), Some(_)) = (self.dofs.prescribed(a * nf + c), newmark) {
@@ -1450,8 +1452,8 @@ impl Simulation {
             self.grid_state.velocity.copy_from_slice(v);
             self.grid_state.acceleration.copy_from_slice(a);
         }
-        let nf = self.fields();
-        self.dofs.rebuild(&self.grid_state.active, nf);
+        let layout = self.layout();
+        self.dofs.rebuild(&self.grid_state.active, layout);
         Ok(())
     }
 
@@ -1701,7 +1703,7 @@ impl Simulation {
     /// The points' `eta_bar` projected to the active nodes (mass-weighted), one per grid node; empty for
     /// a run without gradient enhancement.
     fn nodal_eta_bar(&self) -> Vec<f64> {
-        if self.dofs.fields() != 3 {
+        if self.dofs.layout().eta_bar().is_none() {
             return Vec::new();
         }
         let p = &self.setup.particles;
@@ -1748,9 +1750,9 @@ impl Simulation {
         };
         self.assembler.begin_step(&input);
         let mut x = vec![0.0; self.dofs.len()];
-        if nf == 3 {
+        if let Some(e) = self.dofs.layout().eta_bar() {
             for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
-                x[a * nf + 2] = eta_bar[node as usize];
+                x[a * nf + e] = eta_bar[node as usize];
             }
         }
         self.assembler.evaluate(&input, &x)?;

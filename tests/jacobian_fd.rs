@@ -3,7 +3,7 @@
 //! and local), on a small pre-deformed block with inertia and constrained nodes.
 
 use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
-use mpm_concrete::dofs::DofMap;
+use mpm_concrete::dofs::{DofMap, FieldLayout};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding, parallelogram_corners};
@@ -79,7 +79,11 @@ fn fd_check(
     let mut gs = GridState::new();
     transfer::particles_to_grid(&table, &particles, &grid, 1e-10, &mut gs).expect("p2g");
     let mut dofs = DofMap::default();
-    dofs.rebuild(&gs.active, fields);
+    assert!(
+        fields == 2 || fields == 3,
+        "plane displacement, with eta_bar or not"
+    );
+    dofs.rebuild(&gs.active, FieldLayout::new(2, fields == 3));
     // Constrain the x component of the active nodes on the left edge of the body.
     for node in 0..grid.num_nodes() {
         let x = grid.node_position(node);
