@@ -5,9 +5,8 @@
 //! ```
 //! Writes `material-<preset>-{tension,compression,cyclic}.png` and prints the strengths.
 
-use mpm_concrete::material::driver::{
-    EtaBarPath, PathKind, path_plot, peak, run_path, uniaxial_strengths,
-};
+use mpm_concrete::app::material_driver::path_plot;
+use mpm_concrete::material::driver::{EtaBarPath, PathKind, peak, run_path, uniaxial_strengths};
 use mpm_concrete::material::{MaterialConfig, MicroplaneConfig, Preset};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

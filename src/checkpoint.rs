@@ -17,7 +17,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// File name of the checkpoint inside the output directory.
-pub const FILE: &str = "checkpoint.h5";
+pub const FILE: &str = crate::schema::file::CHECKPOINT;
 
 /// Layout version written into `meta` (checkpoints without it predate checksums).
 const FORMAT: u64 = 2;

@@ -11,6 +11,7 @@
 
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::plot::{LinePlot, ScatterField, Series};
+use crate::schema::{file, history};
 use crate::solver::{Simulation, StepReport};
 use hdf5_metno::types::VarLenUnicode;
 use nalgebra::Vector2;
@@ -222,7 +223,7 @@ fn write_crack_json(
         "tip_speed_between_states": speeds,
         "final_classification": cracks.last().map(|c| c.classification.clone()),
     });
-    let path = dir.join("crack.json");
+    let path = dir.join(file::CRACK);
     let text = serde_json::to_string_pretty(&json).map_err(|e| OutputError::Plot {
         path: path.display().to_string(),
         message: e.to_string(),
@@ -253,7 +254,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
     let tip = Vector2::new(ct.notch_length, 0.5 * ct.height);
     let criteria = CrackCriteria::for_notch(ct.notch_width, h);
     let spacing = h / cfg.shape.points_per_cell as f64;
-    let old: Vec<CrackState> = std::fs::read_to_string(dir.join("crack.json"))
+    let old: Vec<CrackState> = std::fs::read_to_string(dir.join(file::CRACK))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .and_then(|v| serde_json::from_value(v["states"].clone()).ok())
@@ -462,17 +463,19 @@ impl RunOutput {
     fn write_history(&self) -> Result<(), OutputError> {
         let mut s = String::new();
         s.push_str("# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s\n");
-        s.push_str("step,time,dt,attempts,newton_its,linear_its,reason,residual_initial,residual_final,unknowns");
+        let mut columns: Vec<String> = history::LEADING.map(String::from).to_vec();
         if let Some(r) = self.rows.first() {
             for (name, _) in &r.reactions {
-                let _ = write!(s, ",{name}_ux,{name}_uy,{name}_fx,{name}_fy");
+                columns.extend(history::reaction_columns(name));
             }
             for (name, _) in &r.rotations {
-                let _ = write!(s, ",{name}_rotation");
+                columns.push(history::rotation_column(name));
             }
-            s.push_str(",contact_solves");
+            columns.push(history::CONTACT_SOLVES.into());
         }
-        s.push_str(",kinetic_energy,stored_energy,external_work,dissipated_energy,wall_setup,wall_assembly,wall_solve,wall_total,new_pattern\n");
+        columns.extend(history::TRAILING.map(String::from));
+        s.push_str(&columns.join(","));
+        s.push('\n');
         for r in &self.rows {
             let norms = &r.solve.residual_norms;
             let _ = write!(
@@ -511,12 +514,12 @@ impl RunOutput {
                 u8::from(r.new_pattern)
             );
         }
-        write_atomic(&self.dir.join("history.csv"), s.as_bytes())
+        write_atomic(&self.dir.join(file::HISTORY), s.as_bytes())
     }
 
     /// Writes the point fields of the current state (HDF5 + XDMF index) and a damage map (PNG).
     pub fn snapshot(&mut self, sim: &Simulation) -> Result<(), OutputError> {
-        let file = format!("fields_{:06}.h5", sim.step);
+        let file = file::numbered(file::FIELDS, sim.step);
         let path = self.dir.join(&file);
         let tmp = tmp_name(&path);
         self.write_h5(&tmp, sim).map_err(|e| OutputError::Hdf5 {
@@ -556,7 +559,10 @@ impl RunOutput {
             self.cracks.push(state);
             self.write_cracks()?;
         }
-        self.damage_map(sim, &self.dir.join(format!("damage_{:06}.png", sim.step)))
+        self.damage_map(
+            sim,
+            &self.dir.join(file::numbered(file::DAMAGE_MAP, sim.step)),
+        )
     }
 
     fn write_h5(&self, path: &Path, sim: &Simulation) -> hdf5_metno::Result<()> {
@@ -647,7 +653,7 @@ impl RunOutput {
 
     fn write_xdmf(&self, n: usize) -> Result<(), OutputError> {
         write_atomic(
-            &self.dir.join("fields.xdmf"),
+            &self.dir.join(file::FIELDS_INDEX),
             xdmf(&self.snapshots, n).as_bytes(),
         )
     }
@@ -715,7 +721,7 @@ impl RunOutput {
                 y_label: "reaction F_y [N/mm]".into(),
                 series: vs_t,
             },
-            "force_time.png",
+            file::FORCE_TIME,
         )?;
         if !vs_u.is_empty() {
             save(
@@ -725,7 +731,7 @@ impl RunOutput {
                     y_label: "reaction F_y [N/mm]".into(),
                     series: vs_u,
                 },
-                "force_displacement.png",
+                file::FORCE_DISPLACEMENT,
             )?;
         }
         Ok(())

@@ -8,15 +8,15 @@
 //! the material point method". Units everywhere: mm, s, N, MPa, t (tonne).
 //!
 //! Dependencies point one way:
-//! `cli -> io -> scenario -> solver -> {boundary, assembly, transfer, material, shape} -> {grid, particles}
-//! -> tensor`,
-//! and only `assembly`/`solver` talk to [`petsc`], the one module with `unsafe` FFI.
+//! `cli (main.rs) -> app -> io -> scenario -> solver -> {boundary, assembly, transfer, material, shape}
+//! -> {grid, particles} -> tensor`,
+//! and only `assembly`, `solver`, `solver_defaults` (and the PETSc smoke problem, `app::smoke`) talk to
+//! [`petsc`], the one module with `unsafe` FFI.
 
+pub mod app;
 pub mod assembly;
-pub mod bench;
 pub mod boundary;
 pub mod checkpoint;
-pub mod compare;
 pub mod config;
 pub mod contact;
 pub mod crack;
@@ -30,9 +30,8 @@ pub mod plot;
 pub mod preflight;
 pub mod rundir;
 pub mod scenario;
+pub mod schema;
 pub mod shape;
-pub mod smoke;
 pub mod solver;
 pub mod solver_defaults;
-pub mod study;
 pub mod transfer;

@@ -9,6 +9,8 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use mpm_concrete::app::smoke::{self, SmokeParams};
+use mpm_concrete::app::study;
 use mpm_concrete::checkpoint;
 use mpm_concrete::config::{self, RunConfig};
 use mpm_concrete::io::RunOutput;
@@ -16,10 +18,8 @@ use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::preflight;
 use mpm_concrete::rundir::{self, RunIdentity, RunRecord};
 use mpm_concrete::scenario;
-use mpm_concrete::smoke::{self, SmokeParams};
 use mpm_concrete::solver::{Setup, Simulation, StepError};
 use mpm_concrete::solver_defaults;
-use mpm_concrete::study;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -104,7 +104,7 @@ enum Command {
     /// Cross-check a finished run against reference CSV files (history columns or point values): prints
     /// relative errors; exit code 0 when all are within --tolerance, 1 when one exceeds it, 2 on bad
     /// input (docs/cross-check.md).
-    Compare(mpm_concrete::compare::CompareArgs),
+    Compare(mpm_concrete::app::compare::CompareArgs),
     /// Re-measure the crack metrics of a finished CT run from its snapshots with this version's criteria
     /// and rewrite its crack.json (prints the final state).
     Crack {
@@ -113,7 +113,7 @@ enum Command {
     },
     /// Material-point driver: strain or mixed paths through one constitutive law (CSV + PNG); prints the
     /// implied uniaxial strengths. No PETSc involved.
-    MaterialDriver(mpm_concrete::material::driver::DriverArgs),
+    MaterialDriver(mpm_concrete::app::material_driver::DriverArgs),
     /// Solve a small nonlinear lattice problem (3 unknowns per node) with SNES: checks the PETSc set-up
     /// and the solver options given on the command line.
     Smoke {
@@ -184,7 +184,7 @@ fn main() -> std::process::ExitCode {
         return std::process::ExitCode::from(2);
     }
     if let Command::Compare(args) = &cli.command {
-        return std::process::ExitCode::from(mpm_concrete::compare::run_cli(
+        return std::process::ExitCode::from(mpm_concrete::app::compare::run_cli(
             args,
             &petsc_args[1..],
         ));
@@ -247,7 +247,7 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
         }
         Command::MaterialDriver(args) => {
             no_petsc_options("material-driver", "", petsc_args)?;
-            let summary = mpm_concrete::material::driver::run_driver(&args)?;
+            let summary = mpm_concrete::app::material_driver::run_driver(&args)?;
             println!("{summary}");
             Ok(())
         }
@@ -256,7 +256,7 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
             steps,
             output,
         } => {
-            let mut all = mpm_concrete::bench::default_cases();
+            let mut all = mpm_concrete::app::bench::default_cases();
             if !cases.is_empty() {
                 let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
                 if let Some(unknown) = cases.iter().find(|c| !names.contains(c)) {
@@ -284,9 +284,9 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
             preflight::check_petsc_options(&options)
                 .map_err(|e| bad(format!("command line: {e}")))?;
             let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
-            let report = mpm_concrete::bench::run(&exe, &all, &options, &output)
+            let report = mpm_concrete::app::bench::run(&exe, &all, &options, &output)
                 .map_err(anyhow::Error::msg)?;
-            println!("{}", mpm_concrete::bench::markdown(&report));
+            println!("{}", mpm_concrete::app::bench::markdown(&report));
             println!("results in {}", output.display());
             Ok(())
         }
@@ -586,7 +586,7 @@ fn time_note(taken: &[f64], time: f64, steps: usize, dt: f64) -> Option<String> 
 /// run, drops it).
 fn append_history_note(dir: &Path, note: &str) -> Result<()> {
     use std::io::Write as _;
-    let path = dir.join("history.csv");
+    let path = dir.join(mpm_concrete::schema::file::HISTORY);
     if !path.exists() {
         return Ok(());
     }

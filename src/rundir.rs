@@ -4,11 +4,12 @@
 //! to overwrite them (which removes only the files the program writes) or to resume.
 
 use crate::io::{OutputError, write_atomic};
+use crate::schema::file;
 use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The run record in the output directory.
-pub const RUN_FILE: &str = "run.json";
+pub const RUN_FILE: &str = file::RUN;
 
 /// Whether `name` is a file the program writes into a run directory: `run.json`, `config.toml`,
 /// `history.csv`, `fields.xdmf`, `fields_NNNNNN.h5`, `damage_NNNNNN.png`, `force_time.png`,
@@ -21,18 +22,19 @@ pub fn is_program_file(name: &str) -> bool {
             .and_then(|r| r.strip_suffix(suffix))
             .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
     };
-    matches!(
-        name,
-        RUN_FILE
-            | "config.toml"
-            | "history.csv"
-            | "fields.xdmf"
-            | "force_time.png"
-            | "force_displacement.png"
-            | "crack.json"
-            | crate::checkpoint::FILE
-    ) || numbered("fields_", ".h5")
-        || numbered("damage_", ".png")
+    [
+        file::RUN,
+        file::CONFIG,
+        file::HISTORY,
+        file::FIELDS_INDEX,
+        file::FORCE_TIME,
+        file::FORCE_DISPLACEMENT,
+        file::CRACK,
+        file::CHECKPOINT,
+    ]
+    .contains(&name)
+        || numbered(file::FIELDS.0, file::FIELDS.1)
+        || numbered(file::DAMAGE_MAP.0, file::DAMAGE_MAP.1)
 }
 
 /// What a directory holds of a run.

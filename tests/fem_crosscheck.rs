@@ -5,12 +5,12 @@
 //!
 //! Each problem runs through the binary (`mpm-concrete run CONFIG --set ...`) on two grids, in MPM mode
 //! (CPDI1, 2 x 2 points per cell) and in FEM mode (bilinear elements, 2 x 2 Gauss points), and is compared
-//! with [`mpm_concrete::compare::compare`]. Every relative error must lie below a tolerance stated per
+//! with [`mpm_concrete::app::compare::compare`]. Every relative error must lie below a tolerance stated per
 //! quantity and grid, and refining h by 2 must reduce it (measured: first order for the CT, whose reaction is
 //! governed by the singular ends of the loaded segments; second order for the cantilever's deflection, first
 //! order for the MPM stresses).
 
-use mpm_concrete::compare::{self, ReferenceReport, Report, Settings};
+use mpm_concrete::app::compare::{self, ReferenceReport, Report, Settings};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;

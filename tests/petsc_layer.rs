@@ -1,9 +1,9 @@
-//! The PETSc layer end to end on the lattice problem of `mpm_concrete::smoke`: several SNES/KSP/PC
+//! The PETSc layer end to end on the lattice problem of `mpm_concrete::app::smoke`: several SNES/KSP/PC
 //! combinations chosen through the options database reach the same solution with quadratic Newton
 //! convergence; the assembled Jacobian matches finite differences; bad options give clear errors.
 
+use mpm_concrete::app::smoke::{self, SmokeParams};
 use mpm_concrete::petsc::{self, Session};
-use mpm_concrete::smoke::{self, SmokeParams};
 
 /// Sets `options` under `prefix` and solves; returns the result.
 fn solve_with(prefix: &str, options: &str) -> smoke::SmokeResult {

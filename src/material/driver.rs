@@ -12,22 +12,16 @@
 //! prescribed ramp `eta_bar = eta_bar_max |eps| / max_strain`. The history is committed after each
 //! converged step, exactly as the MPM solver does.
 //!
-//! Output: a CSV (one row per step, header with units) and a PNG of the stress-strain curve.
-//! [`run_driver`] also returns the implied uniaxial tensile and compressive strengths of a microplane
-//! material (peak `|P11|` on monotonic uniaxial-stress paths, see [`uniaxial_strengths`]).
-
-use std::fmt;
-use std::io::Write;
-use std::path::{Path, PathBuf};
+//! [`uniaxial_strengths`] measures the implied uniaxial tensile and compressive strengths of a microplane
+//! material (peak `|P11|` on monotonic uniaxial-stress paths). The `material-driver` command (files,
+//! plot, command line) is `crate::app::material_driver`.
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 
-use super::microplane::Preset;
-use super::{Constitutive, Material, MaterialConfig, MaterialError, MicroplaneConfig, Response};
-use crate::plot::LinePlot;
+use super::{Constitutive, Material, MaterialError, Response};
 
 /// Load path of the material-point driver.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PathKind {
     /// Uniaxial stress, tension.
     UniaxialTension,
@@ -44,6 +38,16 @@ pub enum PathKind {
 }
 
 impl PathKind {
+    /// Every path.
+    pub const ALL: [PathKind; 6] = [
+        PathKind::UniaxialTension,
+        PathKind::UniaxialCompression,
+        PathKind::CyclicTension,
+        PathKind::CyclicCompression,
+        PathKind::BiaxialTension,
+        PathKind::PureShear,
+    ];
+
     /// Kebab-case name (as on the command line).
     pub fn name(self) -> &'static str {
         match self {
@@ -57,7 +61,7 @@ impl PathKind {
     }
 
     /// Sign of the control strain.
-    fn sign(self) -> f64 {
+    pub fn sign(self) -> f64 {
         match self {
             PathKind::UniaxialCompression | PathKind::CyclicCompression => -1.0,
             _ => 1.0,
@@ -65,7 +69,7 @@ impl PathKind {
     }
 
     /// Stress component plotted against the control strain.
-    fn stress_component(self) -> (usize, usize) {
+    pub fn stress_component(self) -> (usize, usize) {
         if self == PathKind::PureShear {
             (0, 1)
         } else {
@@ -301,231 +305,10 @@ pub fn uniaxial_strengths(
     }))
 }
 
-/// Stress-strain plot of a path (nominal and Cauchy stress of the controlled component).
-pub fn path_plot(points: &[PathPoint], kind: PathKind, title: &str) -> LinePlot {
-    let (i, j) = kind.stress_component();
-    let (x_label, y_label) = if kind == PathKind::PureShear {
-        ("shear strain 2 F12 [-]", "shear stress [MPa]")
-    } else {
-        ("nominal strain F11 - 1 [-]", "stress 11 [MPa]")
-    };
-    LinePlot::new(title, x_label, y_label)
-        .with_series(
-            "P (1st Piola)",
-            points.iter().map(|p| (p.control, p.p[(i, j)])).collect(),
-        )
-        .with_series(
-            "sigma (Cauchy)",
-            points
-                .iter()
-                .map(|p| (p.control, p.sigma[(i, j)]))
-                .collect(),
-        )
-}
-
-/// Writes the path as CSV (header with units).
-pub fn write_csv(points: &[PathPoint], path: &Path) -> Result<(), MaterialError> {
-    let io = |e: std::io::Error| MaterialError::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(io)?;
-    }
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
-    writeln!(
-        w,
-        "step,control_strain[-],F11[-],F22[-],F33[-],F12[-],P11[MPa],P22[MPa],P33[MPa],P12[MPa],\
-         sigma11[MPa],sigma22[MPa],sigma33[MPa],sigma12[MPa],eta[-],eta_bar[-],damage[-],energy[MPa],newton_iterations"
-    )
-    .map_err(io)?;
-    for (k, p) in points.iter().enumerate() {
-        writeln!(
-            w,
-            "{k},{:e},{:.12},{:.12},{:.12},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{}",
-            p.control,
-            p.f[(0, 0)],
-            p.f[(1, 1)],
-            p.f[(2, 2)],
-            p.f[(0, 1)],
-            p.p[(0, 0)],
-            p.p[(1, 1)],
-            p.p[(2, 2)],
-            p.p[(0, 1)],
-            p.sigma[(0, 0)],
-            p.sigma[(1, 1)],
-            p.sigma[(2, 2)],
-            p.sigma[(0, 1)],
-            p.eta,
-            p.eta_bar,
-            p.damage,
-            p.energy,
-            p.iterations
-        )
-        .map_err(io)?;
-    }
-    w.flush().map_err(io)
-}
-
-/// Command-line arguments of the `material-driver` subcommand.
-#[derive(clap::Args, Clone, Debug)]
-pub struct DriverArgs {
-    /// TOML file with the material: a `[material]` table or the section's keys at top level
-    /// (`model = "microplane"`, ...). Overrides `--preset`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Microplane parameter preset used when no config is given.
-    #[arg(long, value_enum, default_value = "paper")]
-    pub preset: Preset,
-    /// Load path.
-    #[arg(long, value_enum, default_value = "uniaxial-tension")]
-    pub path: PathKind,
-    /// Magnitude of the control strain at the end of the path (default: 10 gamma_0, 40 gamma_0 in
-    /// compression; 0.01 for elastic materials).
-    #[arg(long)]
-    pub max_strain: Option<f64>,
-    /// Number of load steps.
-    #[arg(long, default_value_t = 400)]
-    pub steps: usize,
-    /// Prescribe `eta_bar = eta_bar_max |eps|/max_strain` instead of the local `eta_bar = eta`.
-    #[arg(long)]
-    pub eta_bar_max: Option<f64>,
-    /// Output directory for `<name>.csv` and `<name>.png`.
-    #[arg(long, default_value = "out/material-driver")]
-    pub out: PathBuf,
-    /// File stem of the outputs (default: the path name).
-    #[arg(long)]
-    pub name: Option<String>,
-    /// Steps of each of the two monotonic runs that measure the implied uniaxial strengths.
-    #[arg(long, default_value_t = 2000)]
-    pub strength_steps: usize,
-}
-
-/// What [`run_driver`] did and measured.
-#[derive(Clone, Debug)]
-pub struct DriverSummary {
-    pub path: PathKind,
-    pub csv: PathBuf,
-    pub png: PathBuf,
-    /// Peak magnitude of the controlled stress component along the path (MPa).
-    pub peak_stress: f64,
-    /// Control strain at the peak.
-    pub strain_at_peak: f64,
-    /// Output damage at the end of the path.
-    pub final_damage: f64,
-    /// Implied uniaxial strengths (microplane only).
-    pub strengths: Option<Strengths>,
-}
-
-impl fmt::Display for DriverSummary {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(
-            f,
-            "path {}: {} / {}",
-            self.path.name(),
-            self.csv.display(),
-            self.png.display()
-        )?;
-        writeln!(
-            f,
-            "  peak |stress| {:.4} MPa at strain {:.4e}; final damage {:.4}",
-            self.peak_stress, self.strain_at_peak, self.final_damage
-        )?;
-        if let Some(s) = &self.strengths {
-            writeln!(
-                f,
-                "  implied uniaxial strengths: tensile {:.3} MPa (at {:.3e}), compressive {:.3} MPa (at {:.3e}), ratio {:.3}",
-                s.tensile,
-                s.tensile_strain,
-                s.compressive,
-                s.compressive_strain,
-                s.compressive / s.tensile
-            )?;
-        }
-        Ok(())
-    }
-}
-
-/// Reads a material config file (`[material]` table or top-level keys).
-pub fn read_material_config(path: &Path) -> Result<MaterialConfig, MaterialError> {
-    let err = |message: String| MaterialError::Config {
-        path: path.display().to_string(),
-        message,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    let table: toml::Table = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
-    let section = match table.get("material") {
-        Some(toml::Value::Table(t)) => t.clone(),
-        Some(_) => return Err(err("`material` must be a table".into())),
-        None => table,
-    };
-    section
-        .try_into()
-        .map_err(|e: toml::de::Error| err(e.to_string()))
-}
-
-/// Runs the driver: builds the material, follows the path, writes CSV and PNG, measures strengths.
-pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, MaterialError> {
-    let config = match &args.config {
-        Some(p) => read_material_config(p)?,
-        None => MaterialConfig::Microplane(MicroplaneConfig::preset(args.preset)),
-    };
-    let material = config.build()?;
-    let max_strain = match (args.max_strain, &material) {
-        (Some(m), _) => m,
-        (None, Material::Microplane(m)) => {
-            let g0 = m.params().gamma_0;
-            if args.path.sign() < 0.0 {
-                40.0 * g0
-            } else {
-                10.0 * g0
-            }
-        }
-        (None, _) => 0.01,
-    };
-    let eta_bar_path = match args.eta_bar_max {
-        Some(max) if max.is_finite() => EtaBarPath::Prescribed { max },
-        Some(max) => {
-            return Err(MaterialError::DriverArgument(format!(
-                "eta_bar_max = {max} must be finite"
-            )));
-        }
-        None => EtaBarPath::Local,
-    };
-    let points = run_path(&material, args.path, max_strain, args.steps, eta_bar_path)?;
-    let name = args
-        .name
-        .clone()
-        .unwrap_or_else(|| args.path.name().to_string());
-    let csv = args.out.join(format!("{name}.csv"));
-    let png = args.out.join(format!("{name}.png"));
-    write_csv(&points, &csv)?;
-    let source = match &args.config {
-        Some(p) => p.display().to_string(),
-        None => format!("preset {}", args.preset.name()),
-    };
-    path_plot(
-        &points,
-        args.path,
-        &format!("{} ({source})", args.path.name()),
-    )
-    .save_png(&png)?;
-    let (peak_stress, strain_at_peak) = peak(&points, args.path);
-    Ok(DriverSummary {
-        path: args.path,
-        csv,
-        png,
-        peak_stress,
-        strain_at_peak,
-        final_damage: points.last().map_or(0.0, |p| p.damage),
-        strengths: uniaxial_strengths(&material, args.strength_steps)?,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::material::ElasticConfig;
+    use crate::material::{ElasticConfig, MaterialConfig, MicroplaneConfig, Preset};
 
     fn paper(preset: Preset) -> Material {
         MaterialConfig::Microplane(MicroplaneConfig::preset(preset))
@@ -712,42 +495,5 @@ mod tests {
             )
             .is_err()
         );
-    }
-
-    #[test]
-    fn run_driver_writes_csv_png_and_reads_config() {
-        let dir = std::env::temp_dir().join(format!("mpm_concrete_driver_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let cfg = dir.join("m.toml");
-        std::fs::write(&cfg, "[material]\nmodel = \"microplane\"\npreset = \"paper_gamma0_1.25e-4\"\nquadrature = \"bo33\"\n").unwrap();
-        let args = DriverArgs {
-            config: Some(cfg),
-            preset: Preset::Paper,
-            path: PathKind::UniaxialTension,
-            max_strain: Some(6e-4),
-            steps: 40,
-            eta_bar_max: None,
-            out: dir.clone(),
-            name: Some("t".into()),
-            strength_steps: 100,
-        };
-        let s = run_driver(&args).unwrap();
-        assert!(s.csv.exists() && s.png.exists());
-        let text = std::fs::read_to_string(&s.csv).unwrap();
-        assert!(text.starts_with("step,control_strain[-]"));
-        assert_eq!(text.lines().count(), 42);
-        let st = s.strengths.unwrap();
-        assert!(st.tensile > 1.0 && st.compressive > st.tensile);
-        assert!(s.to_string().contains("implied uniaxial strengths"));
-        std::fs::write(dir.join("bad.toml"), "model = \"microplane\"\nbogus = 1\n").unwrap();
-        let bad = DriverArgs {
-            config: Some(dir.join("bad.toml")),
-            ..args
-        };
-        assert!(matches!(
-            run_driver(&bad),
-            Err(MaterialError::Config { .. })
-        ));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -59,7 +59,7 @@ const ETA_TINY: f64 = 1e-14;
 const R_TINY: f64 = 1e-200;
 
 /// How the macroscopic local equivalent strain `eta` is formed from the microplane values.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EtaMode {
     /// `eta = max_I eta_mic,I` (the paper's "maximum local equivalent strain"; default).
@@ -83,26 +83,30 @@ pub enum StrainMeasure {
 }
 
 /// Named parameter sets (Table 1 of the paper and its low-threshold variant).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Preset {
     /// Table 1: K = 18750 MPa, G = 15254 MPa, nu = 0.18, gamma_0 = 1.25e-3, k_r = 14, alpha = 0.98,
     /// beta = 650, c = 1 mm^2.
     #[serde(rename = "paper")]
-    #[value(name = "paper")]
     Paper,
     /// Table 1 with gamma_0 = 1.25e-4 (a tensile strength near that of concrete).
     #[serde(rename = "paper_gamma0_1.25e-4")]
-    #[value(name = "paper_gamma0_1.25e-4")]
     PaperGamma0Low,
     /// Table 1 with gamma_0 = 1.25e-4 and beta = 6500: beta scaled with 1/gamma_0 so that the onset
     /// half-wavelength `pi sqrt(c/(alpha beta gamma_0))` (3.5 mm) and so the width over which damage first
     /// localises stay those of Table 1 (see [`MicroplaneParams::onset_half_wavelength`]).
     #[serde(rename = "paper_gamma0_1.25e-4_scaled")]
-    #[value(name = "paper_gamma0_1.25e-4_scaled")]
     PaperGamma0LowScaled,
 }
 
 impl Preset {
+    /// Every preset.
+    pub const ALL: [Preset; 3] = [
+        Preset::Paper,
+        Preset::PaperGamma0Low,
+        Preset::PaperGamma0LowScaled,
+    ];
+
     /// The name used in configs and on the command line.
     pub fn name(self) -> &'static str {
         match self {

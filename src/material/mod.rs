@@ -131,18 +131,9 @@ pub enum MaterialError {
     /// The material-point driver's Newton iteration on the free components did not converge.
     #[error("material-point driver: no convergence at step {step} (residual {residual:e} MPa)")]
     DriverNotConverged { step: usize, residual: f64 },
-    /// Invalid driver arguments.
+    /// Invalid arguments of a material-point path.
     #[error("material-point driver: {0}")]
     DriverArgument(String),
-    /// Reading a configuration file failed.
-    #[error("cannot read material config `{path}`: {message}")]
-    Config { path: String, message: String },
-    /// Writing output failed.
-    #[error("cannot write `{path}`: {message}")]
-    Io { path: String, message: String },
-    /// Plotting failed.
-    #[error(transparent)]
-    Plot(#[from] crate::plot::PlotError),
 }
 
 /// A constitutive law in first-Piola form (see [`Response`]).

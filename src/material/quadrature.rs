@@ -15,7 +15,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Choice of the microplane integration rule.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Quadrature {
     /// Bazant & Oh, 21 directions (degree 9).

@@ -7,9 +7,9 @@
 //! preconditioner set-ups, Krylov iterations, line search), Newton iterations per step, linear iterations per
 //! Newton iteration, peak resident memory (MB) and how many steps built a new Jacobian pattern.
 
+use crate::app::study::{self, OptionSet, SetResult};
 use crate::io::write_atomic;
 use crate::material::{Constitutive, MaterialConfig, MicroplaneConfig, Preset, Response};
-use crate::study::{self, OptionSet, SetResult};
 use nalgebra::Matrix3;
 use serde::Serialize;
 use std::fmt::Write as _;

@@ -13,6 +13,7 @@
 //!
 //! See `docs/cross-check.md` for the metrics and the rules.
 
+use crate::schema::{file, history};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -470,8 +471,8 @@ struct RunHistory {
 
 impl RunHistory {
     fn read(dir: &Path) -> Result<Self> {
-        let csv = Csv::read(&dir.join("history.csv"))?;
-        let ti = csv.column_index("time").ok_or_else(|| {
+        let csv = Csv::read(&dir.join(file::HISTORY))?;
+        let ti = csv.column_index(history::TIME).ok_or_else(|| {
             bad(format!(
                 "{}:{}: no `time` column",
                 csv.name, csv.header_line
@@ -482,7 +483,7 @@ impl RunHistory {
         }
         let mut times = Vec::with_capacity(csv.rows.len());
         for (line, f) in &csv.rows {
-            let t = csv.number(*line, "time", &f[ti])?;
+            let t = csv.number(*line, history::TIME, &f[ti])?;
             if times.last().is_some_and(|&p| t < p) {
                 return Err(bad(format!(
                     "{}:{line}: time {} s is earlier than the previous row's",

@@ -7,6 +7,7 @@
 
 use crate::io::write_atomic;
 use crate::plot::{LinePlot, Series};
+use crate::schema::{file, history};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -210,7 +211,7 @@ pub fn run_one(
     });
     Ok(read_result(
         set,
-        &out.join("history.csv"),
+        &out.join(file::HISTORY),
         &stdout,
         total,
         steps,
@@ -260,16 +261,16 @@ fn read_result(
                 .unwrap_or(f64::NAN)
         };
         r.steps += 1;
-        r.newton.push(num("newton_its"));
-        newton_sum += num("newton_its");
-        linear_sum += num("linear_its");
-        r.wall.push(num("wall_total"));
-        r.setup += num("wall_setup");
-        r.assembly += num("wall_assembly");
-        r.solve += num("wall_solve") - num("wall_assembly");
-        r.retries += (num("attempts") as usize).saturating_sub(1);
-        unknowns_sum += num("unknowns");
-        r.new_patterns += usize::from(num("new_pattern") == 1.0);
+        r.newton.push(num(history::NEWTON_ITS));
+        newton_sum += num(history::NEWTON_ITS);
+        linear_sum += num(history::LINEAR_ITS);
+        r.wall.push(num(history::WALL_TOTAL));
+        r.setup += num(history::WALL_SETUP);
+        r.assembly += num(history::WALL_ASSEMBLY);
+        r.solve += num(history::WALL_SOLVE) - num(history::WALL_ASSEMBLY);
+        r.retries += (num(history::ATTEMPTS) as usize).saturating_sub(1);
+        unknowns_sum += num(history::UNKNOWNS);
+        r.new_patterns += usize::from(num(history::NEW_PATTERN) == 1.0);
     }
     r.unknowns = unknowns_sum / r.steps.max(1) as f64;
     r.linear_per_newton = if newton_sum > 0.0 {

@@ -1,0 +1,118 @@
+//! The names of a run directory's files and of the columns of `history.csv`, shared by the writers
+//! (`io`, `checkpoint`, `rundir`, the `run` command) and the readers (`app::compare`, `app::study`), so
+//! that a renamed column or file changes in one place.
+//!
+//! Units of the history columns: time and dt s, displacement mm, force N per mm thickness, rotation rad,
+//! energy N mm per mm thickness, wall s.
+
+/// File names of a run directory.
+pub mod file {
+    /// The run's identity and status (`rundir`).
+    pub const RUN: &str = "run.json";
+    /// The effective configuration.
+    pub const CONFIG: &str = "config.toml";
+    /// One row per step ([`super::history`]).
+    pub const HISTORY: &str = "history.csv";
+    /// The XDMF index of the point fields, for ParaView.
+    pub const FIELDS_INDEX: &str = "fields.xdmf";
+    /// Crack metrics over time.
+    pub const CRACK: &str = "crack.json";
+    /// The restart state.
+    pub const CHECKPOINT: &str = "checkpoint.h5";
+    /// Reaction forces over time.
+    pub const FORCE_TIME: &str = "force_time.png";
+    /// Reaction forces over the loading device's displacement.
+    pub const FORCE_DISPLACEMENT: &str = "force_displacement.png";
+    /// Prefix and suffix of the point fields of one output step, `fields_NNNNNN.h5`.
+    pub const FIELDS: (&str, &str) = ("fields_", ".h5");
+    /// Prefix and suffix of the damage map of one output step, `damage_NNNNNN.png`.
+    pub const DAMAGE_MAP: (&str, &str) = ("damage_", ".png");
+
+    /// The name of a numbered file (`FIELDS` or `DAMAGE_MAP`) of output step `step`.
+    pub fn numbered((prefix, suffix): (&str, &str), step: usize) -> String {
+        format!("{prefix}{step:06}{suffix}")
+    }
+}
+
+/// Columns of `history.csv`: [`history::LEADING`], then per constraint set, rigid body and load the
+/// columns of [`history::reaction_columns`], per pinned device [`history::rotation_column`], then
+/// [`history::CONTACT_SOLVES`] (if there is any set) and [`history::TRAILING`].
+pub mod history {
+    /// Step number.
+    pub const STEP: &str = "step";
+    /// Time reached (s).
+    pub const TIME: &str = "time";
+    /// Time step taken (s).
+    pub const DT: &str = "dt";
+    /// Attempts of the step (1 + retries with the fallback solver or a smaller dt).
+    pub const ATTEMPTS: &str = "attempts";
+    /// Newton iterations.
+    pub const NEWTON_ITS: &str = "newton_its";
+    /// Linear iterations.
+    pub const LINEAR_ITS: &str = "linear_its";
+    /// SNES converged reason.
+    pub const REASON: &str = "reason";
+    /// First and last residual norm over the step's solves.
+    pub const RESIDUAL_INITIAL: &str = "residual_initial";
+    /// See [`RESIDUAL_INITIAL`].
+    pub const RESIDUAL_FINAL: &str = "residual_final";
+    /// Unknowns of the step.
+    pub const UNKNOWNS: &str = "unknowns";
+    /// SNES solves of the step (contact active set and pin rotations).
+    pub const CONTACT_SOLVES: &str = "contact_solves";
+    /// Energies (N mm per mm thickness).
+    pub const KINETIC_ENERGY: &str = "kinetic_energy";
+    /// See [`KINETIC_ENERGY`].
+    pub const STORED_ENERGY: &str = "stored_energy";
+    /// See [`KINETIC_ENERGY`].
+    pub const EXTERNAL_WORK: &str = "external_work";
+    /// See [`KINETIC_ENERGY`].
+    pub const DISSIPATED_ENERGY: &str = "dissipated_energy";
+    /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve, total.
+    pub const WALL_SETUP: &str = "wall_setup";
+    /// See [`WALL_SETUP`].
+    pub const WALL_ASSEMBLY: &str = "wall_assembly";
+    /// See [`WALL_SETUP`].
+    pub const WALL_SOLVE: &str = "wall_solve";
+    /// See [`WALL_SETUP`].
+    pub const WALL_TOTAL: &str = "wall_total";
+    /// 1 if the PETSc objects were built anew for the step.
+    pub const NEW_PATTERN: &str = "new_pattern";
+
+    /// The columns before the reactions.
+    pub const LEADING: [&str; 10] = [
+        STEP,
+        TIME,
+        DT,
+        ATTEMPTS,
+        NEWTON_ITS,
+        LINEAR_ITS,
+        REASON,
+        RESIDUAL_INITIAL,
+        RESIDUAL_FINAL,
+        UNKNOWNS,
+    ];
+
+    /// The columns after the reactions.
+    pub const TRAILING: [&str; 9] = [
+        KINETIC_ENERGY,
+        STORED_ENERGY,
+        EXTERNAL_WORK,
+        DISSIPATED_ENERGY,
+        WALL_SETUP,
+        WALL_ASSEMBLY,
+        WALL_SOLVE,
+        WALL_TOTAL,
+        NEW_PATTERN,
+    ];
+
+    /// Displacement (mm) and force (N per mm thickness) columns of a constraint set, rigid body or load.
+    pub fn reaction_columns(name: &str) -> [String; 4] {
+        ["ux", "uy", "fx", "fy"].map(|c| format!("{name}_{c}"))
+    }
+
+    /// Rotation column (rad) of a pinned device.
+    pub fn rotation_column(name: &str) -> String {
+        format!("{name}_rotation")
+    }
+}
