@@ -12,7 +12,7 @@
 use crate::io::{OutputError, RunOutput};
 use crate::rundir::RunIdentity;
 use crate::solver::{Counters, Method, Simulation};
-use nalgebra::{Matrix2, Matrix3, Vector2};
+use nalgebra::Vector2;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -49,6 +49,9 @@ pub enum CheckpointError {
     },
 }
 
+/// The state of a rigid body's points that moves with it (the rest comes from the configuration).
+const RIGID_COLUMNS: [&str; 2] = ["x", "corners"];
+
 fn flat2(v: &[Vector2<f64>]) -> Vec<f64> {
     v.iter().flat_map(|x| [x.x, x.y]).collect()
 }
@@ -56,15 +59,6 @@ fn flat2(v: &[Vector2<f64>]) -> Vec<f64> {
 fn unflat2(f: &[f64]) -> Vec<Vector2<f64>> {
     f.chunks_exact(2)
         .map(|c| Vector2::new(c[0], c[1]))
-        .collect()
-}
-
-fn unflat_corners(f: &[f64]) -> Vec<[Vector2<f64>; 4]> {
-    f.chunks_exact(8)
-        .map(|c| {
-            let v = unflat2(c);
-            [v[0], v[1], v[2], v[3]]
-        })
         .collect()
 }
 
@@ -120,40 +114,16 @@ fn write(
         names.push(name);
         Ok(())
     };
-    let matrices = |m: &mut dyn Iterator<Item = &[f64]>| m.flatten().copied().collect::<Vec<_>>();
-    put("x".into(), &flat2(&p.x))?;
-    put("v".into(), &flat2(&p.v))?;
-    put("a".into(), &flat2(&p.a))?;
-    put("r1".into(), &flat2(&p.r1))?;
-    put("r2".into(), &flat2(&p.r2))?;
-    put("vol".into(), &p.vol)?;
-    put("f".into(), &matrices(&mut p.f.iter().map(|m| m.as_slice())))?;
-    put(
-        "stress".into(),
-        &matrices(&mut p.stress.iter().map(|m| m.as_slice())),
-    )?;
-    put(
-        "corners".into(),
-        &p.corners.iter().flat_map(|c| flat2(c)).collect::<Vec<_>>(),
-    )?;
-    put("history".into(), &p.history)?;
-    put("eta_bar".into(), &p.eta_bar)?;
-    put("damage".into(), &p.damage)?;
-    put(
-        "dissipated".into(),
-        &p.dissipated.iter().flatten().copied().collect::<Vec<_>>(),
-    )?;
-    put("nonlocal_damage".into(), &p.nonlocal_damage)?;
+    for (name, _) in p.state_columns() {
+        put(name.into(), &p.column(name).expect("a listed column"))?;
+    }
     for (k, rb) in sim.setup.rigid.iter().enumerate() {
-        put(format!("rigid{k}_x"), &flat2(&rb.particles.x))?;
-        put(
-            format!("rigid{k}_corners"),
-            &rb.particles
-                .corners
-                .iter()
-                .flat_map(|c| flat2(c))
-                .collect::<Vec<_>>(),
-        )?;
+        for name in RIGID_COLUMNS {
+            put(
+                format!("rigid{k}_{name}"),
+                &rb.particles.column(name).expect("a listed column"),
+            )?;
+        }
     }
     if let Some((v, a)) = sim.fem_nodal_state() {
         put("fem_nodal_velocity".into(), &flat2(v))?;
@@ -314,29 +284,17 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
                 .into(),
         ));
     }
-    let mut expected: Vec<(String, usize)> = [
-        ("x", 2),
-        ("v", 2),
-        ("a", 2),
-        ("r1", 2),
-        ("r2", 2),
-        ("vol", 1),
-        ("f", 4),
-        ("stress", 9),
-        ("corners", 8),
-        ("history", header.history_stride),
-        ("eta_bar", 1),
-        ("damage", 1),
-        ("dissipated", 2),
-        ("nonlocal_damage", 1),
-    ]
-    .into_iter()
-    .map(|(name, per)| (name.to_owned(), per * n))
-    .collect();
+    let mut expected: Vec<(String, usize)> = p
+        .state_columns()
+        .into_iter()
+        .map(|(name, per)| (name.to_owned(), per * n))
+        .collect();
     for (k, rb) in sim.setup.rigid.iter().enumerate() {
-        let m = rb.particles.len();
-        expected.push((format!("rigid{k}_x"), 2 * m));
-        expected.push((format!("rigid{k}_corners"), 8 * m));
+        for (name, per) in rb.particles.state_columns() {
+            if RIGID_COLUMNS.contains(&name) {
+                expected.push((format!("rigid{k}_{name}"), per * rb.particles.len()));
+            }
+        }
     }
     let fem = sim.setup.method == Method::Fem && data.contains_key("fem_nodal_velocity");
     if fem {
@@ -358,32 +316,15 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
     }
     let mut take = |name: &str| data.remove(name).unwrap_or_default();
     let p = &mut sim.setup.particles;
-    p.x = unflat2(&take("x"));
-    p.v = unflat2(&take("v"));
-    p.a = unflat2(&take("a"));
-    p.r1 = unflat2(&take("r1"));
-    p.r2 = unflat2(&take("r2"));
-    p.vol = take("vol");
-    p.f = take("f")
-        .chunks_exact(4)
-        .map(Matrix2::from_column_slice)
-        .collect();
-    p.stress = take("stress")
-        .chunks_exact(9)
-        .map(Matrix3::from_column_slice)
-        .collect();
-    p.corners = unflat_corners(&take("corners"));
-    p.history = take("history");
-    p.eta_bar = take("eta_bar");
-    p.damage = take("damage");
-    p.dissipated = take("dissipated")
-        .chunks_exact(2)
-        .map(|c| [c[0], c[1]])
-        .collect();
-    p.nonlocal_damage = take("nonlocal_damage");
+    for (name, _) in p.state_columns() {
+        p.set_column(name, &take(name)).map_err(&unusable)?;
+    }
     for (k, rb) in sim.setup.rigid.iter_mut().enumerate() {
-        rb.particles.x = unflat2(&take(&format!("rigid{k}_x")));
-        rb.particles.corners = unflat_corners(&take(&format!("rigid{k}_corners")));
+        for name in RIGID_COLUMNS {
+            rb.particles
+                .set_column(name, &take(&format!("rigid{k}_{name}")))
+                .map_err(&unusable)?;
+        }
     }
     if fem {
         sim.set_fem_nodal_state(

@@ -329,6 +329,120 @@ impl Particles {
         (self.vol0.iter().sum::<f64>() / self.vol0.len() as f64).sqrt()
     }
 
+    /// The evolving per-point state, in a fixed order: what a checkpoint holds to continue a run (mass,
+    /// initial volume, body tag and initial half-edges come from the configuration). Values per point:
+    /// vectors 2, `F` 4 and `sigma` 9 (column-major), CPDI corners 8, the material history
+    /// [`Particles::history_stride`].
+    pub fn state_columns(&self) -> [(&'static str, usize); 14] {
+        [
+            ("x", 2),
+            ("v", 2),
+            ("a", 2),
+            ("r1", 2),
+            ("r2", 2),
+            ("vol", 1),
+            ("f", 4),
+            ("stress", 9),
+            ("corners", 8),
+            ("history", self.history_stride),
+            ("eta_bar", 1),
+            ("damage", 1),
+            ("dissipated", 2),
+            ("nonlocal_damage", 1),
+        ]
+    }
+
+    /// The values of state column `name` ([`Particles::state_columns`]), point after point; `None` for
+    /// an unknown name.
+    pub fn column(&self, name: &str) -> Option<Vec<f64>> {
+        let vectors = |v: &[Vector2<f64>]| v.iter().flat_map(|x| [x.x, x.y]).collect();
+        Some(match name {
+            "x" => vectors(&self.x),
+            "v" => vectors(&self.v),
+            "a" => vectors(&self.a),
+            "r1" => vectors(&self.r1),
+            "r2" => vectors(&self.r2),
+            "vol" => self.vol.clone(),
+            "f" => self.f.iter().flat_map(|m| m.as_slice().to_vec()).collect(),
+            "stress" => self
+                .stress
+                .iter()
+                .flat_map(|m| m.as_slice().to_vec())
+                .collect(),
+            "corners" => self
+                .corners
+                .iter()
+                .flat_map(|c| c.iter().flat_map(|x| [x.x, x.y]))
+                .collect(),
+            "history" => self.history.clone(),
+            "eta_bar" => self.eta_bar.clone(),
+            "damage" => self.damage.clone(),
+            "dissipated" => self.dissipated.iter().flatten().copied().collect(),
+            "nonlocal_damage" => self.nonlocal_damage.clone(),
+            _ => return None,
+        })
+    }
+
+    /// Sets state column `name` from `data` (point after point, as [`Particles::column`] gives it). The
+    /// length must be the column's width times the number of points; an error names the column otherwise.
+    pub fn set_column(&mut self, name: &str, data: &[f64]) -> Result<(), String> {
+        let width = self
+            .state_columns()
+            .iter()
+            .find(|c| c.0 == name)
+            .map(|c| c.1)
+            .ok_or_else(|| format!("no point state column `{name}`"))?;
+        if data.len() != width * self.len() {
+            return Err(format!(
+                "column `{name}` has {} values, {} points need {}",
+                data.len(),
+                self.len(),
+                width * self.len()
+            ));
+        }
+        let vectors = |d: &[f64]| -> Vec<Vector2<f64>> {
+            d.chunks_exact(2)
+                .map(|c| Vector2::new(c[0], c[1]))
+                .collect()
+        };
+        match name {
+            "x" => self.x = vectors(data),
+            "v" => self.v = vectors(data),
+            "a" => self.a = vectors(data),
+            "r1" => self.r1 = vectors(data),
+            "r2" => self.r2 = vectors(data),
+            "vol" => self.vol = data.to_vec(),
+            "f" => {
+                self.f = data
+                    .chunks_exact(4)
+                    .map(Matrix2::from_column_slice)
+                    .collect()
+            }
+            "stress" => {
+                self.stress = data
+                    .chunks_exact(9)
+                    .map(Matrix3::from_column_slice)
+                    .collect()
+            }
+            "corners" => {
+                self.corners = data
+                    .chunks_exact(8)
+                    .map(|c| {
+                        let v = vectors(c);
+                        [v[0], v[1], v[2], v[3]]
+                    })
+                    .collect()
+            }
+            "history" => self.history = data.to_vec(),
+            "eta_bar" => self.eta_bar = data.to_vec(),
+            "damage" => self.damage = data.to_vec(),
+            "dissipated" => self.dissipated = data.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+            "nonlocal_damage" => self.nonlocal_damage = data.to_vec(),
+            _ => unreachable!("listed in state_columns"),
+        }
+        Ok(())
+    }
+
     /// Number of history values per point.
     pub fn history_stride(&self) -> usize {
         self.history_stride
@@ -568,6 +682,44 @@ pub fn parallelogram_corners(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_state_column_survives_a_round_trip() {
+        let mut p = Particles::new();
+        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
+        for k in 0..3 {
+            p.push(Vector2::new(k as f64, 1.0), 0.25, 1e-9, r1, r2, 0);
+        }
+        p.resize_history(3, 0.0);
+        // Distinct values in every column.
+        let mut value = 0.0;
+        for (name, width) in p.state_columns() {
+            let data: Vec<f64> = (0..width * p.len())
+                .map(|_| {
+                    value += 1.0;
+                    value
+                })
+                .collect();
+            p.set_column(name, &data).unwrap();
+        }
+        let mut q = p.clone();
+        for (name, _) in p.state_columns() {
+            let data = p.column(name).unwrap();
+            q.set_column(name, &vec![0.0; data.len()]).unwrap();
+            q.set_column(name, &data).unwrap();
+            assert_eq!(q.column(name).unwrap(), data, "{name}");
+        }
+        assert_eq!(q.x, p.x);
+        assert_eq!(q.f, p.f);
+        assert_eq!(q.stress, p.stress);
+        assert_eq!(q.corners, p.corners);
+        assert_eq!(q.dissipated, p.dissipated);
+        assert_eq!(p.f[0], Matrix2::new(34.0, 36.0, 35.0, 37.0), "column-major");
+        let e = q.set_column("damage", &[1.0]).unwrap_err();
+        assert!(e.contains("damage") && e.contains("3 points"), "{e}");
+        assert!(q.set_column("bogus", &[]).is_err());
+        assert!(q.column("bogus").is_none());
+    }
 
     /// The CT default plate: 200 x 200 mm minus a 110 x 10 mm notch from the left edge at mid-height.
     fn ct_geometry() -> Geometry {
