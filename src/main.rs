@@ -414,8 +414,7 @@ fn smoke_test(session: &SessionGuard, n: usize, load: f64, print_solution: bool)
     Ok(())
 }
 
-/// Options prefix of the fallback solver (its defaults: [`solver_defaults::FALLBACK`]).
-const FALLBACK_PREFIX: &str = "fallback_";
+use solver_defaults::FALLBACK_PREFIX;
 
 /// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
 /// range, unsupported, incompatible, unknown type).
@@ -728,16 +727,12 @@ fn simulate(
     let file = path.display().to_string();
     petsc::apply_default_options(session, &cfg.run.petsc_options)
         .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
-    let model = || -> Result<Setup> {
-        let mut setup = scenario::build(&cfg).map_err(|e| bad(format!("{file}: {e}")))?;
-        setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
-        Ok(setup)
-    };
+    let model = || scenario::build(&cfg).map_err(|e| bad(format!("{file}: {e}")));
     let simulation = |setup: Setup| Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")));
-    let setup = model()?;
+    let mut setup = model()?;
     // The solver defaults follow the kind of step (docs/solvers.md); those a user's solver choice makes
     // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
-    let (_, defaults) = solver_defaults::apply(session, &setup)?;
+    let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
     let mut sim = simulation(setup)?;
     if resume_from.is_some() {
         checkpoint::load(&dir, &mut sim).map_err(bad)?;

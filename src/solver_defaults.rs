@@ -65,7 +65,10 @@ const STIFFNESS_LU: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol
 /// Newton with MUMPS LU, a new factorisation every iteration.
 const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
 
-/// Options of the fallback solver (prefix `fallback_`) tried at the same time step when the main one
+/// Options prefix of the fallback solver.
+pub const FALLBACK_PREFIX: &str = "fallback_";
+
+/// Options of the fallback solver (prefix [`FALLBACK_PREFIX`]) tried at the same time step when the main one
 /// fails, before the step is halved: Newton with a fresh MUMPS LU every iteration (pivoting copes with the
 /// indefinite tangents of strongly softening material), with MUMPS's null-pivot detection (`ICNTL(24) = 1`):
 /// late in the paper-size CT at 4.3 m/s with contact plates the Jacobian became numerically singular
@@ -122,14 +125,16 @@ pub fn main_options(class: StepClass, gradient: bool) -> String {
 }
 
 /// Applies the defaults of the model's class and the fallback solver to the options database (options
-/// already set, from the config or the command line, win) and returns the names of the options it set,
+/// already set, from the config or the command line, win), makes the model retry failed steps with the
+/// fallback solver (prefix [`FALLBACK_PREFIX`]) and returns the names of the options it set,
 /// e.g. `-ksp_type`, so that those a user's choice made irrelevant are not reported as unused. A lagged
 /// preconditioner only makes sense inside a Krylov method: under `-ksp_type preonly` (a user's direct
 /// solve) the default lag is withdrawn, so that Newton keeps a fresh factorisation every iteration.
 pub fn apply(
     session: &SessionGuard,
-    setup: &Setup,
+    setup: &mut Setup,
 ) -> Result<(StepClass, Vec<String>), petsc::PetscError> {
+    setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
     let gradient = setup.materials.iter().any(|m| m.is_nonlocal());
     let mut applied: Vec<String> =
