@@ -82,17 +82,6 @@ fn run(
     let far = 1e6;
     let dt = 1e-6;
     let setup = Setup {
-        grid,
-        particles,
-        materials: vec![material.build()?],
-        shape: ShapeKind::Cpdi1,
-        time: TimeIntegration {
-            dt,
-            dt_min: dt,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         boxes: vec![
             NodeBox {
                 name: "base".into(),
@@ -109,12 +98,18 @@ fn run(
                 rise_time: 0.0,
             },
         ],
-        rigid: vec![],
         options_prefix: Some(format!("{solver}_")),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(
+            grid,
+            particles,
+            vec![material.build()?],
+            ShapeKind::Cpdi1,
+            TimeIntegration {
+                dt,
+                dt_min: dt,
+                ..TimeIntegration::default()
+            },
+        )
     };
     let mut sim = Simulation::new(setup)?;
     let reports: Vec<StepReport> = (0..steps)

@@ -121,19 +121,14 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
         motion,
         rise_time: 0.0,
     };
+    let time = TimeIntegration {
+        dt: 1.0,
+        dt_min: 1.0 / 64.0,
+        quasi_static: true,
+        ..TimeIntegration::default()
+    };
+    let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2)?;
     let setup = Setup {
-        grid: Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2)?,
-        particles,
-        materials: vec![cfg.build()?],
-        shape: ShapeKind::Cpdi1,
-        time: TimeIntegration {
-            dt: 1.0,
-            dt_min: 1.0 / 64.0,
-            quasi_static: true,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         // Grips: every node at x >= L moves with the end, every node at x <= 0 is fixed. A grip that holds
         // only the nodes on x = L leaves the node beyond it free, with the small mass of the end points'
         // CPDI corners that have crossed x = L: it relaxes the last column of points to zero stress
@@ -158,12 +153,8 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
                 [Motion::Free, Motion::Velocity(0.0)],
             ),
         ],
-        rigid: vec![],
         options_prefix: Some(case.prefix.into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(grid, particles, vec![cfg.build()?], ShapeKind::Cpdi1, time)
     };
     let mut sim = Simulation::new(setup)?;
     let t0 = Instant::now();

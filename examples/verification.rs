@@ -67,20 +67,8 @@ fn setup(
     prefix: &str,
 ) -> Setup {
     Setup {
-        grid,
-        particles,
-        materials: vec![material],
-        shape,
-        time,
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
-        boxes: vec![],
-        rigid: vec![],
         options_prefix: Some(prefix.into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(grid, particles, vec![material], shape, time)
     }
 }
 

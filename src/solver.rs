@@ -144,6 +144,38 @@ pub struct Setup {
     pub fallback_prefix: Option<String>,
 }
 
+impl Setup {
+    /// A model of the deformable points `particles` (body tag = index into `materials`) on `grid`, with
+    /// the defaults of a configuration file for the rest: no constraints, rigid bodies, loads or body
+    /// force, MPM, nodes with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a
+    /// prefix and no fallback solver. Set the other fields with struct-update syntax:
+    /// `Setup { boxes, ..Setup::new(grid, particles, materials, shape, time) }`.
+    pub fn new(
+        grid: Grid,
+        particles: Particles,
+        materials: Vec<Material>,
+        shape: ShapeKind,
+        time: TimeIntegration,
+    ) -> Self {
+        Self {
+            grid,
+            particles,
+            materials,
+            shape,
+            time,
+            body_force: Vector2::zeros(),
+            body_force_ramp: 0.0,
+            boxes: Vec::new(),
+            rigid: Vec::new(),
+            loads: Vec::new(),
+            method: Method::Mpm,
+            options_prefix: None,
+            mass_tolerance: 1e-6,
+            fallback_prefix: None,
+        }
+    }
+}
+
 /// Failure of a step or a run.
 #[derive(Debug, thiserror::Error)]
 pub enum StepError {

@@ -143,26 +143,22 @@ fn run_bar_with(
         motion,
         rise_time: RISE,
     };
+    // The pulled end travels up to about 1 mm: a margin of 2 mm plus two cells.
+    let grid = Grid::covering(
+        Vector2::zeros(),
+        Vector2::new(L, h),
+        h,
+        (2.0 / h).ceil() as usize + 2,
+    )
+    .expect("grid");
+    let time = TimeIntegration {
+        dt: DT,
+        dt_min: DT / 64.0,
+        quasi_static: false,
+        ..TimeIntegration::default()
+    };
+    let material = cfg.build().expect("valid material");
     let setup = Setup {
-        // The pulled end travels up to about 1 mm: a margin of 2 mm plus two cells.
-        grid: Grid::covering(
-            Vector2::zeros(),
-            Vector2::new(L, h),
-            h,
-            (2.0 / h).ceil() as usize + 2,
-        )
-        .expect("grid"),
-        particles,
-        materials: vec![cfg.build().expect("valid material")],
-        shape: ShapeKind::Cpdi1,
-        time: TimeIntegration {
-            dt: DT,
-            dt_min: DT / 64.0,
-            quasi_static: false,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         boxes: vec![
             bx(
                 "pulled end",
@@ -183,12 +179,8 @@ fn run_bar_with(
                 [Motion::Free, Motion::Velocity(0.0)],
             ),
         ],
-        rigid: vec![],
         options_prefix: Some("evg_".into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(grid, particles, vec![material], ShapeKind::Cpdi1, time)
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let profile = |sim: &Simulation| {

@@ -56,20 +56,7 @@ fn one_step(kind: ShapeKind, prefix: &str, extra: &str, load: f64) -> (Vec<f64>,
     let far = 1e6;
     let g = load * e / (rho * size);
     let setup = Setup {
-        grid,
-        particles,
-        materials: vec![material(&format!(
-            "model = \"neo_hookean\"\nyoungs_modulus = {e}\npoisson_ratio = 0.3"
-        ))],
-        shape: kind,
-        time: TimeIntegration {
-            dt: 1.0,
-            dt_min: 1.0,
-            quasi_static: true,
-            ..TimeIntegration::default()
-        },
         body_force: Vector2::new(0.5 * g, -g),
-        body_force_ramp: 0.0,
         boxes: vec![NodeBox {
             name: "base".into(),
             min: Vector2::new(-far, -far),
@@ -77,12 +64,21 @@ fn one_step(kind: ShapeKind, prefix: &str, extra: &str, load: f64) -> (Vec<f64>,
             motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
             rise_time: 0.0,
         }],
-        rigid: vec![],
         options_prefix: Some(prefix.into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(
+            grid,
+            particles,
+            vec![material(&format!(
+                "model = \"neo_hookean\"\nyoungs_modulus = {e}\npoisson_ratio = 0.3"
+            ))],
+            kind,
+            TimeIntegration {
+                dt: 1.0,
+                dt_min: 1.0,
+                quasi_static: true,
+                ..TimeIntegration::default()
+            },
+        )
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let r = sim.advance(&s).expect("step");

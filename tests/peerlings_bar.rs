@@ -84,19 +84,14 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
     .expect("material config");
     let material: Material = cfg.build().expect("material");
     let far = 1e3;
+    let time = TimeIntegration {
+        dt: 1.0,
+        dt_min: 1.0 / 64.0,
+        quasi_static: true,
+        ..TimeIntegration::default()
+    };
+    let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2).expect("grid");
     let setup = Setup {
-        grid: Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2).expect("grid"),
-        particles,
-        materials: vec![material],
-        shape: ShapeKind::Cpdi1,
-        time: TimeIntegration {
-            dt: 1.0,
-            dt_min: 1.0 / 64.0,
-            quasi_static: true,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         // Grips: every node at x >= L moves with the end, every node at x <= 0 is fixed (a grip on the
         // nodes of x = L only leaves the next node free with the tiny mass of the CPDI corners that crossed
         // x = L; it relaxes the last column of points to F = I and doubles the strain of the one before).
@@ -123,12 +118,8 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
                 rise_time: 0.0,
             },
         ],
-        rigid: vec![],
         options_prefix: Some(prefix.into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(grid, particles, vec![material], ShapeKind::Cpdi1, time)
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     assert_eq!(sim.fields(), 3, "c > 0: (u_x, u_y, eta_bar) per node");

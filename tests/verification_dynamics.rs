@@ -65,19 +65,6 @@ fn axial_bar_with(
     let dt = period / steps_per_period as f64;
     let far = 1e3;
     let setup = Setup {
-        grid,
-        particles,
-        materials: vec![material(
-            "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
-        )],
-        shape: kind,
-        time: TimeIntegration {
-            dt,
-            dt_min: dt / 8.0,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         boxes: vec![
             NodeBox {
                 name: "rollers".into(),
@@ -94,12 +81,21 @@ fn axial_bar_with(
                 rise_time: 0.0,
             },
         ],
-        rigid: vec![],
         options_prefix: Some("v1_".into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
         method,
-        fallback_prefix: None,
+        ..Setup::new(
+            grid,
+            particles,
+            vec![material(
+                "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
+            )],
+            kind,
+            TimeIntegration {
+                dt,
+                dt_min: dt / 8.0,
+                ..TimeIntegration::default()
+            },
+        )
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let mass: f64 = sim.setup.particles.mass.iter().sum();

@@ -58,19 +58,6 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
     let grid = Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(length, h), h, 2).expect("grid");
     let dt = courant * h / c;
     let setup = Setup {
-        grid,
-        particles,
-        materials: vec![material(&format!(
-            "model = \"linear_elastic\"\nbulk_modulus = {K}\nshear_modulus = {G}"
-        ))],
-        shape: kind,
-        time: TimeIntegration {
-            dt,
-            dt_min: dt,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         boxes: vec![
             NodeBox {
                 name: "rollers".into(),
@@ -87,12 +74,20 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
                 rise_time: 0.0,
             },
         ],
-        rigid: vec![],
         options_prefix: Some("v3_".into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(
+            grid,
+            particles,
+            vec![material(&format!(
+                "model = \"linear_elastic\"\nbulk_modulus = {K}\nshear_modulus = {G}"
+            ))],
+            kind,
+            TimeIntegration {
+                dt,
+                dt_min: dt,
+                ..TimeIntegration::default()
+            },
+        )
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     // Run until the front has crossed three quarters of the strip.
@@ -208,19 +203,6 @@ fn cantilever(
     let period = 2.0 * std::f64::consts::PI / w_exact;
     let dt = period / steps_per_period as f64;
     let setup = Setup {
-        grid,
-        particles,
-        materials: vec![material(&format!(
-            "model = \"linear_elastic\"\nyoungs_modulus = {e}\npoisson_ratio = {nu}"
-        ))],
-        shape: kind,
-        time: TimeIntegration {
-            dt,
-            dt_min: dt,
-            ..TimeIntegration::default()
-        },
-        body_force: Vector2::zeros(),
-        body_force_ramp: 0.0,
         boxes: vec![NodeBox {
             name: "clamp".into(),
             min: Vector2::new(-FAR, -FAR),
@@ -228,12 +210,20 @@ fn cantilever(
             motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
             rise_time: 0.0,
         }],
-        rigid: vec![],
         options_prefix: Some("v6_".into()),
-        mass_tolerance: 1e-6,
-        loads: Vec::new(),
-        method: mpm_concrete::solver::Method::Mpm,
-        fallback_prefix: None,
+        ..Setup::new(
+            grid,
+            particles,
+            vec![material(&format!(
+                "model = \"linear_elastic\"\nyoungs_modulus = {e}\npoisson_ratio = {nu}"
+            ))],
+            kind,
+            TimeIntegration {
+                dt,
+                dt_min: dt,
+                ..TimeIntegration::default()
+            },
+        )
     };
     let mut sim = Simulation::new(setup).expect("simulation");
     let (mut t_prev, mut u_prev) = (0.0, 0.0);

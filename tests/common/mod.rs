@@ -66,16 +66,7 @@ impl Column {
             .expect("grid");
         let far = 1e6;
         Setup {
-            grid,
-            particles,
-            materials: vec![material(&format!(
-                "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
-                self.e
-            ))],
-            shape: kind,
-            time,
             body_force: Vector2::new(0.0, -self.g),
-            body_force_ramp: 0.0,
             boxes: vec![
                 NodeBox {
                     name: "side rollers".into(),
@@ -92,12 +83,18 @@ impl Column {
                     rise_time: 0.0,
                 },
             ],
-            rigid: vec![],
             options_prefix: Some(prefix.into()),
-            mass_tolerance: 1e-6,
-            loads: Vec::new(),
             method,
-            fallback_prefix: None,
+            ..Setup::new(
+                grid,
+                particles,
+                vec![material(&format!(
+                    "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
+                    self.e
+                ))],
+                kind,
+                time,
+            )
         }
     }
 }
