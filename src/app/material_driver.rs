@@ -36,24 +36,26 @@ pub enum DriverError {
     Plot(#[from] PlotError),
 }
 
-/// `--preset`: the names of [`Preset::name`], listed in the help.
-fn preset_parser() -> impl TypedValueParser<Value = Preset> {
-    PossibleValuesParser::new(Preset::ALL.map(Preset::name)).map(|name| {
-        Preset::ALL
-            .into_iter()
-            .find(|p| p.name() == name)
-            .expect("a listed preset")
+/// A command-line value that is one of `all`, written as `name(value)`; the names are listed in the help.
+fn named<T: Copy + Send + Sync + 'static>(
+    all: &'static [T],
+    name: fn(T) -> &'static str,
+) -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(all.iter().map(|&v| name(v))).map(move |given| {
+        *all.iter()
+            .find(|&&v| name(v) == given)
+            .expect("a listed value")
     })
 }
 
-/// `--path`: the names of [`PathKind::name`], listed in the help.
+/// `--preset`: the names of [`Preset::name`].
+fn preset_parser() -> impl TypedValueParser<Value = Preset> {
+    named(&Preset::ALL, Preset::name)
+}
+
+/// `--path`: the names of [`PathKind::name`].
 fn path_parser() -> impl TypedValueParser<Value = PathKind> {
-    PossibleValuesParser::new(PathKind::ALL.map(PathKind::name)).map(|name| {
-        PathKind::ALL
-            .into_iter()
-            .find(|p| p.name() == name)
-            .expect("a listed path")
-    })
+    named(&PathKind::ALL, PathKind::name)
 }
 
 /// Stress-strain plot of a path (nominal and Cauchy stress of the controlled component).
@@ -280,6 +282,39 @@ pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, DriverError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: DriverArgs,
+    }
+
+    #[test]
+    fn presets_and_paths_parse_by_their_names() {
+        let cli = Cli::try_parse_from([
+            "material-driver",
+            "--preset",
+            "paper_gamma0_1.25e-4_scaled",
+            "--path",
+            "pure-shear",
+        ])
+        .unwrap();
+        assert_eq!(cli.args.preset, Preset::PaperGamma0LowScaled);
+        assert_eq!(cli.args.path, PathKind::PureShear);
+        let defaults = Cli::try_parse_from(["material-driver"]).unwrap();
+        assert_eq!(defaults.args.preset, Preset::Paper);
+        assert_eq!(defaults.args.path, PathKind::UniaxialTension);
+        for p in Preset::ALL {
+            let c = Cli::try_parse_from(["material-driver", "--preset", p.name()]).unwrap();
+            assert_eq!(c.args.preset, p);
+        }
+        let e = Cli::try_parse_from(["material-driver", "--path", "nope"])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("nope") && e.contains("pure-shear"), "{e}");
+    }
 
     #[test]
     fn run_driver_writes_csv_png_and_reads_config() {
