@@ -1330,6 +1330,23 @@ pub fn run_cli(args: &CompareArgs, extra: &[String]) -> u8 {
 mod tests {
     use super::*;
 
+    #[test]
+    fn every_quantity_reads_a_field_the_writer_writes() {
+        for (quantity, dataset, component) in QUANTITIES {
+            let field = crate::io::FIELDS
+                .iter()
+                .find(|f| f.name == dataset)
+                .unwrap_or_else(|| {
+                    panic!("`{quantity}` reads `{dataset}`, which io does not write")
+                });
+            assert_eq!(
+                component.is_some(),
+                field.kind == crate::io::Kind::Vector,
+                "{quantity}: component of a vector field, none of a scalar"
+            );
+        }
+    }
+
     /// A regular lattice of points over [0, 10] x [0, 5], spacing 0.5, offset by a quarter spacing (like
     /// material points in their cells).
     fn lattice() -> Vec<[f64; 2]> {
