@@ -494,8 +494,6 @@ struct LinearSystem {
     /// The SNES tolerances from the options database, restored at the start of every step attempt (the
     /// contact re-solves of a step run with a raised absolute tolerance).
     tolerances: Tolerances,
-    /// Whether the user asked for `-snes_lag_preconditioner_persists` (then it is left alone).
-    lag_persists: bool,
     /// The lag of the preconditioner from the options database (`-snes_lag_preconditioner`).
     lag: PetscInt,
 }
@@ -566,8 +564,6 @@ impl LinearSystem {
             snes.set_fieldsplit(&[("u", &is_u), ("eta_bar", &is_eb)])?;
         }
         let tolerances = snes.tolerances()?;
-        let persists = format!("{}snes_lag_preconditioner_persists", prefix.unwrap_or(""));
-        let lag_persists = petsc::has_option(session, &persists)?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
             prefix: prefix.map(str::to_owned),
@@ -578,7 +574,6 @@ impl LinearSystem {
             jac,
             snes,
             tolerances,
-            lag_persists,
             lag,
         })
     }
@@ -939,16 +934,16 @@ impl Simulation {
             x,
             snes,
             tolerances,
-            lag_persists,
             lag,
             ..
         } = self.system.as_mut().expect("linear system just built");
-        // The first solve of an attempt runs with the configured tolerances and lag and a fresh
-        // preconditioner (the contact re-solves of an earlier attempt may have changed all three).
+        // The first solve of an attempt runs with the configured tolerances and lag (the contact
+        // re-solves of an earlier attempt may have changed both) and so starts with a fresh
+        // preconditioner: PETSc rebuilds it at the first Newton iteration of every solve unless the lag
+        // is -1 or persists (`-snes_lag_preconditioner_persists`, a user's choice, left alone).
         snes.set_tolerances(tolerances)?;
-        snes.set_lag_preconditioner(*lag)?;
-        if !*lag_persists {
-            snes.set_lag_preconditioner_persists(false)?;
+        if *lag > 1 {
+            snes.set_lag_preconditioner(*lag)?;
         }
         // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
@@ -1032,7 +1027,6 @@ impl Simulation {
             jac,
             snes,
             tolerances,
-            lag_persists,
             lag,
             ..
         } = system.as_mut().expect("prepared linear system");
@@ -1082,16 +1076,16 @@ impl Simulation {
                 // `|R| <= max(atol, rtol |R_0|)` with `R_0` the residual at the start of the first solve,
                 // rather than to `rtol` times their own (often tiny) initial residual. Where the
                 // preconditioner is lagged anyway (`lag > 1`, e.g. the LU of stiffness-dominated steps),
-                // they keep the last one of the first solve: a changed active set changes a few rows, which
-                // GMRES absorbs in a few iterations, far cheaper than a new factorisation (docs/theory.md,
-                // "Contact with rigid devices").
+                // they keep the last one of the first solve (lag -1: never rebuilt; a lag that persists
+                // through solves would carry its count into later steps): a changed active set changes a
+                // few rows, which GMRES absorbs in a few iterations, far cheaper than a new factorisation
+                // (docs/theory.md, "Contact with rigid devices").
                 let r0 = info.residual_norms.first().copied().unwrap_or(0.0);
                 snes.set_tolerances(&Tolerances {
                     atol: tolerances.atol.max(tolerances.rtol * r0),
                     ..*tolerances
                 })?;
-                if *lag > 1 && !*lag_persists {
-                    snes.set_lag_preconditioner_persists(true)?;
+                if *lag > 1 {
                     snes.set_lag_preconditioner(-1)?;
                 }
             }

@@ -192,21 +192,6 @@ impl Snes {
         )
     }
 
-    /// Whether the lag of the preconditioner (`-snes_lag_preconditioner`) counts on through the next
-    /// solves instead of restarting, with a fresh preconditioner, at each solve.
-    pub fn set_lag_preconditioner_persists(&mut self, persists: bool) -> Result<()> {
-        let flag = if persists {
-            sys::PetscBool_PETSC_TRUE
-        } else {
-            sys::PetscBool_PETSC_FALSE
-        };
-        // SAFETY: valid SNES.
-        check(
-            unsafe { sys::SNESSetLagPreconditionerPersists(self.raw, flag) },
-            "SNESSetLagPreconditionerPersists",
-        )
-    }
-
     /// Names the fields for `-pc_type fieldsplit` (ignored by other preconditioners).
     pub fn set_fieldsplit(&mut self, fields: &[(&str, &IndexSet)]) -> Result<()> {
         let pc = self.pc()?;
