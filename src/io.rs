@@ -240,7 +240,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         path: path.display().to_string(),
         message,
     };
-    let config_path = dir.join("config.toml");
+    let config_path = dir.join(file::CONFIG);
     let text = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
     let cfg = crate::config::RunConfig::from_str_named(&text, &config_path.display().to_string())
         .map_err(|e| run_err(&config_path, e.to_string()))?;
@@ -263,7 +263,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
     for entry in std::fs::read_dir(dir).map_err(io_err(dir))? {
         let path = entry.map_err(io_err(dir))?.path();
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        if !name.is_some_and(|n| n.starts_with("fields_") && n.ends_with(".h5")) {
+        if !name.is_some_and(|n| n.starts_with(file::FIELDS.0) && n.ends_with(file::FIELDS.1)) {
             continue;
         }
         let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
@@ -401,7 +401,7 @@ impl RunOutput {
         sim: &Simulation,
     ) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
-        write_atomic(&dir.join("config.toml"), config_text.as_bytes())?;
+        write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
         Ok(Self {
             dir: dir.to_owned(),
             title: title.to_owned(),

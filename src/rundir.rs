@@ -61,7 +61,7 @@ pub fn inspect(dir: &Path) -> Result<Contents, String> {
     for entry in std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))? {
         let entry = entry.map_err(|e| format!("{}: {e}", dir.display()))?;
         let name = entry.file_name().to_string_lossy().into_owned();
-        if is_program_file(&name) && name != "config.toml" && entry.path().is_file() {
+        if is_program_file(&name) && name != file::CONFIG && entry.path().is_file() {
             results.push(name);
         }
     }

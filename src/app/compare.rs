@@ -540,7 +540,7 @@ fn list_snapshots(dir: &Path) -> Result<Vec<SnapshotFile>> {
     for entry in entries {
         let entry = entry.map_err(|e| bad(format!("{}: cannot list: {e}", dir.display())))?;
         let name = entry.file_name().to_string_lossy().into_owned();
-        if !(name.starts_with("fields_") && name.ends_with(".h5")) {
+        if !(name.starts_with(file::FIELDS.0) && name.ends_with(file::FIELDS.1)) {
             continue;
         }
         let path = entry.path();
