@@ -1030,7 +1030,6 @@ impl Simulation {
             lag,
             ..
         } = system.as_mut().expect("prepared linear system");
-        let row_s = row_scale(&s.materials);
         let h = grid.cell_size();
         let mut info_total: Option<SolveInfo> = None;
         let (mut assembly_time, mut evaluations) = (0.0, [0usize; 2]);
@@ -1049,7 +1048,7 @@ impl Simulation {
                 residuals: 0,
                 jacobians: 0,
                 contact: devices.as_slice(),
-                row_scale: row_s,
+                row_scale: input.row_scale,
             };
             let info = match snes.solve(&mut problem, x, jac) {
                 Ok(info) => info,
@@ -1761,19 +1760,16 @@ impl Simulation {
         let eta_bar = self.nodal_eta_bar();
         let nf = self.dofs.fields();
         let s = &self.setup;
-        let input = StepInput {
-            table: &self.table,
-            particles: &s.particles,
-            materials: &s.materials,
-            dofs: &self.dofs,
-            mass: &self.grid_state.mass,
-            velocity: &self.grid_state.velocity,
-            acceleration: &self.grid_state.acceleration,
-            newmark: None,
-            body_force: s.body_force,
-            nodal_force: &nodal_force,
-            row_scale: row_scale(&s.materials),
-        };
+        // No inertia and the full body force at t = 0.
+        let input = Self::step_input(
+            s,
+            &self.table,
+            &self.dofs,
+            &self.grid_state,
+            None,
+            1.0,
+            &nodal_force,
+        );
         self.assembler.begin_step(&input);
         let mut x = vec![0.0; self.dofs.len()];
         if let Some(e) = self.dofs.layout().eta_bar() {

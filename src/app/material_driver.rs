@@ -48,16 +48,6 @@ fn named<T: Copy + Send + Sync + 'static>(
     })
 }
 
-/// `--preset`: the names of [`Preset::name`].
-fn preset_parser() -> impl TypedValueParser<Value = Preset> {
-    named(&Preset::ALL, Preset::name)
-}
-
-/// `--path`: the names of [`PathKind::name`].
-fn path_parser() -> impl TypedValueParser<Value = PathKind> {
-    named(&PathKind::ALL, PathKind::name)
-}
-
 /// Stress-strain plot of a path (nominal and Cauchy stress of the controlled component).
 pub fn path_plot(points: &[PathPoint], kind: PathKind, title: &str) -> LinePlot {
     let (i, j) = kind.stress_component();
@@ -132,10 +122,10 @@ pub struct DriverArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Microplane parameter preset used when no config is given.
-    #[arg(long, default_value = "paper", value_parser = preset_parser())]
+    #[arg(long, default_value = "paper", value_parser = named(&Preset::ALL, Preset::name))]
     pub preset: Preset,
     /// Load path.
-    #[arg(long, default_value = "uniaxial-tension", value_parser = path_parser())]
+    #[arg(long, default_value = "uniaxial-tension", value_parser = named(&PathKind::ALL, PathKind::name))]
     pub path: PathKind,
     /// Magnitude of the control strain at the end of the path (default: 10 gamma_0, 40 gamma_0 in
     /// compression; 0.01 for elastic materials).
