@@ -16,10 +16,11 @@
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, StepReport, TimeIntegration};
+use mpm_concrete::solver::{Simulation, StepReport};
 use nalgebra::Vector2;
 use serde::Serialize;
 

@@ -25,11 +25,12 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::material::isotropic::peerlings::Bar;
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::LinePlot;
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, StepError, TimeIntegration};
+use mpm_concrete::solver::{Simulation, StepError};
 use nalgebra::Vector2;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -160,7 +161,7 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
     let t0 = Instant::now();
     let (mut curve, mut dissipated) = (vec![(0.0, 0.0)], vec![(0.0, 0.0)]);
     let (mut failed_at, mut iterations) = (None, 0);
-    while sim.time < case.steps as f64 - 1e-9 {
+    while sim.state.time < case.steps as f64 - 1e-9 {
         match sim.advance(s) {
             Ok(r) => {
                 let dl = r.displacements[0].1[0];
@@ -176,7 +177,7 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
             Err(e) => return Err(e.into()),
         }
     }
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     Ok(BarResult {
         curve,
         dissipated,

@@ -198,7 +198,7 @@ fn run_case(s: &SessionGuard, h: f64, c: f64, rate: Rate) -> Result<RunResult> {
     setup.options_prefix = Some("nq_".into());
     setup.fallback_prefix = None;
     let mut sim = Simulation::new(setup)?;
-    let points = sim.setup.particles.len();
+    let points = sim.state.particles.len();
     let pulled = |names: &[(String, [f64; 2])]| names.iter().position(|n| n.0 == "pulled_end");
     let t0 = Instant::now();
     let mut r = RunResult {
@@ -219,7 +219,7 @@ fn run_case(s: &SessionGuard, h: f64, c: f64, rate: Rate) -> Result<RunResult> {
     };
     let steps = cfg.run.steps;
     let end_time = steps as f64 * cfg.time.dt;
-    while sim.time < end_time * (1.0 - 1e-9) {
+    while sim.state.time < end_time * (1.0 - 1e-9) {
         match sim.advance(s) {
             Ok(rep) => {
                 let k = pulled(&rep.reactions).ok_or("no pulled_end reaction")?;
@@ -256,7 +256,7 @@ fn run_case(s: &SessionGuard, h: f64, c: f64, rate: Rate) -> Result<RunResult> {
         }
     }
     r.wall = t0.elapsed().as_secs_f64();
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     r.x = p.x.iter().map(|x| [x.x, x.y]).collect();
     r.damage = p.damage.clone();
     let (up, fp) = r.peak();

@@ -12,11 +12,12 @@
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::{LinePlot, Series};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
 use serde_json::{Value, json};
 use std::f64::consts::PI;
@@ -145,15 +146,16 @@ fn v1(s: &SessionGuard, out: &Path) -> Result<Value> {
             ),
         ];
         let mut sim = Simulation::new(st)?;
-        let mass: f64 = sim.setup.particles.mass.iter().sum();
+        let mass: f64 = sim.state.particles.mass.iter().sum();
         let mut curve = vec![(0.0, amplitude)];
         let mut max_err = 0.0f64;
         for _ in 0..200 {
             sim.advance(s)?;
-            let p = &sim.setup.particles;
+            let p = &sim.state.particles;
             let vcm = p.mass.iter().zip(&p.v).map(|(m, v)| m * v.x).sum::<f64>() / mass;
-            max_err = max_err.max((vcm - amplitude * (w1 * sim.time).cos()).abs() / amplitude);
-            curve.push((sim.time / period, vcm));
+            max_err =
+                max_err.max((vcm - amplitude * (w1 * sim.state.time).cos()).abs() / amplitude);
+            curve.push((sim.state.time / period, vcm));
         }
         println!(
             "V1 {} {cells} cells: max |v_cm error| / amplitude over two periods = {max_err:.4}",
@@ -246,10 +248,10 @@ fn column(
         node_box("base", [-FAR, -FAR], [FAR, 0.0], [Motion::Velocity(0.0); 2]),
     ];
     let mut sim = Simulation::new(st)?;
-    while sim.time < load_steps as f64 + 1.0 - 1e-9 {
+    while sim.state.time < load_steps as f64 + 1.0 - 1e-9 {
         sim.advance(s)?;
     }
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     Ok(ColumnResult {
         syy: p.stress.iter().map(|t| t[(1, 1)]).collect(),
         uy: p.x.iter().zip(&y0).map(|(x, y)| x.y - y).collect(),
@@ -473,8 +475,8 @@ fn v3(s: &SessionGuard, out: &Path) -> Result<Value> {
         for _ in 0..steps {
             sim.advance(s)?;
         }
-        front = c * sim.time;
-        let p = &sim.setup.particles;
+        front = c * sim.state.time;
+        let p = &sim.state.particles;
         let window: Vec<usize> = (0..p.len())
             .filter(|&q| p.x[q].x > 0.25 * length && p.x[q].x < front - 0.25 * length)
             .collect();
@@ -591,12 +593,12 @@ fn v6(s: &SessionGuard, out: &Path) -> Result<Value> {
             let mut curve = vec![(0.0, 0.0)];
             for _ in 0..64 {
                 sim.advance(s)?;
-                let u = sim.setup.particles.x[tip].y - y_tip0;
+                let u = sim.state.particles.x[tip].y - y_tip0;
                 if (u_prev > 0.0 && u <= 0.0) || (u_prev < 0.0 && u >= 0.0) {
-                    crossings.push(t_prev + (sim.time - t_prev) * u_prev / (u_prev - u));
+                    crossings.push(t_prev + (sim.state.time - t_prev) * u_prev / (u_prev - u));
                 }
-                curve.push((sim.time / period, u));
-                (t_prev, u_prev) = (sim.time, u);
+                curve.push((sim.state.time / period, u));
+                (t_prev, u_prev) = (sim.state.time, u);
             }
             let [first, .., last] = crossings[..] else {
                 return Err("fewer than two zero crossings".into());

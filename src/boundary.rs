@@ -6,7 +6,6 @@
 
 use crate::contact::Contact;
 use crate::grid::Grid;
-use crate::particles::Particles;
 use nalgebra::Vector2;
 
 /// A force on the grid nodes of a segment, distributed as a uniform traction (consistent nodal forces of
@@ -118,7 +117,8 @@ pub struct NodeBox {
     pub rise_time: f64,
 }
 
-/// A rigid body of particles (e.g. a steel loading plate) moving with a prescribed velocity. Glued
+/// A rigid body of particles (e.g. a steel loading plate) moving with a prescribed velocity; its points
+/// are part of the run's state ([`State::rigid`](crate::model::State::rigid)). Glued
 /// (`contact = None`): every grid node in the support of its particles follows it in the constrained
 /// components each step. In contact ([`Contact`]): it pushes on the specimen through unilateral contact
 /// on its face (and, with a pin, turns freely about the pin).
@@ -126,8 +126,6 @@ pub struct NodeBox {
 pub struct RigidBody {
     /// Name used in reports.
     pub name: String,
-    /// Its particles (only positions and domains are used).
-    pub particles: Particles,
     /// Motion of the x and y components.
     pub motion: [Motion; 2],
     /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.

@@ -10,8 +10,8 @@
 //! file is reported as corrupt and never loaded.
 
 use crate::io::{OutputError, RunOutput};
+use crate::model::{Counters, Method, Model, State};
 use crate::rundir::RunIdentity;
-use crate::solver::{Counters, Method, Simulation};
 use nalgebra::Vector2;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -74,17 +74,17 @@ fn crc_f64(data: &[f64]) -> u32 {
     h.finalize()
 }
 
-/// Writes the state of `sim`, the records of `out` and the run's `identity` to `dir/checkpoint.h5`
+/// Writes `state`, the records of `out` and the run's `identity` to `dir/checkpoint.h5`
 /// (through a temporary file, so a failed write leaves the previous checkpoint).
 pub fn save(
     dir: &Path,
-    sim: &Simulation,
+    state: &State,
     out: &RunOutput,
     identity: &RunIdentity,
 ) -> Result<(), OutputError> {
     let path = dir.join(FILE);
     let tmp = dir.join(format!("{FILE}.tmp"));
-    write(&tmp, sim, out, identity).map_err(|e| OutputError::Hdf5 {
+    write(&tmp, state, out, identity).map_err(|e| OutputError::Hdf5 {
         path: path.display().to_string(),
         message: e.to_string(),
     })?;
@@ -96,12 +96,12 @@ pub fn save(
 
 fn write(
     path: &Path,
-    sim: &Simulation,
+    state: &State,
     out: &RunOutput,
     identity: &RunIdentity,
 ) -> hdf5_metno::Result<()> {
     let f = hdf5_metno::File::create(path)?;
-    let p = &sim.setup.particles;
+    let p = &state.particles;
     let mut names = Vec::new();
     let mut put = |name: String, data: &[f64]| -> hdf5_metno::Result<()> {
         let ds = f
@@ -117,19 +117,19 @@ fn write(
     for (name, _) in p.state_columns() {
         put(name.into(), &p.column(name).expect("a listed column"))?;
     }
-    for (k, rb) in sim.setup.rigid.iter().enumerate() {
+    for (k, rb) in state.rigid.iter().enumerate() {
         for name in RIGID_COLUMNS {
             put(
                 format!("rigid{k}_{name}"),
-                &rb.particles.column(name).expect("a listed column"),
+                &rb.column(name).expect("a listed column"),
             )?;
         }
     }
-    if let Some((v, a)) = sim.fem_nodal_state() {
+    if let Some((v, a)) = &state.fem_nodal {
         put("fem_nodal_velocity".into(), &flat2(v))?;
         put("fem_nodal_acceleration".into(), &flat2(a))?;
     }
-    let counters = serde_json::to_value(sim.counters())
+    let counters = serde_json::to_value(state.counters())
         .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))?;
     let text = serde_json::json!({
         "format": FORMAT,
@@ -240,7 +240,7 @@ pub fn read_header(dir: &Path) -> Result<Header, CheckpointError> {
 /// Restores `sim` (freshly built from the same configuration) from `dir/checkpoint.h5`: every dataset is
 /// read and checked against its checksum and the configuration before `sim` is changed. Returns the
 /// header (for the output's records).
-pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError> {
+pub fn load(dir: &Path, model: &Model, state: &mut State) -> Result<Header, CheckpointError> {
     let (f, header, path) = open(dir)?;
     let shown = path.display().to_string();
     let corrupt = |detail: String| CheckpointError::Corrupt {
@@ -270,7 +270,7 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
         path: shown.clone(),
         detail,
     };
-    let p = &sim.setup.particles;
+    let p = &state.particles;
     let n = p.len();
     if header.points != n {
         return Err(unusable(format!(
@@ -289,16 +289,16 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
         .into_iter()
         .map(|(name, per)| (name.to_owned(), per * n))
         .collect();
-    for (k, rb) in sim.setup.rigid.iter().enumerate() {
-        for (name, per) in rb.particles.state_columns() {
+    for (k, rb) in state.rigid.iter().enumerate() {
+        for (name, per) in rb.state_columns() {
             if RIGID_COLUMNS.contains(&name) {
-                expected.push((format!("rigid{k}_{name}"), per * rb.particles.len()));
+                expected.push((format!("rigid{k}_{name}"), per * rb.len()));
             }
         }
     }
-    let fem = sim.setup.method == Method::Fem && data.contains_key("fem_nodal_velocity");
+    let fem = model.method == Method::Fem && data.contains_key("fem_nodal_velocity");
     if fem {
-        let nodes = sim.setup.grid.num_nodes();
+        let nodes = model.grid.num_nodes();
         expected.push(("fem_nodal_velocity".into(), 2 * nodes));
         expected.push(("fem_nodal_acceleration".into(), 2 * nodes));
     }
@@ -315,23 +315,22 @@ pub fn load(dir: &Path, sim: &mut Simulation) -> Result<Header, CheckpointError>
         }
     }
     let mut take = |name: &str| data.remove(name).unwrap_or_default();
-    let p = &mut sim.setup.particles;
+    let p = &mut state.particles;
     for (name, _) in p.state_columns() {
         p.set_column(name, &take(name)).map_err(&unusable)?;
     }
-    for (k, rb) in sim.setup.rigid.iter_mut().enumerate() {
+    for (k, rb) in state.rigid.iter_mut().enumerate() {
         for name in RIGID_COLUMNS {
-            rb.particles
-                .set_column(name, &take(&format!("rigid{k}_{name}")))
+            rb.set_column(name, &take(&format!("rigid{k}_{name}")))
                 .map_err(&unusable)?;
         }
     }
     if fem {
-        sim.set_fem_nodal_state(
+        state.fem_nodal = Some((
             unflat2(&take("fem_nodal_velocity")),
             unflat2(&take("fem_nodal_acceleration")),
-        );
+        ));
     }
-    sim.set_counters(header.counters.clone());
+    state.set_counters(header.counters.clone());
     Ok(header)
 }

@@ -15,9 +15,9 @@
 //! Every error names the file, the field and what is allowed.
 
 use crate::material::MaterialConfig;
+use crate::model::{InitialAcceleration, Method};
 use crate::particles::Geometry;
 use crate::shape::ShapeKind;
-use crate::solver::{InitialAcceleration, Method};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 

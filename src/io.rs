@@ -10,9 +10,10 @@
 //! * `crack.json`: crack metrics at every output step (see [`crate::crack`]) when a notch tip is known.
 
 use crate::crack::{self, CrackCriteria, CrackState};
+use crate::model::{Model, State};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::schema::{file, history};
-use crate::solver::{Simulation, StepReport};
+use crate::solver::StepReport;
 use hdf5_metno::types::VarLenUnicode;
 use nalgebra::Vector2;
 use std::fmt::Write as _;
@@ -387,18 +388,22 @@ pub struct RunOutput {
     rows: Vec<StepReport>,
     snapshots: Vec<Snapshot>,
     initial_position: Vec<Vector2<f64>>,
+    /// Cell size of the background grid (mm), the resolution of the crack metrics and the damage maps.
+    cell_size: f64,
     /// Notch tip (mm) and criteria of the crack metrics, if tracked.
     crack: Option<(Vector2<f64>, CrackCriteria)>,
     cracks: Vec<CrackState>,
 }
 
 impl RunOutput {
-    /// Creates (or reuses) `dir`, keeps a copy of the configuration text as `config.toml`.
+    /// Creates (or reuses) `dir`, keeps a copy of the configuration text as `config.toml`; displacements
+    /// are measured from the points of `initial` (the state at t = 0 of `model`).
     pub fn create(
         dir: &Path,
         title: &str,
         config_text: &str,
-        sim: &Simulation,
+        model: &Model,
+        initial: &State,
     ) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
@@ -408,7 +413,8 @@ impl RunOutput {
             config_text: config_text.to_owned(),
             rows: Vec::new(),
             snapshots: Vec::new(),
-            initial_position: sim.setup.particles.x.clone(),
+            initial_position: initial.particles.x.clone(),
+            cell_size: model.grid.cell_size(),
             crack: None,
             cracks: Vec::new(),
         })
@@ -518,55 +524,55 @@ impl RunOutput {
     }
 
     /// Writes the point fields of the current state (HDF5 + XDMF index) and a damage map (PNG).
-    pub fn snapshot(&mut self, sim: &Simulation) -> Result<(), OutputError> {
-        let file = file::numbered(file::FIELDS, sim.step);
+    pub fn snapshot(&mut self, state: &State) -> Result<(), OutputError> {
+        let file = file::numbered(file::FIELDS, state.step);
         let path = self.dir.join(&file);
         let tmp = tmp_name(&path);
-        self.write_h5(&tmp, sim).map_err(|e| OutputError::Hdf5 {
+        self.write_h5(&tmp, state).map_err(|e| OutputError::Hdf5 {
             path: path.display().to_string(),
             message: e.to_string(),
         })?;
         std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
-        self.snapshots.retain(|s| s.step != sim.step);
+        self.snapshots.retain(|s| s.step != state.step);
         self.snapshots.push(Snapshot {
-            step: sim.step,
-            time: sim.time,
+            step: state.step,
+            time: state.time,
             file,
         });
-        self.write_xdmf(sim.setup.particles.len())?;
+        self.write_xdmf(state.particles.len())?;
         if let Some((tip, criteria)) = &self.crack {
-            let p = &sim.setup.particles;
-            let mut state = crack::measure(
+            let p = &state.particles;
+            let mut measured = crack::measure(
                 &p.x,
                 &p.damage,
                 *tip,
-                sim.setup.grid.cell_size(),
+                self.cell_size,
                 p.point_spacing(),
                 criteria,
-                sim.time,
+                state.time,
             );
-            state.dissipated = p
+            measured.dissipated = p
                 .dissipated
                 .iter()
                 .fold([0.0; 2], |a, d| [a[0] + d[0], a[1] + d[1]]);
-            state.nonlocal_points = (0..p.len())
+            measured.nonlocal_points = (0..p.len())
                 .filter(|&i| {
                     p.damage[i] >= criteria.damage_threshold
                         && p.nonlocal_damage[i] >= 0.5 * p.damage[i]
                 })
                 .count();
-            self.cracks.retain(|c| c.time != state.time);
-            self.cracks.push(state);
+            self.cracks.retain(|c| c.time != measured.time);
+            self.cracks.push(measured);
             self.write_cracks()?;
         }
         self.damage_map(
-            sim,
-            &self.dir.join(file::numbered(file::DAMAGE_MAP, sim.step)),
+            state,
+            &self.dir.join(file::numbered(file::DAMAGE_MAP, state.step)),
         )
     }
 
-    fn write_h5(&self, path: &Path, sim: &Simulation) -> hdf5_metno::Result<()> {
-        let p = &sim.setup.particles;
+    fn write_h5(&self, path: &Path, state: &State) -> hdf5_metno::Result<()> {
+        let p = &state.particles;
         let n = p.len();
         let f = hdf5_metno::File::create(path)?;
         let text = |s: &str| {
@@ -589,10 +595,10 @@ impl RunOutput {
         put_text(&f, "config", &self.config_text)?;
         f.new_attr::<f64>()
             .create("time_s")?
-            .write_scalar(&sim.time)?;
+            .write_scalar(&state.time)?;
         f.new_attr::<u64>()
             .create("step")?
-            .write_scalar(&(sim.step as u64))?;
+            .write_scalar(&(state.step as u64))?;
         let connectivity: Vec<i64> = (0..n as i64).collect();
         let ds = f
             .new_dataset_builder()
@@ -600,7 +606,7 @@ impl RunOutput {
             .create(CONNECTIVITY.name)?;
         put_text(&ds, "units", CONNECTIVITY.units)?;
         put_text(&ds, "description", CONNECTIVITY.description)?;
-        for (field, values) in FIELDS.iter().zip(self.point_values(sim)) {
+        for (field, values) in FIELDS.iter().zip(self.point_values(state)) {
             let builder = f.new_dataset_builder();
             let ds = match field.kind {
                 Kind::Scalar => builder.with_data(&values).create(field.name)?,
@@ -618,8 +624,8 @@ impl RunOutput {
     }
 
     /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0).
-    fn point_values(&self, sim: &Simulation) -> [Vec<f64>; FIELDS.len()] {
-        let p = &sim.setup.particles;
+    fn point_values(&self, state: &State) -> [Vec<f64>; FIELDS.len()] {
+        let p = &state.particles;
         let vec3 = |v: &mut dyn Iterator<Item = Vector2<f64>>| -> Vec<f64> {
             v.flat_map(|x| [x.x, x.y, 0.0]).collect()
         };
@@ -659,11 +665,11 @@ impl RunOutput {
     }
 
     /// Damage map of the current state.
-    pub fn damage_map(&self, sim: &Simulation, path: &Path) -> Result<(), OutputError> {
-        let p = &sim.setup.particles;
-        let h = sim.setup.grid.cell_size();
+    pub fn damage_map(&self, state: &State, path: &Path) -> Result<(), OutputError> {
+        let p = &state.particles;
+        let h = self.cell_size;
         let plot = ScatterField {
-            title: format!("{}: damage at t = {:.1} us", self.title, sim.time * 1e6),
+            title: format!("{}: damage at t = {:.1} us", self.title, state.time * 1e6),
             x: p.x.iter().map(|x| x.x).collect(),
             y: p.x.iter().map(|x| x.y).collect(),
             value: p.damage.clone(),
@@ -773,21 +779,22 @@ material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio =
     #[test]
     fn snapshots_have_connectivity_3_component_vectors_and_units() {
         let cfg = RunConfig::from_str_named(CONFIG, "io-block.toml").expect("config");
-        let mut sim =
-            Simulation::new(crate::scenario::build(&cfg).expect("model")).expect("simulation");
+        let mut sim = crate::solver::Simulation::new(crate::scenario::build(&cfg).expect("model"))
+            .expect("simulation");
         let dir = std::env::temp_dir().join(format!("mpmc-io-{}", std::process::id()));
-        let mut out = RunOutput::create(&dir, "io-block", CONFIG, &sim).expect("output");
-        out.snapshot(&sim).expect("snapshot 0");
-        let n = sim.setup.particles.len();
-        let p = &mut sim.setup.particles;
+        let mut out =
+            RunOutput::create(&dir, "io-block", CONFIG, &sim.model, &sim.state).expect("output");
+        out.snapshot(&sim.state).expect("snapshot 0");
+        let n = sim.state.particles.len();
+        let p = &mut sim.state.particles;
         for (i, (x, v)) in p.x.iter_mut().zip(&mut p.v).enumerate() {
             *x += Vector2::new(0.5, -0.25 * i as f64);
             *v = Vector2::new(1.0e3, i as f64);
         }
         p.damage[1] = 0.75;
-        sim.step = 7;
-        sim.time = 7.0e-6;
-        out.snapshot(&sim).expect("snapshot 7");
+        sim.state.step = 7;
+        sim.state.time = 7.0e-6;
+        out.snapshot(&sim.state).expect("snapshot 7");
 
         let xdmf = std::fs::read_to_string(dir.join("fields.xdmf")).expect("xdmf");
         for file in ["fields_000000.h5", "fields_000007.h5"] {
@@ -841,7 +848,7 @@ material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio =
             |name: &str| -> Vec<f64> { f.dataset(name).and_then(|d| d.read_raw()).expect(name) };
         let (position, displacement, velocity) =
             (read("position"), read("displacement"), read("velocity"));
-        let p = &sim.setup.particles;
+        let p = &sim.state.particles;
         for i in 0..n {
             assert_eq!(position[3 * i..3 * i + 3], [p.x[i].x, p.x[i].y, 0.0]);
             let d = &displacement[3 * i..3 * i + 3];

@@ -8,8 +8,8 @@
 //! the material point method". Units everywhere: mm, s, N, MPa, t (tonne).
 //!
 //! Dependencies point one way:
-//! `cli (main.rs) -> app -> io -> scenario -> solver -> {boundary, assembly, transfer, material, shape}
-//! -> {grid, particles} -> tensor`,
+//! `cli (main.rs) -> app -> io -> scenario -> solver -> model -> {boundary, assembly, transfer, material,
+//! shape} -> {grid, particles} -> tensor`,
 //! and only `assembly`, `solver`, `solver_defaults` (and the PETSc smoke problem, `app::smoke`) talk to
 //! [`petsc`], the one module with `unsafe` FFI.
 
@@ -24,6 +24,7 @@ pub mod dofs;
 pub mod grid;
 pub mod io;
 pub mod material;
+pub mod model;
 pub mod particles;
 pub mod petsc;
 pub mod plot;

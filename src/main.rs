@@ -14,11 +14,12 @@ use mpm_concrete::app::study;
 use mpm_concrete::checkpoint;
 use mpm_concrete::config::{self, RunConfig};
 use mpm_concrete::io::RunOutput;
+use mpm_concrete::model::Setup;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::preflight;
 use mpm_concrete::rundir::{self, RunIdentity, RunRecord};
 use mpm_concrete::scenario;
-use mpm_concrete::solver::{Setup, Simulation, StepError};
+use mpm_concrete::solver::{Simulation, StepError};
 use mpm_concrete::solver_defaults;
 use std::path::{Path, PathBuf};
 
@@ -603,9 +604,9 @@ fn save_state(
     dir: &Path,
     identity: &RunIdentity,
 ) -> Result<()> {
-    out.snapshot(sim)?;
+    out.snapshot(&sim.state)?;
     out.force_plots()?;
-    checkpoint::save(dir, sim, out, identity)?;
+    checkpoint::save(dir, &sim.state, out, identity)?;
     Ok(())
 }
 
@@ -735,8 +736,11 @@ fn simulate(
     let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
     let mut sim = simulation(setup)?;
     if resume_from.is_some() {
-        checkpoint::load(&dir, &mut sim).map_err(bad)?;
-        eprintln!("resuming at step {} (t = {:e} s)", sim.step, sim.time);
+        checkpoint::load(&dir, &sim.model, &mut sim.state).map_err(bad)?;
+        eprintln!(
+            "resuming at step {} (t = {:e} s)",
+            sim.state.step, sim.state.time
+        );
     }
     // Ctrl-C: finish the current step, write a checkpoint and the outputs, and stop.
     let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -745,8 +749,8 @@ fn simulate(
         ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::SeqCst))
             .context("installing the Ctrl-C handler")?;
     }
-    let np = sim.setup.particles.len();
-    let grid = &sim.setup.grid;
+    let np = sim.state.particles.len();
+    let grid = &sim.model.grid;
     eprintln!(
         "{}: {np} material points, grid {}x{} cells of {} mm, {} steps of {:e} s, {} unknowns per node, output in {}",
         cfg.run.name,
@@ -755,7 +759,7 @@ fn simulate(
         grid.cell_size(),
         cfg.run.steps,
         cfg.time.dt,
-        sim.fields(),
+        sim.model.layout().per_node(),
         dir.display()
     );
     let bar = if flags.quiet {
@@ -769,7 +773,7 @@ fn simulate(
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    bar.set_position(sim.step as u64);
+    bar.set_position(sim.state.step as u64);
     let started = std::time::Instant::now();
     // A PETSc logging stage for the time loop, so -log_view separates it from the set-up.
     let _stage = session.push_stage(session.register_stage("MPM time steps")?)?;
@@ -824,8 +828,9 @@ fn simulate(
         config::source_label(&file, &overrides)
     );
     // The output's reference state (initial positions, the step-0 fields) is the model as built.
-    let initial = simulation(model()?)?;
-    let mut out = RunOutput::create(&dir, &cfg.run.name, &config_copy, &initial)?;
+    let (initial_model, initial) =
+        mpm_concrete::solver::split(model()?).map_err(|e| bad(format!("{file}: {e}")))?;
+    let mut out = RunOutput::create(&dir, &cfg.run.name, &config_copy, &initial_model, &initial)?;
     if let Some(ct) = &cfg.ct {
         out.track_crack(
             nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
@@ -842,9 +847,9 @@ fn simulate(
             .map_or(0, |d| d.as_secs()),
         resumed_from_step: resume_from.as_ref().map(|h| h.counters.step),
         status: "running".into(),
-        steps_done: sim.step,
+        steps_done: sim.state.step,
         steps_requested: cfg.run.steps,
-        time_reached: sim.time,
+        time_reached: sim.state.time,
         time_requested: cfg.run.steps as f64 * cfg.time.dt,
         reduced_steps: 0,
         note: None,
@@ -856,7 +861,7 @@ fn simulate(
             .context("restoring the output's records from the checkpoint")?,
         None => out.snapshot(&initial)?,
     }
-    drop(initial);
+    drop((initial_model, initial));
 
     let hint = resume_command(own_args, petsc_args, &dir);
     let finish = |record: &mut RunRecord,
@@ -866,10 +871,10 @@ fn simulate(
                   why: Option<String>|
      -> Result<Option<String>> {
         let taken: Vec<f64> = out.rows().iter().map(|r| r.dt).collect();
-        let note = time_note(&taken, sim.time, cfg.run.steps, cfg.time.dt);
+        let note = time_note(&taken, sim.state.time, cfg.run.steps, cfg.time.dt);
         record.status = status.into();
-        record.steps_done = sim.step;
-        record.time_reached = sim.time;
+        record.steps_done = sim.state.step;
+        record.time_reached = sim.state.time;
         record.reduced_steps = reduced_steps(&taken, cfg.time.dt);
         record.note = match (&why, &note) {
             (Some(w), Some(n)) => Some(format!("{w}; {n}")),
@@ -887,14 +892,18 @@ fn simulate(
             Err(e) => {
                 bar.abandon();
                 save_state(&mut out, &sim, &dir, &identity)?;
-                let why = format!("step {} failed: {}", sim.step + 1, e.to_string().trim());
+                let why = format!(
+                    "step {} failed: {}",
+                    sim.state.step + 1,
+                    e.to_string().trim()
+                );
                 finish(&mut record, &out, &sim, "failed", Some(why))?;
                 anyhow::bail!(
                     "{}; the last converged state (step {}, t = {:e} s) is saved in {} with a checkpoint; \
                      to continue (e.g. with other solver options): {hint}",
                     e.to_string().trim(),
-                    sim.step,
-                    sim.time,
+                    sim.state.step,
+                    sim.state.time,
                     dir.display()
                 );
             }
@@ -914,29 +923,29 @@ fn simulate(
         out.record(report)?;
         let every = cfg.run.output_every;
         let stop = interrupted.load(std::sync::atomic::Ordering::SeqCst);
-        if (every > 0 && sim.step % every == 0) || sim.step == cfg.run.steps || stop {
+        if (every > 0 && sim.state.step % every == 0) || sim.state.step == cfg.run.steps || stop {
             save_state(&mut out, &sim, &dir, &identity)?;
             // run.json follows the checkpoint, so a run killed outright shows how far it got.
-            record.steps_done = sim.step;
-            record.time_reached = sim.time;
+            record.steps_done = sim.state.step;
+            record.time_reached = sim.state.time;
             record.write(&dir)?;
         }
-        if stop && sim.step < cfg.run.steps {
+        if stop && sim.state.step < cfg.run.steps {
             bar.abandon();
             finish(
                 &mut record,
                 &out,
                 &sim,
                 "interrupted",
-                Some(format!("interrupted after step {}", sim.step)),
+                Some(format!("interrupted after step {}", sim.state.step)),
             )?;
             anyhow::bail!(
                 "interrupted after step {}; the state is saved in {}: continue with {hint}",
-                sim.step,
+                sim.state.step,
                 dir.display()
             );
         }
-        if sim.step >= cfg.run.steps {
+        if sim.state.step >= cfg.run.steps {
             break;
         }
         step = sim.advance(session);

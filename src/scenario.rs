@@ -9,8 +9,8 @@ use crate::config::{
 use crate::contact::Contact;
 use crate::grid::{Grid, GridError};
 use crate::material::{Material, MaterialError};
+use crate::model::{Method, Setup, TimeIntegration};
 use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
-use crate::solver::{Method, Setup, TimeIntegration};
 use nalgebra::Vector2;
 
 /// Failure to build a run from a valid configuration.
@@ -229,7 +229,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             .map_err(|source| ScenarioError::Seeding { what, source })?;
         materials.push(body.material);
     }
-    let mut rigid = Vec::new();
+    let (mut rigid, mut rigid_points) = (Vec::new(), Vec::new());
     for r in &rigid_defs {
         let what = format!("rigid body `{}`", r.name);
         let seeding = Seeding {
@@ -245,9 +245,9 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         if p.is_empty() {
             return Err(ScenarioError::NoMaterial { what, h, ppc });
         }
+        rigid_points.push(p);
         rigid.push(RigidBody {
             name: r.name.clone(),
-            particles: p,
             motion: [r.x.motion(), r.y.motion()],
             rise_time: r.rise_time,
             contact: r.contact.as_ref().map(|c| Contact {
@@ -262,7 +262,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     for x in particles
         .x
         .iter()
-        .chain(rigid.iter().flat_map(|r| r.particles.x.iter()))
+        .chain(rigid_points.iter().flat_map(|r| r.x.iter()))
     {
         lo = lo.inf(x);
         hi = hi.sup(x);
@@ -310,6 +310,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         body_force_ramp: cfg.body_force_ramp,
         boxes,
         rigid,
+        rigid_points,
         loads: cfg
             .load
             .iter()

@@ -6,13 +6,12 @@
 //! simulation exactly as it was, so it can be retried with a smaller time step.
 
 use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
-use crate::boundary::{
-    Motion, NodalLoad, NodeBox, RigidBody, prescribed_acceleration, prescribed_increment,
-};
+use crate::boundary::{Motion, prescribed_acceleration, prescribed_increment};
 use crate::contact::{self, ContactNode, DeviceContact, NodeStatus};
-use crate::dofs::{DofMap, FieldLayout};
+use crate::dofs::DofMap;
 use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
+use crate::model::{FemReference, InitialAcceleration, Method, Model, Setup, State};
 use crate::particles::Particles;
 use crate::petsc::{
     self, CallbackError, IndexSet, LogEvent, Matrix, NonlinearProblem, PetscInt, SessionGuard,
@@ -22,80 +21,6 @@ use crate::shape::{ShapeError, ShapeKind, ShapeTable};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
 use nalgebra::Vector2;
 use std::time::Instant;
-
-/// Time integration settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TimeIntegration {
-    /// Nominal time step (s).
-    pub dt: f64,
-    /// Smallest time step the halving may reach before the run stops (s).
-    pub dt_min: f64,
-    /// Newmark beta (> 0; 1/4 = trapezoidal rule).
-    pub beta: f64,
-    /// Newmark gamma (1/2: no numerical damping).
-    pub gamma: f64,
-    /// Drop inertia (static equilibrium each step, loads ramped with time).
-    pub quasi_static: bool,
-    /// How a dynamic run starts in acceleration (ignored quasi-statically and on resume).
-    pub initial_acceleration: InitialAcceleration,
-}
-
-impl Default for TimeIntegration {
-    fn default() -> Self {
-        Self {
-            dt: 1e-6,
-            dt_min: 1e-6 / 64.0,
-            beta: 0.25,
-            gamma: 0.5,
-            quasi_static: false,
-            initial_acceleration: InitialAcceleration::default(),
-        }
-    }
-}
-
-/// The acceleration a dynamic run starts with (`[time] initial_acceleration`).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
-#[serde(try_from = "String")]
-pub enum InitialAcceleration {
-    /// `M a_0 = f_ext(0) - f_int(u_0)` on the grid before the first step, constrained components with the
-    /// acceleration of their prescribed motion, carried to the points: a load applied at t = 0 acts from
-    /// the first step on.
-    #[default]
-    Consistent,
-    /// `a_0 = 0`: the run starts at rest in acceleration, and a load applied at t = 0 is felt about half a
-    /// step late.
-    Zero,
-}
-
-impl TryFrom<String> for InitialAcceleration {
-    type Error = String;
-
-    fn try_from(name: String) -> Result<Self, String> {
-        match name.as_str() {
-            "consistent" => Ok(Self::Consistent),
-            "zero" => Ok(Self::Zero),
-            _ => Err(format!(
-                "field `time.initial_acceleration` = \"{name}\": \"consistent\" (M a_0 = f_ext - f_int at \
-                 t = 0, the default) or \"zero\" (start at rest in acceleration)"
-            )),
-        }
-    }
-}
-
-/// How the material points and the grid relate.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// Material point method: shape functions at the current point positions on a grid that is reset to
-    /// its reference position every step (updated Lagrangian).
-    #[default]
-    Mpm,
-    /// Finite elements on the grid cells: points fixed at the cells' Gauss points, bilinear shape functions
-    /// of the reference configuration, gradients pushed forward with `F_n` (so `F = I + sum_I u_I (x)
-    /// grad_X N_I`, total Lagrangian) and nodal velocity and acceleration carried from step to step
-    /// (no grid reset).
-    Fem,
-}
 
 /// Most SNES solves of one step attempt while the contact active set and the pin rotations settle.
 const MAX_CONTACT_SOLVES: usize = 30;
@@ -109,71 +34,6 @@ fn row_scale(materials: &[Material]) -> f64 {
             e.bulk + 4.0 * e.shear / 3.0
         })
         .fold(0.0, f64::max)
-}
-
-/// Everything that defines a run.
-pub struct Setup {
-    /// Background grid.
-    pub grid: Grid,
-    /// Deformable material points (body tag = index into `materials`).
-    pub particles: Particles,
-    /// One constitutive law per body tag.
-    pub materials: Vec<Material>,
-    /// Interpolator.
-    pub shape: ShapeKind,
-    /// Time integration.
-    pub time: TimeIntegration,
-    /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
-    pub body_force: Vector2<f64>,
-    /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
-    pub body_force_ramp: f64,
-    /// Node-box constraints.
-    pub boxes: Vec<NodeBox>,
-    /// Rigid loading bodies.
-    pub rigid: Vec<RigidBody>,
-    /// Applied forces.
-    pub loads: Vec<NodalLoad>,
-    /// MPM or FEM on the grid cells.
-    pub method: Method,
-    /// Options prefix of the SNES (None: plain `-snes_*`).
-    pub options_prefix: Option<String>,
-    /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
-    pub mass_tolerance: f64,
-    /// Options prefix of a fallback SNES (e.g. with a direct solver) tried at the same time step when the
-    /// main one fails, before the time step is halved; None: halve at once.
-    pub fallback_prefix: Option<String>,
-}
-
-impl Setup {
-    /// A model of the deformable points `particles` (body tag = index into `materials`) on `grid`, with
-    /// the defaults of a configuration file for the rest: no constraints, rigid bodies, loads or body
-    /// force, MPM, nodes with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a
-    /// prefix and no fallback solver. Set the other fields with struct-update syntax:
-    /// `Setup { boxes, ..Setup::new(grid, particles, materials, shape, time) }`.
-    pub fn new(
-        grid: Grid,
-        particles: Particles,
-        materials: Vec<Material>,
-        shape: ShapeKind,
-        time: TimeIntegration,
-    ) -> Self {
-        Self {
-            grid,
-            particles,
-            materials,
-            shape,
-            time,
-            body_force: Vector2::zeros(),
-            body_force_ramp: 0.0,
-            boxes: Vec::new(),
-            rigid: Vec::new(),
-            loads: Vec::new(),
-            method: Method::Mpm,
-            options_prefix: None,
-            mass_tolerance: 1e-6,
-            fallback_prefix: None,
-        }
-    }
 }
 
 /// Failure of a step or a run.
@@ -268,63 +128,19 @@ pub struct StepReport {
     pub contact_solves: usize,
 }
 
-/// The counters of a running simulation besides the particles (for checkpoints).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Counters {
-    /// Time reached (s).
-    pub time: f64,
-    /// Steps completed.
-    pub step: usize,
-    /// Time step to try next (s).
-    pub dt: f64,
-    /// Work of reactions and body forces so far (N mm per mm thickness).
-    pub external_work: f64,
-    /// Accumulated prescribed displacement per constraint set (mm).
-    pub accumulated: Vec<[f64; 2]>,
-    /// Last reactions per constraint set (N per mm thickness).
-    pub last_reactions: Vec<[f64; 2]>,
-    /// Rotation of each rigid body about its pin (rad; 0 without a pin).
-    #[serde(default)]
-    pub rotations: Vec<f64>,
-    /// Rotation rate of each rigid body in the last step (rad/s).
-    #[serde(default)]
-    pub rotation_rates: Vec<f64>,
-    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step: the
-    /// first guess of the next step's active set, so that a resumed run takes the same steps.
-    #[serde(default)]
-    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
-}
-
-/// A running simulation: the committed state and the reusable per-step workspace.
-pub struct Simulation {
-    /// Run definition; `particles` in it is the committed state.
-    pub setup: Setup,
-    /// Time reached (s).
-    pub time: f64,
-    /// Steps completed.
-    pub step: usize,
-    /// Time step to try next (s).
-    pub dt: f64,
-    /// Work of reactions and body forces so far (N mm per mm thickness).
-    pub external_work: f64,
-    /// Accumulated prescribed displacement per constraint set (mm), in report order.
-    accumulated: Vec<[f64; 2]>,
-    /// Last reactions (for the trapezoidal work increment).
-    last_reactions: Vec<[f64; 2]>,
-    /// Rotation of each rigid body about its pin since t = 0 (rad; 0 without a pin).
-    rotations: Vec<f64>,
-    /// Rotation rate of each rigid body in the last step (rad/s), the first guess of the next step.
-    rotation_rates: Vec<f64>,
-    /// Per rigid body in contact, the statuses of its contact nodes at the end of the last step (the
-    /// first guess of the next step's active set).
-    contact_warm: Vec<Vec<(usize, NodeStatus)>>,
+/// The per-step scratch of the time step, reused from step to step: shape-function tables, grid fields,
+/// the unknowns and their constraints, the assembler's buffers and the PETSc objects. Nothing in it
+/// outlives a step's meaning: a workspace may be dropped and rebuilt between steps (a resumed run
+/// starts with a fresh one) without changing the results.
+#[derive(Default)]
+pub struct Workspace {
+    /// Shape functions of the points in the step's configuration.
     table: ShapeTable,
+    /// Shape functions of the rigid bodies' points (MPM mode; FEM mode uses the reference ones).
     rigid_tables: Vec<ShapeTable>,
-    /// Node shares of every load (see [`NodalLoad::shares`]).
-    load_shares: Vec<Vec<(usize, f64)>>,
-    /// FEM mode: reference shape functions and the carried nodal state.
-    fem: Option<FemState>,
+    /// Grid mass, velocity and acceleration from P2G.
     grid_state: GridState,
+    /// The unknowns and their constraints.
     dofs: DofMap,
     assembler: Assembler,
     /// PETSc objects reused while the pattern does not change.
@@ -334,21 +150,24 @@ pub struct Simulation {
     events: Option<[LogEvent; 2]>,
 }
 
-/// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
-pub type NodalState = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+impl Workspace {
+    /// An empty workspace; its buffers grow at the first step.
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+/// A running simulation: the model, its state and the workspace of its steps.
+pub struct Simulation {
+    /// What defines the run.
+    pub model: Model,
+    /// The committed state.
+    pub state: State,
+    workspace: Workspace,
+}
 
 /// Per load, its active grid nodes and their shares of the resultant (summing to 1).
 type LoadNodes = Vec<Vec<(usize, f64)>>;
-
-/// State of the FEM mode kept between steps (the grid is not reset).
-#[derive(Debug, Clone)]
-struct FemState {
-    /// Shape functions `N_I(X_p)` and `grad_X N_I(X_p)` at the reference Gauss points.
-    reference: ShapeTable,
-    /// Nodal velocity (mm/s) and acceleration (mm/s^2) at the end of the last step; `None` before the
-    /// first step (the initial state is projected from the points).
-    nodal: Option<NodalState>,
-}
 
 /// What [`Simulation::prepare`] sets up for one step attempt, owned so that the later phases can borrow
 /// the simulation freely.
@@ -368,16 +187,23 @@ struct StepPlan {
     /// Per rigid body, its contact with the specimen (`None` without contact) and its face length (mm).
     devices: Vec<Option<DeviceContact>>,
     face_lengths: Vec<f64>,
-    /// Applied nodal forces at `t_n+1` (N per mm thickness, one per grid node) and the nodes of each load.
-    nodal_force: Vec<Vector2<f64>>,
+    /// Inertia and applied forces of the step, and the nodes of each load.
+    loading: Loading,
     load_nodes: LoadNodes,
-    /// Newmark parameters (`None`: quasi-static) and the body-force factor of a quasi-static ramp.
-    newmark: Option<Newmark>,
-    load_factor: f64,
     /// Whether the PETSc objects were built anew for this step.
     new_pattern: bool,
     /// Wall time of the preparation (s).
     setup_time: f64,
+}
+
+/// Inertia and applied forces of a step: what the assembler needs besides the points and the grid.
+struct Loading {
+    /// Newmark parameters (`None`: quasi-static).
+    newmark: Option<Newmark>,
+    /// The body-force factor of a quasi-static ramp.
+    load_factor: f64,
+    /// Applied nodal forces at `t_n+1` (N per mm thickness, one per grid node; empty without loads).
+    nodal_force: Vec<Vector2<f64>>,
 }
 
 /// What [`Simulation::solve`] hands to [`Simulation::finish`].
@@ -580,203 +406,203 @@ impl LinearSystem {
 }
 
 impl Simulation {
-    /// A simulation at t = 0 with virgin material history.
-    pub fn new(mut setup: Setup) -> Result<Self, StepError> {
-        if setup.particles.is_empty() {
-            return Err(StepError::Empty);
-        }
-        let stride = setup
-            .materials
-            .iter()
-            .map(|m| m.history_len())
-            .max()
-            .unwrap_or(0);
-        setup.particles.resize_history(stride, 0.0);
-        for p in 0..setup.particles.len() {
-            let m = &setup.materials[setup.particles.body[p] as usize];
-            let h = setup.particles.history_mut(p);
-            m.init_history(&mut h[..m.history_len()]);
-        }
-        let nsets = setup.boxes.len() + setup.rigid.len() + setup.loads.len();
-        let nrigid = setup.rigid.len();
-        for rb in &setup.rigid {
-            if let Some(c) = &rb.contact {
-                let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
-                let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
-                if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
-                    return Err(StepError::Setup(format!(
-                        "rigid body `{}`: a device in contact needs both motion components prescribed \
-                         (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
-                        rb.name
-                    )));
-                }
-            }
-        }
-        let dt = setup.time.dt;
-        let load_shares = setup
-            .loads
-            .iter()
-            .map(|l| l.shares(&setup.grid))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(StepError::Setup)?;
-        let mut rigid_tables: Vec<ShapeTable> =
-            setup.rigid.iter().map(|_| ShapeTable::new()).collect();
-        let fem = match setup.method {
-            Method::Mpm => None,
-            Method::Fem => {
-                if setup.shape != ShapeKind::Linear {
-                    return Err(StepError::Setup(format!(
-                        "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
-                        setup.shape.name()
-                    )));
-                }
-                // The reference configuration is the configuration at construction; the rigid bodies'
-                // nodes are fixed there too.
-                let mut reference = ShapeTable::new();
-                reference.compute(ShapeKind::Linear, &setup.grid, &setup.particles)?;
-                for (rt, rb) in rigid_tables.iter_mut().zip(&setup.rigid) {
-                    rt.compute(ShapeKind::Linear, &setup.grid, &rb.particles)?;
-                }
-                Some(FemState {
-                    reference,
-                    nodal: None,
-                })
-            }
-        };
+    /// A simulation at t = 0 with virgin material history: `setup` split into [`Model`] and [`State`],
+    /// with an empty [`Workspace`].
+    pub fn new(setup: Setup) -> Result<Self, StepError> {
+        let (model, state) = split(setup)?;
         Ok(Self {
-            rigid_tables,
-            load_shares,
-            fem,
-            setup,
-            time: 0.0,
-            step: 0,
-            dt,
-            external_work: 0.0,
-            accumulated: vec![[0.0; 2]; nsets],
-            last_reactions: vec![[0.0; 2]; nsets],
-            rotations: vec![0.0; nrigid],
-            rotation_rates: vec![0.0; nrigid],
-            contact_warm: vec![Vec::new(); nrigid],
-            table: ShapeTable::new(),
-            grid_state: GridState::new(),
-            dofs: DofMap::default(),
-            assembler: Assembler::new(),
-            system: None,
-            events: None,
+            model,
+            state,
+            workspace: Workspace::new(),
         })
     }
 
-    /// The counters besides the particle state.
-    pub fn counters(&self) -> Counters {
-        Counters {
-            time: self.time,
-            step: self.step,
-            dt: self.dt,
-            external_work: self.external_work,
-            accumulated: self.accumulated.clone(),
-            last_reactions: self.last_reactions.clone(),
-            rotations: self.rotations.clone(),
-            rotation_rates: self.rotation_rates.clone(),
-            contact_statuses: self.contact_warm.clone(),
+    /// Advances one step: [`advance`] on the simulation's parts.
+    pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
+        advance(&self.model, &mut self.state, &mut self.workspace, session)
+    }
+}
+
+/// Splits a scenario's `setup` into the model and the state at t = 0 (virgin material history), after
+/// checking what the step relies on: material points exist, devices in contact have both motion
+/// components prescribed, a unit normal and a friction coefficient >= 0, loads lie on grid lines, the FEM
+/// mode uses the linear interpolator.
+pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
+    let Setup {
+        grid,
+        mut particles,
+        materials,
+        shape,
+        time,
+        body_force,
+        body_force_ramp,
+        boxes,
+        rigid,
+        rigid_points,
+        loads,
+        method,
+        options_prefix,
+        mass_tolerance,
+        fallback_prefix,
+    } = setup;
+    if particles.is_empty() {
+        return Err(StepError::Empty);
+    }
+    if rigid_points.len() != rigid.len() {
+        return Err(StepError::Setup(format!(
+            "{} rigid bodies but {} sets of rigid-body points",
+            rigid.len(),
+            rigid_points.len()
+        )));
+    }
+    let stride = materials.iter().map(|m| m.history_len()).max().unwrap_or(0);
+    particles.resize_history(stride, 0.0);
+    for p in 0..particles.len() {
+        let m = &materials[particles.body[p] as usize];
+        let h = particles.history_mut(p);
+        m.init_history(&mut h[..m.history_len()]);
+    }
+    for rb in &rigid {
+        if let Some(c) = &rb.contact {
+            let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
+            let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
+            if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
+                return Err(StepError::Setup(format!(
+                    "rigid body `{}`: a device in contact needs both motion components prescribed \
+                     (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
+                    rb.name
+                )));
+            }
         }
     }
-
-    /// Restores the counters of a checkpoint (the particles are restored by the caller).
-    pub fn set_counters(&mut self, c: Counters) {
-        self.time = c.time;
-        self.step = c.step;
-        self.dt = c.dt;
-        self.external_work = c.external_work;
-        self.accumulated = c.accumulated;
-        self.last_reactions = c.last_reactions;
-        let nr = self.setup.rigid.len();
-        self.rotations = c.rotations;
-        self.rotations.resize(nr, 0.0);
-        self.rotation_rates = c.rotation_rates;
-        self.rotation_rates.resize(nr, 0.0);
-        self.contact_warm = c.contact_statuses;
-        self.contact_warm.resize(nr, Vec::new());
-    }
-
-    /// FEM mode: the nodal velocity (mm/s) and acceleration (mm/s^2) carried to the next step (None in
-    /// MPM mode and before the first step).
-    pub fn fem_nodal_state(&self) -> Option<&NodalState> {
-        self.fem.as_ref().and_then(|f| f.nodal.as_ref())
-    }
-
-    /// FEM mode: restores the carried nodal state (from a checkpoint); ignored in MPM mode.
-    pub fn set_fem_nodal_state(
-        &mut self,
-        velocity: Vec<Vector2<f64>>,
-        acceleration: Vec<Vector2<f64>>,
-    ) {
-        if let Some(fem) = &mut self.fem {
-            fem.nodal = Some((velocity, acceleration));
+    let load_shares = loads
+        .iter()
+        .map(|l| l.shares(&grid))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(StepError::Setup)?;
+    let fem = match method {
+        Method::Mpm => None,
+        Method::Fem => {
+            if shape != ShapeKind::Linear {
+                return Err(StepError::Setup(format!(
+                    "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
+                    shape.name()
+                )));
+            }
+            // The reference configuration is the configuration at construction; the rigid bodies'
+            // nodes are fixed there too.
+            let mut points = ShapeTable::new();
+            points.compute(ShapeKind::Linear, &grid, &particles)?;
+            let rigid = rigid_points
+                .iter()
+                .map(|rp| {
+                    let mut t = ShapeTable::new();
+                    t.compute(ShapeKind::Linear, &grid, rp).map(|()| t)
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            Some(FemReference { points, rigid })
         }
-    }
+    };
+    let nsets = boxes.len() + rigid.len() + loads.len();
+    let state = State::new(particles, rigid_points, nsets, time.dt);
+    let model = Model {
+        grid,
+        materials,
+        shape,
+        time,
+        body_force,
+        body_force_ramp,
+        boxes,
+        rigid,
+        loads,
+        method,
+        options_prefix,
+        mass_tolerance,
+        fallback_prefix,
+        load_shares,
+        fem,
+    };
+    Ok((model, state))
+}
 
-    /// The unknowns of a node: the plane displacement, and `eta_bar` if any material is
-    /// gradient-enhanced.
-    pub fn layout(&self) -> FieldLayout {
-        FieldLayout::new(2, self.setup.materials.iter().any(Material::is_nonlocal))
+/// Advances `state` by one step of (at most) `state.dt` on `model`, with the scratch of `workspace`:
+/// halving the step on failure down to `dt_min`; after a reduced step the next one tries twice as long
+/// again, up to the nominal `dt`. The first step of a dynamic run starts with the consistent initial
+/// acceleration unless `initial_acceleration` is [`InitialAcceleration::Zero`]. A failed step leaves
+/// `state` as it was.
+pub fn advance(
+    model: &Model,
+    state: &mut State,
+    workspace: &mut Workspace,
+    session: &SessionGuard,
+) -> Result<StepReport, StepError> {
+    Step {
+        m: model,
+        st: state,
+        ws: workspace,
     }
+    .advance(session)
+}
 
-    /// Unknowns per node: 3 if any material is gradient-enhanced, else 2.
-    pub fn fields(&self) -> usize {
-        self.layout().per_node()
-    }
+/// One step in progress: the model, the state it advances and the workspace it uses.
+struct Step<'a> {
+    m: &'a Model,
+    st: &'a mut State,
+    ws: &'a mut Workspace,
+}
 
-    /// Advances one step of (at most) `self.dt`, halving the step on failure down to `dt_min`; after a
+impl Step<'_> {
+    /// Advances one step of (at most) `self.st.dt`, halving the step on failure down to `dt_min`; after a
     /// reduced step the next one tries twice as long again, up to the nominal `dt`. The first step of a
     /// dynamic run starts with the consistent initial acceleration unless `initial_acceleration` is
     /// [`InitialAcceleration::Zero`].
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
         // Before the first step only: a resumed run continues with its checkpointed accelerations.
-        let time = &self.setup.time;
-        if self.step == 0
+        let time = &self.m.time;
+        if self.st.step == 0
             && !time.quasi_static
             && time.initial_acceleration == InitialAcceleration::Consistent
         {
             self.initialize_acceleration()?;
         }
-        let mut dt = self.dt;
+        let mut dt = self.st.dt;
         let mut attempts = 0;
         // The main solver first; after a failure the fallback solver (if any) at the same dt, then halving.
-        let mut prefix = self.setup.options_prefix.clone();
+        let mut prefix = self.m.options_prefix.clone();
         loop {
             attempts += 1;
             match self.try_step(session, dt, prefix.as_deref())? {
                 Ok(mut report) => {
                     report.attempts = attempts;
-                    self.dt = (dt * 2.0).min(self.setup.time.dt);
+                    self.st.dt = (dt * 2.0).min(self.m.time.dt);
                     return Ok(report);
                 }
                 Err(reason) => {
-                    if let Some(fb) = &self.setup.fallback_prefix
+                    if let Some(fb) = &self.m.fallback_prefix
                         && prefix.as_deref() != Some(fb.as_str())
                     {
                         tracing::warn!(
                             "step {} at t = {:.6e} s: {reason}; retrying with the fallback solver (-{fb}*)",
-                            self.step + 1,
-                            self.time
+                            self.st.step + 1,
+                            self.st.time
                         );
                         prefix = Some(fb.clone());
                         continue;
                     }
                     let next = dt / 2.0;
-                    if next < self.setup.time.dt_min {
+                    if next < self.m.time.dt_min {
                         return Err(StepError::Diverged {
-                            step: self.step + 1,
-                            time: self.time,
+                            step: self.st.step + 1,
+                            time: self.st.time,
                             dt,
-                            dt_min: self.setup.time.dt_min,
+                            dt_min: self.m.time.dt_min,
                             reason,
                         });
                     }
                     tracing::warn!(
                         "step {} at t = {:.6e} s: {reason}; retrying with dt = {next:.3e} s",
-                        self.step + 1,
-                        self.time
+                        self.st.step + 1,
+                        self.st.time
                     );
                     dt = next;
                 }
@@ -796,14 +622,14 @@ impl Simulation {
         prefix: Option<&str>,
     ) -> Result<Result<StepReport, String>, StepError> {
         let t0 = Instant::now();
-        let events = match self.events {
+        let events = match self.ws.events {
             Some(e) => e,
             None => {
                 let e = [
                     LogEvent::register(session, "MPMSetup")?,
                     LogEvent::register(session, "MPMAssembly")?,
                 ];
-                *self.events.insert(e)
+                *self.ws.events.insert(e)
             }
         };
         let setup_guard = events[0].begin();
@@ -820,26 +646,25 @@ impl Simulation {
     /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
     /// assembler and the PETSc objects stay free to be borrowed mutably beside it).
     fn step_input<'a>(
-        setup: &'a Setup,
+        model: &'a Model,
+        particles: &'a Particles,
         table: &'a ShapeTable,
         dofs: &'a DofMap,
         grid_state: &'a GridState,
-        newmark: Option<Newmark>,
-        load_factor: f64,
-        nodal_force: &'a [Vector2<f64>],
+        loading: &'a Loading,
     ) -> StepInput<'a> {
         StepInput {
             table,
-            particles: &setup.particles,
-            materials: &setup.materials,
+            particles,
+            materials: &model.materials,
             dofs,
             mass: &grid_state.mass,
             velocity: &grid_state.velocity,
             acceleration: &grid_state.acceleration,
-            newmark,
-            body_force: setup.body_force * load_factor,
-            nodal_force,
-            row_scale: row_scale(&setup.materials),
+            newmark: loading.newmark,
+            body_force: model.body_force * loading.load_factor,
+            nodal_force: &loading.nodal_force,
+            row_scale: row_scale(&model.materials),
         }
     }
 
@@ -854,30 +679,30 @@ impl Simulation {
     ) -> Result<StepPlan, StepError> {
         self.project_to_grid()?;
         // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
-        let set_du = self.constraint_values(|v, rise| prescribed_increment(v, rise, self.time, dt));
+        let set_du =
+            self.constraint_values(|v, rise| prescribed_increment(v, rise, self.st.time, dt));
         let sets = self.constrain(&set_du)?;
         // Contact devices: translation from the prescribed motion, rotation about the pin first guessed as
         // the last step's rate.
-        let nb = self.setup.boxes.len();
+        let nb = self.m.boxes.len();
         let translations: Vec<Vector2<f64>> = set_du[nb..]
             .iter()
             .map(|d| Vector2::new(d[0].unwrap_or(0.0), d[1].unwrap_or(0.0)))
             .collect();
-        let pins: Vec<Option<Vector2<f64>>> = (0..self.setup.rigid.len())
-            .map(|k| self.pin_of(k))
-            .collect();
-        let dtheta: Vec<f64> = (0..self.setup.rigid.len())
+        let pins: Vec<Option<Vector2<f64>>> =
+            (0..self.m.rigid.len()).map(|k| self.pin_of(k)).collect();
+        let dtheta: Vec<f64> = (0..self.m.rigid.len())
             .map(|k| match pins[k] {
-                Some(_) => self.rotation_rates[k] * dt,
+                Some(_) => self.st.rotation_rates[k] * dt,
                 None => 0.0,
             })
             .collect();
         let (devices, face_lengths) = self.contact_devices(&translations, &pins, &dtheta, dt);
-        let t_new = self.time + dt;
+        let t_new = self.st.time + dt;
         // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
         let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
         let eta_bar = self.nodal_eta_bar();
-        let s = &self.setup;
+        let s = self.m;
         let newmark = (!s.time.quasi_static).then_some(Newmark {
             beta: s.time.beta,
             gamma: s.time.gamma,
@@ -898,36 +723,38 @@ impl Simulation {
             dtheta,
             devices,
             face_lengths,
-            nodal_force,
+            loading: Loading {
+                newmark,
+                load_factor,
+                nodal_force,
+            },
             load_nodes,
-            newmark,
-            load_factor,
             new_pattern: false,
             setup_time: 0.0,
         };
         let input = Self::step_input(
             s,
-            &self.table,
-            &self.dofs,
-            &self.grid_state,
-            newmark,
-            load_factor,
-            &plan.nodal_force,
+            &self.st.particles,
+            &self.ws.table,
+            &self.ws.dofs,
+            &self.ws.grid_state,
+            &plan.loading,
         );
-        self.assembler.begin_step(&input);
+        self.ws.assembler.begin_step(&input);
         // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged.
         let new_pattern = !self
+            .ws
             .system
             .as_ref()
-            .is_some_and(|sys| sys.fits(prefix, &self.dofs, &self.assembler));
+            .is_some_and(|sys| sys.fits(prefix, &self.ws.dofs, &self.ws.assembler));
         if new_pattern {
-            self.system = None; // free the old objects first
-            self.system = Some(LinearSystem::new(
+            self.ws.system = None; // free the old objects first
+            self.ws.system = Some(LinearSystem::new(
                 session,
                 prefix,
                 &s.grid,
-                &self.dofs,
-                &self.assembler,
+                &self.ws.dofs,
+                &self.ws.assembler,
             )?);
         }
         let LinearSystem {
@@ -936,7 +763,7 @@ impl Simulation {
             tolerances,
             lag,
             ..
-        } = self.system.as_mut().expect("linear system just built");
+        } = self.ws.system.as_mut().expect("linear system just built");
         // The first solve of an attempt runs with the configured tolerances and lag (the contact
         // re-solves of an earlier attempt may have changed both) and so starts with a fresh
         // preconditioner: PETSc rebuilds it at the first Newton iteration of every solve unless the lag
@@ -948,24 +775,24 @@ impl Simulation {
         // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
         // increments into the body); eta_bar from the particles (mass-weighted projection).
-        let nf = self.dofs.fields();
+        let nf = self.ws.dofs.fields();
         x.write(|xs| {
-            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+            for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
                 let node = node as usize;
                 let du = match newmark {
                     Some(_) => {
-                        dt * self.grid_state.velocity[node]
-                            + 0.5 * dt * dt * self.grid_state.acceleration[node]
+                        dt * self.ws.grid_state.velocity[node]
+                            + 0.5 * dt * dt * self.ws.grid_state.acceleration[node]
                     }
                     None => Vector2::zeros(),
                 };
                 xs[a * nf] = du.x;
                 xs[a * nf + 1] = du.y;
-                if let Some(e) = self.dofs.layout().eta_bar() {
+                if let Some(e) = self.ws.dofs.layout().eta_bar() {
                     xs[a * nf + e] = eta_bar[node];
                 }
                 for c in 0..nf {
-                    if let (Some(v), Some(_)) = (self.dofs.prescribed(a * nf + c), newmark) {
+                    if let (Some(v), Some(_)) = (self.ws.dofs.prescribed(a * nf + c), newmark) {
                         xs[a * nf + c] = v;
                     }
                 }
@@ -989,36 +816,27 @@ impl Simulation {
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, String>, StepError> {
         let t1 = Instant::now();
-        let step = self.step;
-        let Self {
-            setup: s,
+        let step = self.st.step;
+        let s = self.m;
+        let particles = &self.st.particles;
+        let Workspace {
             table,
             dofs,
             grid_state,
             assembler,
             system,
             ..
-        } = self;
+        } = &mut *self.ws;
         let StepPlan {
             devices,
             dtheta,
             pins,
             translations,
             face_lengths,
-            nodal_force,
-            newmark,
-            load_factor,
+            loading,
             ..
         } = plan;
-        let input = Self::step_input(
-            s,
-            table,
-            dofs,
-            grid_state,
-            *newmark,
-            *load_factor,
-            nodal_force,
-        );
+        let input = Self::step_input(s, particles, table, dofs, grid_state, loading);
         let grid = &s.grid;
         let nf = dofs.fields();
         let n = dofs.len();
@@ -1212,8 +1030,12 @@ impl Simulation {
             dtheta,
             devices,
             load_nodes,
-            newmark,
-            load_factor,
+            loading:
+                Loading {
+                    newmark,
+                    load_factor,
+                    ..
+                },
             new_pattern,
             setup_time,
             ..
@@ -1226,9 +1048,9 @@ impl Simulation {
             evaluations,
             contact_solves,
         } = solved;
-        let nf = self.dofs.fields();
-        let n = self.dofs.len();
-        let s = &self.setup;
+        let nf = self.ws.dofs.fields();
+        let n = self.ws.dofs.len();
+        let s = self.m;
         let grid = &s.grid;
         let mut reactions: Vec<[f64; 2]> = sets
             .iter()
@@ -1248,15 +1070,15 @@ impl Simulation {
             }
         }
         let nodes = grid.num_nodes();
-        let du_nodes = self.assembler.nodal_du().to_vec();
+        let du_nodes = self.ws.assembler.nodal_du().to_vec();
         let mut acc_nodes = vec![Vector2::zeros(); nodes];
         if let Some(nm) = newmark {
-            for &node in self.dofs.active_nodes() {
+            for &node in self.ws.dofs.active_nodes() {
                 let node = node as usize;
                 acc_nodes[node] = nm.acceleration(
                     du_nodes[node],
-                    self.grid_state.velocity[node],
-                    self.grid_state.acceleration[node],
+                    self.ws.grid_state.velocity[node],
+                    self.ws.grid_state.acceleration[node],
                 );
             }
             // Closed contact nodes leave the step with the device's velocity in the constrained
@@ -1273,8 +1095,8 @@ impl Simulation {
                 let (n, t) = (d.normal, d.tangent());
                 for c in d.nodes.iter().filter(|c| c.status.closed()) {
                     let (v, a) = (
-                        self.grid_state.velocity[c.node],
-                        self.grid_state.acceleration[c.node],
+                        self.ws.grid_state.velocity[c.node],
+                        self.ws.grid_state.acceleration[c.node],
                     );
                     let target = c.du_device / dt;
                     // The acceleration that makes v_n + dt ((1 - gamma) a_n + gamma a) equal the target.
@@ -1288,7 +1110,7 @@ impl Simulation {
                     if c.status == NodeStatus::Stick {
                         *acc += (fit(t) - t.dot(acc)) * t;
                     }
-                    let f = self.grid_state.mass[c.node] * (*acc - before);
+                    let f = self.ws.grid_state.mass[c.node] * (*acc - before);
                     reactions[first + k][0] += f.x;
                     reactions[first + k][1] += f.y;
                 }
@@ -1298,9 +1120,9 @@ impl Simulation {
         // prescribed du) and of the body force (b . du weighted by nodal mass).
         let mut work = 0.0;
         let bf = s.body_force * load_factor;
-        for &node in self.dofs.active_nodes() {
+        for &node in self.ws.dofs.active_nodes() {
             let node = node as usize;
-            work += self.grid_state.mass[node] * bf.dot(&du_nodes[node]);
+            work += self.ws.grid_state.mass[node] * bf.dot(&du_nodes[node]);
         }
         let gamma = if newmark.is_some() { s.time.gamma } else { 0.0 };
         let sol = StepSolution {
@@ -1320,16 +1142,16 @@ impl Simulation {
         }
         for (k, (r, du)) in reactions.iter().zip(&displacements).enumerate() {
             for c in 0..2 {
-                work += 0.5 * (r[c] + self.last_reactions[k][c]) * du[c];
+                work += 0.5 * (r[c] + self.st.last_reactions[k][c]) * du[c];
             }
         }
-        let s = &mut self.setup;
+        let s = self.m;
+        let ps = &mut self.st.particles;
         // Eroded points (material `erosion_damage`) move with the grid but keep their deformation
         // gradient, volume and domain: a void does not deform, so it never inverts.
-        let frozen: Vec<_> = (0..s.particles.len())
-            .filter(|&p| s.materials[s.particles.body[p] as usize].is_eroded(s.particles.damage[p]))
+        let frozen: Vec<_> = (0..ps.len())
+            .filter(|&p| s.materials[ps.body[p] as usize].is_eroded(ps.damage[p]))
             .map(|p| {
-                let ps = &s.particles;
                 (
                     p,
                     ps.x[p],
@@ -1341,9 +1163,8 @@ impl Simulation {
                 )
             })
             .collect();
-        transfer::grid_to_particles(&self.table, &s.grid, &sol, &mut s.particles)?;
+        transfer::grid_to_particles(&self.ws.table, &s.grid, &sol, ps)?;
         for (p, x, f, r1, r2, vol, corners) in frozen {
-            let ps = &mut s.particles;
             let shift = ps.x[p] - x;
             ps.f[p] = f;
             ps.r1[p] = r1;
@@ -1351,26 +1172,27 @@ impl Simulation {
             ps.vol[p] = vol;
             ps.corners[p] = corners.map(|c| c + shift);
         }
-        if let Some(fem) = &mut self.fem {
-            let (mut v, a) = (self.grid_state.velocity.clone(), acc_nodes.clone());
+        if s.fem.is_some() {
+            let (mut v, a) = (self.ws.grid_state.velocity.clone(), acc_nodes.clone());
             if let Some(nm) = newmark {
-                for &node in self.dofs.active_nodes() {
+                for &node in self.ws.dofs.active_nodes() {
                     let node = node as usize;
                     v[node] += nm.dt
-                        * ((1.0 - nm.gamma) * self.grid_state.acceleration[node]
+                        * ((1.0 - nm.gamma) * self.ws.grid_state.acceleration[node]
                             + nm.gamma * a[node]);
                 }
             } else {
                 v.iter_mut().for_each(|v| *v = Vector2::zeros());
             }
-            fem.nodal = Some((v, a));
+            self.st.fem_nodal = Some((v, a));
         }
         if s.time.quasi_static {
-            s.particles.v.iter_mut().for_each(|v| *v = Vector2::zeros());
-            s.particles.a.iter_mut().for_each(|a| *a = Vector2::zeros());
+            ps.v.iter_mut().for_each(|v| *v = Vector2::zeros());
+            ps.a.iter_mut().for_each(|a| *a = Vector2::zeros());
         }
-        let stored = self.assembler.commit(&mut s.particles, &s.materials);
-        for (k, (rb, du)) in s
+        let stored = self.ws.assembler.commit(ps, &s.materials);
+        for (k, (rb, du)) in self
+            .st
             .rigid
             .iter_mut()
             .zip(&displacements[s.boxes.len()..])
@@ -1381,53 +1203,51 @@ impl Simulation {
             let pin = pins[k].unwrap_or_else(Vector2::zeros);
             let r = contact::rotation(dtheta[k]) - nalgebra::Matrix2::identity();
             let moved = |x: &mut Vector2<f64>| *x += dx + r * (*x - pin);
-            rb.particles.x.iter_mut().for_each(moved);
-            rb.particles
-                .corners
+            rb.x.iter_mut().for_each(moved);
+            rb.corners
                 .iter_mut()
                 .for_each(|cs| cs.iter_mut().for_each(moved));
-            self.rotations[k] += dtheta[k];
-            self.rotation_rates[k] = dtheta[k] / dt;
+            self.st.rotations[k] += dtheta[k];
+            self.st.rotation_rates[k] = dtheta[k] / dt;
             if let Some(d) = &devices[k] {
-                self.contact_warm[k] = d.nodes.iter().map(|c| (c.node, c.status)).collect();
+                self.st.contact_statuses[k] = d.nodes.iter().map(|c| (c.node, c.status)).collect();
             }
         }
-        for (acc, du) in self.accumulated.iter_mut().zip(&displacements) {
+        for (acc, du) in self.st.accumulated.iter_mut().zip(&displacements) {
             acc[0] += du[0];
             acc[1] += du[1];
         }
-        self.last_reactions = reactions.clone();
-        self.external_work += work;
-        self.time = t_new;
-        self.step += 1;
+        self.st.last_reactions = reactions.clone();
+        self.st.external_work += work;
+        self.st.time = t_new;
+        self.st.step += 1;
         // Kinetic energy: of the points in MPM (the grid is discarded); of the lumped nodal masses in FEM
         // mode, the energy the Newmark scheme conserves there.
-        let kinetic = match self.fem.as_ref().and_then(|f| f.nodal.as_ref()) {
+        let kinetic = match &self.st.fem_nodal {
             Some((v, _)) => self
+                .ws
                 .dofs
                 .active_nodes()
                 .iter()
-                .map(|&n| 0.5 * self.grid_state.mass[n as usize] * v[n as usize].norm_squared())
+                .map(|&n| 0.5 * self.ws.grid_state.mass[n as usize] * v[n as usize].norm_squared())
                 .sum(),
-            None => (0..s.particles.len())
-                .map(|p| 0.5 * s.particles.mass[p] * s.particles.v[p].norm_squared())
-                .sum(),
+            None => {
+                let ps = &self.st.particles;
+                (0..ps.len())
+                    .map(|p| 0.5 * ps.mass[p] * ps.v[p].norm_squared())
+                    .sum()
+            }
         };
-        let names: Vec<String> = s
-            .boxes
-            .iter()
-            .map(|b| b.name.clone())
-            .chain(s.rigid.iter().map(|r| r.name.clone()))
-            .chain(s.loads.iter().map(|l| l.name.clone()))
-            .collect();
+        let names = s.set_names();
+
         Ok(StepReport {
-            step: self.step,
-            time: self.time,
+            step: self.st.step,
+            time: self.st.time,
             dt,
             attempts: 1,
             solve: info,
             unknowns: n,
-            nonzeros: self.assembler.nonzeros(),
+            nonzeros: self.ws.assembler.nonzeros(),
             reactions: names
                 .iter()
                 .cloned()
@@ -1435,11 +1255,11 @@ impl Simulation {
                 .collect(),
             displacements: names
                 .into_iter()
-                .zip(self.accumulated.iter().copied())
+                .zip(self.st.accumulated.iter().copied())
                 .collect(),
             kinetic_energy: kinetic,
             stored_energy: stored,
-            external_work: self.external_work,
+            external_work: self.st.external_work,
             wall_setup: setup_time,
             wall_solve: solve_time,
             wall_assembly: assembly_time,
@@ -1451,7 +1271,7 @@ impl Simulation {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| r.contact.as_ref().is_some_and(|c| c.pin.is_some()))
-                .map(|(k, r)| (r.name.clone(), self.rotations[k]))
+                .map(|(k, r)| (r.name.clone(), self.st.rotations[k]))
                 .collect(),
             contact_solves,
         })
@@ -1460,32 +1280,33 @@ impl Simulation {
     /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and
     /// acceleration replace the projected ones) and the numbering of the unknowns, nothing constrained yet.
     fn project_to_grid(&mut self) -> Result<(), StepError> {
-        let s = &self.setup;
-        match &self.fem {
-            None => self.table.compute(s.shape, &s.grid, &s.particles)?,
-            Some(fem) => self.table.push_forward(&fem.reference, &s.particles.f)?,
+        let s = self.m;
+        let ps = &self.st.particles;
+        match &s.fem {
+            None => self.ws.table.compute(s.shape, &s.grid, ps)?,
+            Some(fem) => self.ws.table.push_forward(&fem.points, &ps.f)?,
         }
         transfer::particles_to_grid(
-            &self.table,
-            &s.particles,
+            &self.ws.table,
+            ps,
             &s.grid,
             s.mass_tolerance,
-            &mut self.grid_state,
+            &mut self.ws.grid_state,
         )?;
-        if let Some((v, a)) = self.fem.as_ref().and_then(|f| f.nodal.as_ref()) {
+        if let Some((v, a)) = &self.st.fem_nodal {
             // FEM: the nodal state carries over (the same nodes are active in every step).
-            self.grid_state.velocity.copy_from_slice(v);
-            self.grid_state.acceleration.copy_from_slice(a);
+            self.ws.grid_state.velocity.copy_from_slice(v);
+            self.ws.grid_state.acceleration.copy_from_slice(a);
         }
-        let layout = self.layout();
-        self.dofs.rebuild(&self.grid_state.active, layout);
+        let layout = s.layout();
+        self.ws.dofs.rebuild(&self.ws.grid_state.active, layout);
         Ok(())
     }
 
     /// Per constraint set (boxes first, then rigid bodies) and component: `value(v, rise_time)` for a
     /// component moving with velocity `v`, `None` for a free one.
     fn constraint_values(&self, value: impl Fn(f64, f64) -> f64) -> Vec<[Option<f64>; 2]> {
-        let s = &self.setup;
+        let s = self.m;
         s.boxes
             .iter()
             .map(|b| (b.motion, b.rise_time))
@@ -1502,19 +1323,19 @@ impl Simulation {
     /// Prescribes `values` (one per set, as from [`Simulation::constraint_values`]) on the active nodes of
     /// every constraint set; returns each set's constrained unknowns.
     fn constrain(&mut self, values: &[[Option<f64>; 2]]) -> Result<Vec<Vec<usize>>, StepError> {
-        let s = &self.setup;
+        let s = self.m;
         let grid = &s.grid;
-        let nf = self.dofs.fields();
+        let nf = self.ws.dofs.fields();
         let mut sets: Vec<Vec<usize>> = Vec::new();
         for (b, du) in s.boxes.iter().zip(values) {
             let mut dofs_of_set = Vec::new();
             for node in 0..grid.num_nodes() {
                 let x = grid.node_position(node);
                 let inside = (0..2).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
-                if let (true, Some(a)) = (inside, self.dofs.active_index(node)) {
+                if let (true, Some(a)) = (inside, self.ws.dofs.active_index(node)) {
                     for (c, d) in du.iter().enumerate() {
                         if let Some(d) = d {
-                            self.dofs.constrain(node, c, *d);
+                            self.ws.dofs.constrain(node, c, *d);
                             dofs_of_set.push(a * nf + c);
                         }
                     }
@@ -1522,30 +1343,33 @@ impl Simulation {
             }
             sets.push(dofs_of_set);
         }
-        for ((rb, rt), du) in s
-            .rigid
-            .iter()
-            .zip(self.rigid_tables.iter_mut())
-            .zip(&values[s.boxes.len()..])
-        {
+        let nrigid = s.rigid.len();
+        self.ws.rigid_tables.resize_with(nrigid, ShapeTable::new);
+        for (k, (rb, du)) in s.rigid.iter().zip(&values[s.boxes.len()..]).enumerate() {
             if rb.contact.is_some() {
                 // In contact: constrained by the active set of the step, not here.
                 sets.push(Vec::new());
                 continue;
             }
-            if self.fem.is_none() {
-                rt.compute(s.shape, grid, &rb.particles)?;
-            }
+            // Glued: the nodes under the body's points (of the reference configuration in FEM mode).
+            let points = &self.st.rigid[k];
+            let rt = match &s.fem {
+                Some(fem) => &fem.rigid[k],
+                None => {
+                    self.ws.rigid_tables[k].compute(s.shape, grid, points)?;
+                    &self.ws.rigid_tables[k]
+                }
+            };
             let mut dofs_of_set = Vec::new();
-            for p in 0..rb.particles.len() {
+            for p in 0..points.len() {
                 for w in rt.weights(p) {
                     if w.value <= 0.0 {
                         continue;
                     }
-                    if let Some(a) = self.dofs.active_index(w.node as usize) {
+                    if let Some(a) = self.ws.dofs.active_index(w.node as usize) {
                         for (c, d) in du.iter().enumerate() {
                             if let Some(d) = d {
-                                self.dofs.constrain(w.node as usize, c, *d);
+                                self.ws.dofs.constrain(w.node as usize, c, *d);
                                 dofs_of_set.push(a * nf + c);
                             }
                         }
@@ -1562,9 +1386,9 @@ impl Simulation {
     /// Current pin (mm) of rigid body `k`: its pin at t = 0 moved with the accumulated translation;
     /// `None` without a pin.
     fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
-        let s = &self.setup;
+        let s = self.m;
         let pin = s.rigid[k].contact.as_ref()?.pin?;
-        let acc = self.accumulated[s.boxes.len() + k];
+        let acc = self.st.accumulated[s.boxes.len() + k];
         Some(pin + Vector2::new(acc[0], acc[1]))
     }
 
@@ -1581,10 +1405,10 @@ impl Simulation {
         dtheta: &[f64],
         dt: f64,
     ) -> (Vec<Option<DeviceContact>>, Vec<f64>) {
-        let s = &self.setup;
+        let s = self.m;
         let grid = &s.grid;
         let h = grid.cell_size();
-        let nf = self.dofs.fields();
+        let nf = self.ws.dofs.fields();
         let mut devices = Vec::with_capacity(s.rigid.len());
         let mut lengths = Vec::with_capacity(s.rigid.len());
         let mut index = vec![usize::MAX; grid.num_nodes()];
@@ -1594,10 +1418,10 @@ impl Simulation {
                 lengths.push(0.0);
                 continue;
             };
-            let n = contact::rotation(self.rotations[k]) * c.normal;
+            let n = contact::rotation(self.st.rotations[k]) * c.normal;
             let t = Vector2::new(-n.y, n.x);
             let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for x in rb.particles.corners.iter().flatten() {
+            for x in self.st.rigid[k].corners.iter().flatten() {
                 for (j, v) in [n.dot(x), t.dot(x)].into_iter().enumerate() {
                     lo[j] = lo[j].min(v);
                     hi[j] = hi[j].max(v);
@@ -1610,16 +1434,16 @@ impl Simulation {
                 Some(pin) => translations[k] + r * (x - pin),
                 None => translations[k],
             };
-            let warm = &self.contact_warm[k];
+            let warm = &self.st.contact_statuses[k];
             let mut nodes = Vec::new();
-            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+            for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
                 let node = node as usize;
                 let x = grid.node_position(node);
                 let tx = t.dot(&x);
                 if (n.dot(&x) - cf).abs() > 0.5 * h + 1e-9
                     || tx < lo[1] - 1e-9
                     || tx > hi[1] + 1e-9
-                    || (0..2).any(|c| self.dofs.is_constrained(a * nf + c))
+                    || (0..2).any(|c| self.ws.dofs.is_constrained(a * nf + c))
                 {
                     continue;
                 }
@@ -1634,7 +1458,7 @@ impl Simulation {
             }
             // Gap: from the face to the nearest corner of the specimen points (in front of the device's
             // back face) interpolating to the node.
-            let p = &s.particles;
+            let p = &self.st.particles;
             for q in 0..p.len() {
                 if n.dot(&p.x[q]) < cf - depth {
                     continue;
@@ -1643,7 +1467,7 @@ impl Simulation {
                     .iter()
                     .map(|c| n.dot(c))
                     .fold(f64::INFINITY, f64::min);
-                for w in self.table.weights(q) {
+                for w in self.ws.table.weights(q) {
                     let i = index[w.node as usize];
                     if w.value > 1e-12 && i != usize::MAX {
                         nodes[i].gap = nodes[i].gap.min(near - cf);
@@ -1667,8 +1491,8 @@ impl Simulation {
                 // A node that closes with friction slips if its predicted motion slides along the device
                 // (sticking it would reverse its tangential velocity in the trapezoidal rule).
                 let (v, a) = (
-                    self.grid_state.velocity[c.node],
-                    self.grid_state.acceleration[c.node],
+                    self.ws.grid_state.velocity[c.node],
+                    self.ws.grid_state.acceleration[c.node],
                 );
                 let slide = t.dot(&(dt * v + 0.5 * dt * dt * a - c.du_device));
                 let fresh = if closed == NodeStatus::Stick && slide.abs() > 1e-9 * h {
@@ -1694,14 +1518,14 @@ impl Simulation {
     /// The loads at time `t` on the active nodes: the nodal forces (one per grid node; empty without
     /// loads) and, per load, its nodes with their shares renormalised to 1.
     fn nodal_loads(&self, t: f64) -> Result<(Vec<Vector2<f64>>, LoadNodes), StepError> {
-        let s = &self.setup;
+        let s = self.m;
         let mut nodal_force = Vec::new();
         let mut load_nodes = Vec::with_capacity(s.loads.len());
-        for (load, shares) in s.loads.iter().zip(&self.load_shares) {
+        for (load, shares) in s.loads.iter().zip(&self.m.load_shares) {
             let active: Vec<(usize, f64)> = shares
                 .iter()
                 .copied()
-                .filter(|&(node, _)| self.grid_state.active[node])
+                .filter(|&(node, _)| self.ws.grid_state.active[node])
                 .collect();
             let total: f64 = active.iter().map(|(_, w)| w).sum();
             if total <= 0.0 {
@@ -1728,18 +1552,18 @@ impl Simulation {
     /// The points' `eta_bar` projected to the active nodes (mass-weighted), one per grid node; empty for
     /// a run without gradient enhancement.
     fn nodal_eta_bar(&self) -> Vec<f64> {
-        if self.dofs.layout().eta_bar().is_none() {
+        if self.ws.dofs.layout().eta_bar().is_none() {
             return Vec::new();
         }
-        let p = &self.setup.particles;
-        let mut eb = vec![0.0; self.grid_state.mass.len()];
+        let p = &self.st.particles;
+        let mut eb = vec![0.0; self.ws.grid_state.mass.len()];
         for q in 0..p.len() {
-            for w in self.table.weights(q) {
+            for w in self.ws.table.weights(q) {
                 eb[w.node as usize] += w.value * p.mass[q] * p.eta_bar[q];
             }
         }
-        for &node in self.dofs.active_nodes() {
-            eb[node as usize] /= self.grid_state.mass[node as usize];
+        for &node in self.ws.dofs.active_nodes() {
+            eb[node as usize] /= self.ws.grid_state.mass[node as usize];
         }
         eb
     }
@@ -1753,41 +1577,45 @@ impl Simulation {
     /// only on the state at t = 0, not on the points' previous `a_p`.
     fn initialize_acceleration(&mut self) -> Result<(), StepError> {
         self.project_to_grid()?;
-        let t = self.time;
+        let t = self.st.time;
         let prescribed = self.constraint_values(|v, rise| prescribed_acceleration(v, rise, t));
         let sets = self.constrain(&prescribed)?;
         let (nodal_force, _) = self.nodal_loads(t)?;
         let eta_bar = self.nodal_eta_bar();
-        let nf = self.dofs.fields();
-        let s = &self.setup;
+        let nf = self.ws.dofs.fields();
+        let s = self.m;
         // No inertia and the full body force at t = 0.
+        let loading = Loading {
+            newmark: None,
+            load_factor: 1.0,
+            nodal_force,
+        };
         let input = Self::step_input(
             s,
-            &self.table,
-            &self.dofs,
-            &self.grid_state,
-            None,
-            1.0,
-            &nodal_force,
+            &self.st.particles,
+            &self.ws.table,
+            &self.ws.dofs,
+            &self.ws.grid_state,
+            &loading,
         );
-        self.assembler.begin_step(&input);
-        let mut x = vec![0.0; self.dofs.len()];
-        if let Some(e) = self.dofs.layout().eta_bar() {
-            for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+        self.ws.assembler.begin_step(&input);
+        let mut x = vec![0.0; self.ws.dofs.len()];
+        if let Some(e) = self.ws.dofs.layout().eta_bar() {
+            for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
                 x[a * nf + e] = eta_bar[node as usize];
             }
         }
-        self.assembler.evaluate(&input, &x)?;
+        self.ws.assembler.evaluate(&input, &x)?;
         // R = f_int - f_ext at du = 0 (no inertia), unbalanced forces in the constrained rows too.
         let mut r = vec![0.0; x.len()];
-        self.assembler.residual(&input, &x, &mut r, true)?;
+        self.ws.assembler.residual(&input, &x, &mut r, true)?;
         let mut acc = vec![Vector2::zeros(); s.grid.num_nodes()];
-        for (a, &node) in self.dofs.active_nodes().iter().enumerate() {
+        for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
-            let m = self.grid_state.mass[node];
+            let m = self.ws.grid_state.mass[node];
             acc[node] = Vector2::from_fn(|c, _| {
                 let d = a * nf + c;
-                self.dofs.prescribed(d).unwrap_or(-r[d] / m)
+                self.ws.dofs.prescribed(d).unwrap_or(-r[d] / m)
             });
         }
         // Devices in contact: a touching node whose free acceleration would carry it into the device takes
@@ -1809,35 +1637,38 @@ impl Simulation {
                 if push > 0.0 {
                     acc[c.node] += push * n;
                     let b = c.row * nf;
-                    let m = self.grid_state.mass[c.node];
+                    let m = self.ws.grid_state.mass[c.node];
                     contact_forces[k] += Vector2::new(r[b], r[b + 1]) + m * acc[c.node];
                 }
             }
         }
         // The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
         // with the initial inertia in each constrained set, the applied resultant of each load.
-        for (reaction, dofs) in self.last_reactions.iter_mut().zip(&sets) {
+        for (reaction, dofs) in self.st.last_reactions.iter_mut().zip(&sets) {
             *reaction = [0.0; 2];
             for &d in dofs {
-                let (node, c) = (self.dofs.node(d / nf), d % nf);
-                reaction[c] += r[d] + self.grid_state.mass[node] * acc[node][c];
+                let (node, c) = (self.ws.dofs.node(d / nf), d % nf);
+                reaction[c] += r[d] + self.ws.grid_state.mass[node] * acc[node][c];
             }
         }
         for (k, f) in contact_forces.iter().enumerate() {
             if devices[k].is_some() {
-                self.last_reactions[nb + k] = [f.x, f.y];
+                self.st.last_reactions[nb + k] = [f.x, f.y];
             }
         }
-        for (reaction, load) in self.last_reactions[sets.len()..].iter_mut().zip(&s.loads) {
+        for (reaction, load) in self.st.last_reactions[sets.len()..]
+            .iter_mut()
+            .zip(&s.loads)
+        {
             let f = load.force * load.factor(t);
             *reaction = [f.x, f.y];
         }
-        let table = &self.table;
-        for (p, ap) in self.setup.particles.a.iter_mut().enumerate() {
+        let table = &self.ws.table;
+        for (p, ap) in self.st.particles.a.iter_mut().enumerate() {
             *ap = transfer::interpolate(table.weights(p), |i| acc[i]);
         }
-        if let Some(fem) = &mut self.fem {
-            fem.nodal = Some((self.grid_state.velocity.clone(), acc));
+        if self.m.fem.is_some() {
+            self.st.fem_nodal = Some((self.ws.grid_state.velocity.clone(), acc));
         }
         Ok(())
     }

@@ -14,8 +14,8 @@
 //! needs a multigrid or a direct method. Every choice below can be overridden by `run.petsc_options` and,
 //! with the final word, by the command line.
 
+use crate::model::Setup;
 use crate::petsc::{self, SessionGuard};
-use crate::solver::Setup;
 
 /// Below this ratio `r` a dynamic step counts as stiffness-dominated.
 pub const STIFFNESS_DOMINATED_BELOW: f64 = 0.01;

@@ -93,25 +93,25 @@ fn check_restart(config: &str, tag: &str) {
     let (dir_a, dir_b) = (base.join("a"), base.join("b"));
 
     let mut a = simulation(&cfg);
-    let mut out_a = RunOutput::create(&dir_a, "a", config, &a).expect("output");
+    let mut out_a = RunOutput::create(&dir_a, "a", config, &a.model, &a.state).expect("output");
     advance(&s, &mut a, &mut out_a, cfg.run.steps);
 
     let mut b = simulation(&cfg);
-    let mut out_b = RunOutput::create(&dir_b, "b", config, &b).expect("output");
+    let mut out_b = RunOutput::create(&dir_b, "b", config, &b.model, &b.state).expect("output");
     advance(&s, &mut b, &mut out_b, cfg.run.steps / 2);
     let identity = RunIdentity::new(config, "");
-    checkpoint::save(&dir_b, &b, &out_b, &identity).expect("checkpoint");
+    checkpoint::save(&dir_b, &b.state, &out_b, &identity).expect("checkpoint");
     drop((b, out_b));
 
     let mut c = simulation(&cfg);
-    let mut out_c = RunOutput::create(&dir_b, "b", config, &c).expect("output");
-    let header = checkpoint::load(&dir_b, &mut c).expect("restore");
+    let mut out_c = RunOutput::create(&dir_b, "b", config, &c.model, &c.state).expect("output");
+    let header = checkpoint::load(&dir_b, &c.model, &mut c.state).expect("restore");
     assert_eq!(header.identity, identity);
     header.restore_records(&mut out_c).expect("records");
-    assert_eq!(c.step, cfg.run.steps / 2);
+    assert_eq!(c.state.step, cfg.run.steps / 2);
     advance(&s, &mut c, &mut out_c, cfg.run.steps - cfg.run.steps / 2);
 
-    let (pa, pc) = (&a.setup.particles, &c.setup.particles);
+    let (pa, pc) = (&a.state.particles, &c.state.particles);
     assert!(
         pa.damage.iter().any(|d| *d > 0.0),
         "the run should damage the specimen"
@@ -121,7 +121,7 @@ fn check_restart(config: &str, tag: &str) {
     assert_eq!(pa.f, pc.f, "deformation gradients");
     assert_eq!(pa.history, pc.history, "material history");
     assert_eq!(pa.damage, pc.damage, "damage");
-    assert_eq!(a.counters(), c.counters(), "time, step, work");
+    assert_eq!(a.state.counters(), c.state.counters(), "time, step, work");
     assert_eq!(physics(out_a.rows()), physics(out_c.rows()), "history rows");
     std::fs::remove_dir_all(&base).ok();
 }

@@ -54,7 +54,7 @@ fn simulation(toml: &str) -> Simulation {
 }
 
 fn momentum(sim: &Simulation) -> nalgebra::Vector2<f64> {
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     (0..p.len()).map(|i| p.mass[i] * p.v[i]).sum()
 }
 
@@ -63,7 +63,7 @@ fn block_bounces_off_a_wall_without_tensile_reaction() {
     let s = session();
     let mut sim = simulation(WALL);
     let p0 = momentum(&sim);
-    let mass: f64 = sim.setup.particles.mass.iter().sum();
+    let mass: f64 = sim.state.particles.mass.iter().sum();
     let (v0, ke0) = (p0.x / mass, 0.5 * p0.x * p0.x / mass);
     let mut impulse = 0.0;
     let mut last_f = 0.0;
@@ -145,7 +145,7 @@ fn block_bounces_off_a_wall_without_tensile_reaction() {
         -v1 / v0
     );
     // Separated: the block's right face is left of the wall.
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     let right = p
         .corners
         .iter()
@@ -192,7 +192,7 @@ fn block_sliding_on_a_plane_decelerates_at_mu_g() {
     let s = session();
     let mu = 0.3;
     let mut sim = simulation(&sliding(mu));
-    let mass: f64 = sim.setup.particles.mass.iter().sum();
+    let mass: f64 = sim.state.particles.mass.iter().sum();
     let g = 9810.0;
     let mut samples = Vec::new();
     for _ in 0..20 {
@@ -225,7 +225,7 @@ fn block_sliding_on_a_plane_decelerates_at_mu_g() {
 fn frictionless_block_slides_at_constant_speed() {
     let s = session();
     let mut sim = simulation(&sliding(0.0));
-    let mass: f64 = sim.setup.particles.mass.iter().sum();
+    let mass: f64 = sim.state.particles.mass.iter().sum();
     for _ in 0..10 {
         let r = sim.advance(&s).expect("step converges");
         let [fx, fy] = r.reactions[0].1;

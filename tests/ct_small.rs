@@ -39,7 +39,7 @@ fn damage_starts_at_the_notch_tip_and_the_opening_force_is_positive() {
     setup.options_prefix = Some("ct_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     assert_eq!(
-        sim.fields(),
+        sim.model.layout().per_node(),
         3,
         "gradient-enhanced: (u_x, u_y, eta_bar) per node"
     );
@@ -56,7 +56,7 @@ fn damage_starts_at_the_notch_tip_and_the_opening_force_is_positive() {
             "step {}: opening force {opening}",
             r.step
         );
-        let p = &sim.setup.particles;
+        let p = &sim.state.particles;
         let damaged: Vec<usize> = (0..p.len()).filter(|&i| p.damage[i] > 0.05).collect();
         if !damaged.is_empty() {
             first_damage = Some((r.step, damaged));
@@ -65,7 +65,7 @@ fn damage_starts_at_the_notch_tip_and_the_opening_force_is_positive() {
     }
     let (step, damaged) = first_damage.expect("damage within 80 us");
     eprintln!("first damage at step {step}: {} points", damaged.len());
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     for i in damaged {
         let d = (p.x[i] - tip).norm();
         assert!(
@@ -94,10 +94,10 @@ fn eroded_points_carry_no_stress_and_keep_their_deformation_gradient() {
     setup.options_prefix = Some("er_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     // F of each point when it first counts as eroded (committed damage >= 0.9).
-    let mut frozen: Vec<Option<nalgebra::Matrix2<f64>>> = vec![None; sim.setup.particles.len()];
+    let mut frozen: Vec<Option<nalgebra::Matrix2<f64>>> = vec![None; sim.state.particles.len()];
     for _ in 0..160 {
         sim.advance(&s).expect("step converges");
-        let p = &sim.setup.particles;
+        let p = &sim.state.particles;
         for (i, fz) in frozen.iter_mut().enumerate() {
             if let Some(f) = fz {
                 assert_eq!(*f, p.f[i], "point {i}: F changed after erosion");

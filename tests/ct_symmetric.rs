@@ -52,7 +52,7 @@ fn mirror_error(load_introduction: &str, steps: usize) -> (f64, f64, f64) {
     for _ in 0..steps {
         sim.advance(&s).expect("step converges");
     }
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     let h = 96.0;
     let key = |x: nalgebra::Vector2<f64>| ((x.x * 8.0).round() as i64, (x.y * 8.0).round() as i64);
     let index: std::collections::HashMap<_, _> =

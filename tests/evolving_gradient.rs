@@ -17,10 +17,11 @@
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
 
 const E: f64 = 20000.0;
@@ -186,7 +187,7 @@ fn run_bar_with(
     let profile = |sim: &Simulation| {
         let mut pts: Vec<(f64, f64)> = x0
             .iter()
-            .zip(&sim.setup.particles.damage)
+            .zip(&sim.state.particles.damage)
             .map(|(x, d)| (*x, *d))
             .collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -201,7 +202,7 @@ fn run_bar_with(
             .advance(s)
             .unwrap_or_else(|e| panic!("h = {h}, {activity}: step failed: {e}"));
         d = r.displacements[0].1[0];
-        if onset.is_none() && sim.setup.particles.damage.iter().any(|&v| v >= 0.5) {
+        if onset.is_none() && sim.state.particles.damage.iter().any(|&v| v >= 0.5) {
             onset = Some(zone_width(&profile(&sim), 0.25));
         }
         if next < marks.len() && d >= marks[next] - 1e-12 {
@@ -217,7 +218,7 @@ fn run_bar_with(
         dissipated: (r.external_work - r.stored_energy - r.kinetic_energy) / h,
         stress: r.reactions[0].1[0] / h,
         damage: profile(&sim),
-        eta_bar: sim.setup.particles.eta_bar.clone(),
+        eta_bar: sim.state.particles.eta_bar.clone(),
     }
 }
 

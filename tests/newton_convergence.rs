@@ -6,10 +6,11 @@
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
 
 fn material(toml_text: &str) -> Material {
@@ -83,7 +84,7 @@ fn one_step(kind: ShapeKind, prefix: &str, extra: &str, load: f64) -> (Vec<f64>,
     let mut sim = Simulation::new(setup).expect("simulation");
     let r = sim.advance(&s).expect("step");
     let strain = sim
-        .setup
+        .state
         .particles
         .f
         .iter()

@@ -15,10 +15,11 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::isotropic::peerlings::{Bar, Solution};
 use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
 
 /// E (MPa), gamma_0, L and W (mm), density (t/mm^3; irrelevant quasi-statically).
@@ -122,13 +123,17 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
         ..Setup::new(grid, particles, vec![material], ShapeKind::Cpdi1, time)
     };
     let mut sim = Simulation::new(setup).expect("simulation");
-    assert_eq!(sim.fields(), 3, "c > 0: (u_x, u_y, eta_bar) per node");
+    assert_eq!(
+        sim.model.layout().per_node(),
+        3,
+        "c > 0: (u_x, u_y, eta_bar) per node"
+    );
     let mut stress = 0.0;
-    while sim.time < steps as f64 - 1e-9 {
+    while sim.state.time < steps as f64 - 1e-9 {
         let r = sim.advance(&s).expect("load step converges");
         stress = r.reactions[0].1[0] / h;
     }
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     BarRun {
         x0,
         eta_bar: p.eta_bar.clone(),

@@ -6,10 +6,11 @@ mod common;
 use common::{Column, material};
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
+use mpm_concrete::model::{InitialAcceleration, Method, Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{InitialAcceleration, Method, Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
 
 /// V1: bar L = 25, E = 100, rho = 1, nu = 0, fixed at x = 0, lateral rollers, v(x, 0) = v0 sin(b1 x).
@@ -98,15 +99,15 @@ fn axial_bar_with(
         )
     };
     let mut sim = Simulation::new(setup).expect("simulation");
-    let mass: f64 = sim.setup.particles.mass.iter().sum();
+    let mass: f64 = sim.state.particles.mass.iter().sum();
     let amplitude = v0 / (b1 * l);
     let e0 = 0.5
         * sim
-            .setup
+            .state
             .particles
             .mass
             .iter()
-            .zip(&sim.setup.particles.v)
+            .zip(&sim.state.particles.v)
             .map(|(m, v)| m * v.norm_squared())
             .sum::<f64>();
     let (mut max_err, mut max_drift) = (0.0f64, 0.0f64);
@@ -119,9 +120,9 @@ fn axial_bar_with(
             e0 = r.kinetic_energy + r.stored_energy;
         }
         assert!(r.solve.converged());
-        let p = &sim.setup.particles;
+        let p = &sim.state.particles;
         let vcm = p.mass.iter().zip(&p.v).map(|(m, v)| m * v.x).sum::<f64>() / mass;
-        let exact = amplitude * (w1 * sim.time).cos();
+        let exact = amplitude * (w1 * sim.state.time).cos();
         max_err = max_err.max((vcm - exact).abs() / amplitude);
         let total = r.kinetic_energy + r.stored_energy;
         max_drift = max_drift.max((total - e0).abs() / e0);
@@ -230,9 +231,9 @@ fn sudden_gravity_column(method: Method, start: InitialAcceleration, cells: usiz
     for _ in 0..3 * steps_per_period / 2 {
         let r = sim.advance(&s).expect("step");
         assert!(r.solve.converged());
-        let p = &sim.setup.particles;
+        let p = &sim.state.particles;
         let u = top.iter().map(|&k| p.x[k].y - y0[k]).sum::<f64>() / top.len() as f64;
-        let exact = sudden_gravity_exact(&col, y_top, sim.time);
+        let exact = sudden_gravity_exact(&col, y_top, sim.state.time);
         num += (u - exact).powi(2);
         den += exact * exact;
         energy_error =

@@ -6,9 +6,10 @@
 mod common;
 
 use common::Column;
+use mpm_concrete::model::{Method, TimeIntegration};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Method, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 
 /// The column of [`Column::setup`] (one cell wide, rollers, clamped base) with gravity ramped over
 /// `load_steps` quasi-static steps, one more step at full load.
@@ -39,11 +40,11 @@ fn column(
     setup.body_force_ramp = load_steps as f64;
     let y0: Vec<f64> = setup.particles.x.iter().map(|x| x.y).collect();
     let mut sim = Simulation::new(setup).expect("simulation");
-    while sim.time < load_steps as f64 + 1.0 - 1e-9 {
+    while sim.state.time < load_steps as f64 + 1.0 - 1e-9 {
         let r = sim.advance(&s).expect("step");
         assert!(r.solve.converged());
     }
-    let p = &sim.setup.particles;
+    let p = &sim.state.particles;
     let (mut num, mut den) = (0.0, 0.0);
     for (k, &y) in y0.iter().enumerate() {
         let exact = -c.rho * c.g * (c.height - y);

@@ -6,10 +6,11 @@
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Setup, Simulation, TimeIntegration};
+use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
 
 fn material(toml_text: &str) -> Material {
@@ -96,8 +97,8 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
         let r = sim.advance(&s).expect("step");
         assert!(r.solve.converged());
     }
-    let front = c * sim.time;
-    let p = &sim.setup.particles;
+    let front = c * sim.state.time;
+    let p = &sim.state.particles;
     let window: Vec<usize> = (0..p.len())
         .filter(|&k| p.x[k].x > 0.25 * length && p.x[k].x < front - 0.25 * length)
         .collect();
@@ -231,12 +232,12 @@ fn cantilever(
     for _ in 0..(periods * steps_per_period as f64).ceil() as usize {
         let r = sim.advance(&s).expect("step");
         assert!(r.solve.converged());
-        let u = sim.setup.particles.x[tip].y - y_tip0;
+        let u = sim.state.particles.x[tip].y - y_tip0;
         // Zero crossings of the deflection (it starts at 0 moving up: T/2, T, 3T/2, ...), interpolated.
         if (u_prev > 0.0 && u <= 0.0) || (u_prev < 0.0 && u >= 0.0) {
-            crossings.push(t_prev + (sim.time - t_prev) * u_prev / (u_prev - u));
+            crossings.push(t_prev + (sim.state.time - t_prev) * u_prev / (u_prev - u));
         }
-        t_prev = sim.time;
+        t_prev = sim.state.time;
         u_prev = u;
     }
     assert!(

@@ -7,9 +7,9 @@
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::model::{Method, Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::shape::ShapeKind;
-use mpm_concrete::solver::{Method, Setup, TimeIntegration};
 use nalgebra::Vector2;
 
 /// A constitutive law from its TOML section.

@@ -1,0 +1,341 @@
+//! The run split the way it lives through the time steps (spec Sec. 1):
+//! - [`Model`]: what defines the run and never changes while it runs (grid, materials, interpolator,
+//!   time integration, constraints, loading devices, loads, solver policy);
+//! - [`State`]: what a checkpoint holds (the material points with their history, the rigid bodies'
+//!   points, the FEM mode's nodal state, time and the counters of the devices);
+//! - the per-step scratch (shape-function tables, grid fields, unknowns, assembler, PETSc objects) is the
+//!   solver's [`Workspace`](crate::solver::Workspace).
+//!
+//! A step is [`advance`](crate::solver::advance)`(&Model, &mut State, &mut Workspace, ..)`; output and
+//! checkpoints read `&State`. Units: mm, s, N, MPa, t (tonne).
+
+use crate::boundary::{NodalLoad, NodeBox, RigidBody};
+use crate::contact::NodeStatus;
+use crate::dofs::FieldLayout;
+use crate::grid::Grid;
+use crate::material::Material;
+use crate::particles::Particles;
+use crate::shape::{ShapeKind, ShapeTable};
+use nalgebra::Vector2;
+
+/// Time integration settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeIntegration {
+    /// Nominal time step (s).
+    pub dt: f64,
+    /// Smallest time step the halving may reach before the run stops (s).
+    pub dt_min: f64,
+    /// Newmark beta (> 0; 1/4 = trapezoidal rule).
+    pub beta: f64,
+    /// Newmark gamma (1/2: no numerical damping).
+    pub gamma: f64,
+    /// Drop inertia (static equilibrium each step, loads ramped with time).
+    pub quasi_static: bool,
+    /// How a dynamic run starts in acceleration (ignored quasi-statically and on resume).
+    pub initial_acceleration: InitialAcceleration,
+}
+
+impl Default for TimeIntegration {
+    fn default() -> Self {
+        Self {
+            dt: 1e-6,
+            dt_min: 1e-6 / 64.0,
+            beta: 0.25,
+            gamma: 0.5,
+            quasi_static: false,
+            initial_acceleration: InitialAcceleration::default(),
+        }
+    }
+}
+
+/// The acceleration a dynamic run starts with (`[time] initial_acceleration`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(try_from = "String")]
+pub enum InitialAcceleration {
+    /// `M a_0 = f_ext(0) - f_int(u_0)` on the grid before the first step, constrained components with the
+    /// acceleration of their prescribed motion, carried to the points: a load applied at t = 0 acts from
+    /// the first step on.
+    #[default]
+    Consistent,
+    /// `a_0 = 0`: the run starts at rest in acceleration, and a load applied at t = 0 is felt about half a
+    /// step late.
+    Zero,
+}
+
+impl TryFrom<String> for InitialAcceleration {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<Self, String> {
+        match name.as_str() {
+            "consistent" => Ok(Self::Consistent),
+            "zero" => Ok(Self::Zero),
+            _ => Err(format!(
+                "field `time.initial_acceleration` = \"{name}\": \"consistent\" (M a_0 = f_ext - f_int at \
+                 t = 0, the default) or \"zero\" (start at rest in acceleration)"
+            )),
+        }
+    }
+}
+
+/// How the material points and the grid relate.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Material point method: shape functions at the current point positions on a grid that is reset to
+    /// its reference position every step (updated Lagrangian).
+    #[default]
+    Mpm,
+    /// Finite elements on the grid cells: points fixed at the cells' Gauss points, bilinear shape functions
+    /// of the reference configuration, gradients pushed forward with `F_n` (so `F = I + sum_I u_I (x)
+    /// grad_X N_I`, total Lagrangian) and nodal velocity and acceleration carried from step to step
+    /// (no grid reset).
+    Fem,
+}
+
+/// A run as a scenario builds it: the model's parameters and the bodies at t = 0.
+/// [`Simulation::new`](crate::solver::Simulation::new) splits it into [`Model`] and [`State`].
+pub struct Setup {
+    /// Background grid.
+    pub grid: Grid,
+    /// Deformable material points (body tag = index into `materials`).
+    pub particles: Particles,
+    /// One constitutive law per body tag.
+    pub materials: Vec<Material>,
+    /// Interpolator.
+    pub shape: ShapeKind,
+    /// Time integration.
+    pub time: TimeIntegration,
+    /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
+    pub body_force: Vector2<f64>,
+    /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
+    pub body_force_ramp: f64,
+    /// Node-box constraints.
+    pub boxes: Vec<NodeBox>,
+    /// Rigid loading bodies.
+    pub rigid: Vec<RigidBody>,
+    /// The points of each rigid body at t = 0 (one per entry of `rigid`; only positions and domains are
+    /// used).
+    pub rigid_points: Vec<Particles>,
+    /// Applied forces.
+    pub loads: Vec<NodalLoad>,
+    /// MPM or FEM on the grid cells.
+    pub method: Method,
+    /// Options prefix of the SNES (None: plain `-snes_*`).
+    pub options_prefix: Option<String>,
+    /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
+    pub mass_tolerance: f64,
+    /// Options prefix of a fallback SNES (e.g. with a direct solver) tried at the same time step when the
+    /// main one fails, before the time step is halved; None: halve at once.
+    pub fallback_prefix: Option<String>,
+}
+
+impl Setup {
+    /// A model of the deformable points `particles` (body tag = index into `materials`) on `grid`, with
+    /// the defaults of a configuration file for the rest: no constraints, rigid bodies, loads or body
+    /// force, MPM, nodes with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a
+    /// prefix and no fallback solver. Set the other fields with struct-update syntax:
+    /// `Setup { boxes, ..Setup::new(grid, particles, materials, shape, time) }`.
+    pub fn new(
+        grid: Grid,
+        particles: Particles,
+        materials: Vec<Material>,
+        shape: ShapeKind,
+        time: TimeIntegration,
+    ) -> Self {
+        Self {
+            grid,
+            particles,
+            materials,
+            shape,
+            time,
+            body_force: Vector2::zeros(),
+            body_force_ramp: 0.0,
+            boxes: Vec::new(),
+            rigid: Vec::new(),
+            rigid_points: Vec::new(),
+            loads: Vec::new(),
+            method: Method::Mpm,
+            options_prefix: None,
+            mass_tolerance: 1e-6,
+            fallback_prefix: None,
+        }
+    }
+}
+
+/// What defines a run and stays fixed while it runs.
+pub struct Model {
+    /// Background grid.
+    pub grid: Grid,
+    /// One constitutive law per body tag.
+    pub materials: Vec<Material>,
+    /// Interpolator.
+    pub shape: ShapeKind,
+    /// Time integration.
+    pub time: TimeIntegration,
+    /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
+    pub body_force: Vector2<f64>,
+    /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
+    pub body_force_ramp: f64,
+    /// Node-box constraints.
+    pub boxes: Vec<NodeBox>,
+    /// Rigid loading bodies (their points move with them: [`State::rigid`]).
+    pub rigid: Vec<RigidBody>,
+    /// Applied forces.
+    pub loads: Vec<NodalLoad>,
+    /// MPM or FEM on the grid cells.
+    pub method: Method,
+    /// Options prefix of the SNES (None: plain `-snes_*`).
+    pub options_prefix: Option<String>,
+    /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
+    pub mass_tolerance: f64,
+    /// Options prefix of a fallback SNES tried at the same time step when the main one fails, before
+    /// the time step is halved; None: halve at once.
+    pub fallback_prefix: Option<String>,
+    /// Node shares of every load (see [`NodalLoad::shares`]).
+    pub(crate) load_shares: Vec<Vec<(usize, f64)>>,
+    /// FEM mode: the shape functions of the reference configuration (that of t = 0).
+    pub(crate) fem: Option<FemReference>,
+}
+
+/// The FEM mode's reference shape functions, fixed at t = 0.
+#[derive(Debug, Clone)]
+pub(crate) struct FemReference {
+    /// `N_I(X_p)` and `grad_X N_I(X_p)` at the reference Gauss points.
+    pub(crate) points: ShapeTable,
+    /// The rigid bodies' points on the grid (glued bodies constrain these nodes in every step).
+    pub(crate) rigid: Vec<ShapeTable>,
+}
+
+impl Model {
+    /// The unknowns of a node: the plane displacement, and `eta_bar` if any material is
+    /// gradient-enhanced.
+    pub fn layout(&self) -> FieldLayout {
+        FieldLayout::new(2, self.materials.iter().any(Material::is_nonlocal))
+    }
+
+    /// Names of the constraint sets in report order: node boxes, rigid bodies, loads.
+    pub fn set_names(&self) -> Vec<String> {
+        self.boxes
+            .iter()
+            .map(|b| b.name.clone())
+            .chain(self.rigid.iter().map(|r| r.name.clone()))
+            .chain(self.loads.iter().map(|l| l.name.clone()))
+            .collect()
+    }
+}
+
+/// What a checkpoint holds: everything of a run that changes from step to step.
+#[derive(Debug, Clone)]
+pub struct State {
+    /// Deformable material points with their history (body tag = index into [`Model::materials`]).
+    pub particles: Particles,
+    /// The points of each rigid body of [`Model::rigid`] where the body has moved them.
+    pub rigid: Vec<Particles>,
+    /// Time reached (s).
+    pub time: f64,
+    /// Steps completed.
+    pub step: usize,
+    /// Time step to try next (s).
+    pub dt: f64,
+    /// Work of reactions and body forces so far (N mm per mm thickness).
+    pub external_work: f64,
+    /// Accumulated prescribed displacement per constraint set (mm), in report order.
+    pub accumulated: Vec<[f64; 2]>,
+    /// Last reactions per constraint set (N per mm thickness; the trapezoidal work increment).
+    pub last_reactions: Vec<[f64; 2]>,
+    /// Rotation of each rigid body about its pin since t = 0 (rad; 0 without a pin).
+    pub rotations: Vec<f64>,
+    /// Rotation rate of each rigid body in the last step (rad/s), the first guess of the next step.
+    pub rotation_rates: Vec<f64>,
+    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step
+    /// (the first guess of the next step's active set).
+    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
+    /// FEM mode: the nodal velocity and acceleration carried to the next step (None in MPM mode and
+    /// before the first step).
+    pub fem_nodal: Option<NodalState>,
+}
+
+impl State {
+    /// The state at t = 0 of `particles` and the rigid bodies' points, with `nsets` constraint sets
+    /// (boxes, rigid bodies, loads) and a first time step `dt` (s).
+    pub fn new(particles: Particles, rigid: Vec<Particles>, nsets: usize, dt: f64) -> Self {
+        let nrigid = rigid.len();
+        Self {
+            particles,
+            rigid,
+            time: 0.0,
+            step: 0,
+            dt,
+            external_work: 0.0,
+            accumulated: vec![[0.0; 2]; nsets],
+            last_reactions: vec![[0.0; 2]; nsets],
+            rotations: vec![0.0; nrigid],
+            rotation_rates: vec![0.0; nrigid],
+            contact_statuses: vec![Vec::new(); nrigid],
+            fem_nodal: None,
+        }
+    }
+
+    /// The counters besides the points (the header of a checkpoint).
+    pub fn counters(&self) -> Counters {
+        Counters {
+            time: self.time,
+            step: self.step,
+            dt: self.dt,
+            external_work: self.external_work,
+            accumulated: self.accumulated.clone(),
+            last_reactions: self.last_reactions.clone(),
+            rotations: self.rotations.clone(),
+            rotation_rates: self.rotation_rates.clone(),
+            contact_statuses: self.contact_statuses.clone(),
+        }
+    }
+
+    /// Restores the counters of a checkpoint (the points are restored by the caller); lists of an older
+    /// checkpoint without pins or contact are padded to one entry per rigid body.
+    pub fn set_counters(&mut self, c: Counters) {
+        let nr = self.rigid.len();
+        self.time = c.time;
+        self.step = c.step;
+        self.dt = c.dt;
+        self.external_work = c.external_work;
+        self.accumulated = c.accumulated;
+        self.last_reactions = c.last_reactions;
+        self.rotations = c.rotations;
+        self.rotations.resize(nr, 0.0);
+        self.rotation_rates = c.rotation_rates;
+        self.rotation_rates.resize(nr, 0.0);
+        self.contact_statuses = c.contact_statuses;
+        self.contact_statuses.resize(nr, Vec::new());
+    }
+}
+
+/// The counters of a running simulation besides the particles (for checkpoints).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Counters {
+    /// Time reached (s).
+    pub time: f64,
+    /// Steps completed.
+    pub step: usize,
+    /// Time step to try next (s).
+    pub dt: f64,
+    /// Work of reactions and body forces so far (N mm per mm thickness).
+    pub external_work: f64,
+    /// Accumulated prescribed displacement per constraint set (mm).
+    pub accumulated: Vec<[f64; 2]>,
+    /// Last reactions per constraint set (N per mm thickness).
+    pub last_reactions: Vec<[f64; 2]>,
+    /// Rotation of each rigid body about its pin (rad; 0 without a pin).
+    #[serde(default)]
+    pub rotations: Vec<f64>,
+    /// Rotation rate of each rigid body in the last step (rad/s).
+    #[serde(default)]
+    pub rotation_rates: Vec<f64>,
+    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step: the
+    /// first guess of the next step's active set, so that a resumed run takes the same steps.
+    #[serde(default)]
+    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
+}
+
+/// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
+pub type NodalState = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
