@@ -319,16 +319,30 @@ impl Assembler {
         self.cols.len() * self.layout.per_node() * self.layout.per_node()
     }
 
-    /// The block pattern of the Jacobian (block rows = active nodes, global block columns offset by
-    /// `first`, the first block row owned by this process): the layout of [`Assembler::jacobian_into`].
-    pub fn block_pattern(&self, first: usize) -> BlockCsr<'_> {
-        debug_assert_eq!(first, 0, "block columns are numbered from 0 on one process");
+    /// The block pattern of the whole Jacobian (block rows and block columns = active nodes in
+    /// [`DofMap`] order): the layout of [`Assembler::jacobian_into`] over all rows.
+    pub fn block_pattern(&self) -> BlockCsr<'_> {
         BlockCsr {
-            first,
+            first: 0,
             bs: self.layout.per_node(),
             row_ptr: &self.row_ptr,
             cols: &self.cols,
         }
+    }
+
+    /// The block rows `rows` of the pattern as a process's own pattern ([`BlockCsr::first`] =
+    /// `rows.start`, row pointers from 0, global block columns), copied into `row_ptr` and `cols`.
+    pub fn block_rows_pattern(
+        &self,
+        rows: std::ops::Range<usize>,
+        row_ptr: &mut Vec<usize>,
+        cols: &mut Vec<u32>,
+    ) {
+        let base = self.row_ptr[rows.start];
+        row_ptr.clear();
+        row_ptr.extend(self.row_ptr[rows.start..=rows.end].iter().map(|r| r - base));
+        cols.clear();
+        cols.extend_from_slice(&self.cols[base..self.row_ptr[rows.end]]);
     }
 
     /// The pattern as (row, column) pairs in the order of [`Assembler::jacobian_into`]'s values (for
@@ -534,13 +548,23 @@ impl Assembler {
         }
     }
 
-    /// Writes the Jacobian at the last evaluated iterate into `values` (length [`Assembler::nonzeros`]),
-    /// ordered by `layout` for [`Assembler::block_pattern`]: in parallel, block rows owning disjoint
-    /// ranges.
-    pub fn jacobian_into(&self, input: &StepInput<'_>, values: &mut [f64], layout: BlockLayout) {
+    /// Writes the block rows `rows` of the Jacobian at the last evaluated iterate into `values` (their
+    /// nonzeros, ordered by `layout` as in [`Assembler::block_rows_pattern`]; all rows:
+    /// [`Assembler::nonzeros`] values for [`Assembler::block_pattern`]), rows in parallel (rayon).
+    pub fn jacobian_into(
+        &self,
+        input: &StepInput<'_>,
+        rows: std::ops::Range<usize>,
+        values: &mut [f64],
+        layout: BlockLayout,
+    ) {
         let nf = self.layout.per_node();
-        assert_eq!(values.len(), self.nonzeros(), "Jacobian value array length");
-        let rows = self.row_ptr.len() - 1;
+        let (lo, hi) = (self.row_ptr[rows.start], self.row_ptr[rows.end]);
+        assert_eq!(
+            values.len(),
+            (hi - lo) * nf * nf,
+            "Jacobian value array length"
+        );
         let asm = AssemblerView {
             inc_offsets: &self.inc_offsets,
             inc_entries: &self.inc_entries,
@@ -556,7 +580,7 @@ impl Assembler {
             nf,
             layout,
         };
-        fill_rows(&ctx, 0..rows, values, 0, nf * nf);
+        fill_rows(&ctx, rows, values, lo * nf * nf, nf * nf);
     }
 
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress

@@ -130,14 +130,15 @@ impl DeviceContact {
     }
 
     /// Rewrites the Jacobian block rows of the closed nodes in place: `row_of(a)` gives the start of
-    /// block row `a` in `values`, its number of block columns and the position of its diagonal block;
+    /// block row `a` in `values`, its number of block columns and the position of its diagonal block
+    /// (`None`: the row is not in `values`, e.g. owned by another process);
     /// `offset(ncols, i, pos, k)` the position of entry (row component `i`, block column `pos`, column
     /// component `k`) within the block row.
     pub fn jacobian_rows(
         &self,
         nf: usize,
         s: f64,
-        row_of: impl Fn(usize) -> (usize, usize, usize),
+        row_of: impl Fn(usize) -> Option<(usize, usize, usize)>,
         values: &mut [f64],
         offset: impl Fn(usize, usize, usize, usize) -> usize,
     ) {
@@ -148,7 +149,9 @@ impl DeviceContact {
             if !c.status.closed() {
                 continue;
             }
-            let (start, ncols, diag) = row_of(c.row);
+            let Some((start, ncols, diag)) = row_of(c.row) else {
+                continue;
+            };
             let at = |i, pos, k| start + offset(ncols, i, pos, k);
             // The tangential row from the physical rows, before they are overwritten.
             tangential.clear();

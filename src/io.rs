@@ -390,6 +390,8 @@ pub struct RunOutput {
     initial_position: Vec<Vector2<f64>>,
     /// Cell size of the background grid (mm), the resolution of the crack metrics and the damage maps.
     cell_size: f64,
+    /// False for the records of a run whose files another process writes.
+    writes: bool,
     /// Notch tip (mm) and criteria of the crack metrics, if tracked.
     crack: Option<(Vector2<f64>, CrackCriteria)>,
     cracks: Vec<CrackState>,
@@ -407,7 +409,19 @@ impl RunOutput {
     ) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
-        Ok(Self {
+        Ok(Self::mirror(dir, title, config_text, model, initial).writing())
+    }
+
+    /// The records of a run whose files another process writes (the other processes of a distributed
+    /// run): steps are recorded, nothing is written.
+    pub fn mirror(
+        dir: &Path,
+        title: &str,
+        config_text: &str,
+        model: &Model,
+        initial: &State,
+    ) -> Self {
+        Self {
             dir: dir.to_owned(),
             title: title.to_owned(),
             config_text: config_text.to_owned(),
@@ -415,9 +429,17 @@ impl RunOutput {
             snapshots: Vec::new(),
             initial_position: initial.particles.x.clone(),
             cell_size: model.grid.cell_size(),
+            writes: false,
             crack: None,
             cracks: Vec::new(),
-        })
+        }
+    }
+
+    fn writing(self) -> Self {
+        Self {
+            writes: true,
+            ..self
+        }
     }
 
     /// Measures the crack grown from `notch_tip` (mm) at every snapshot and writes `crack.json`.
@@ -450,6 +472,11 @@ impl RunOutput {
         write_crack_json(&self.dir, *tip, criteria, &self.cracks)
     }
 
+    /// True if this process writes the run's files (false for a [`RunOutput::mirror`]).
+    pub fn writes(&self) -> bool {
+        self.writes
+    }
+
     /// Output directory.
     pub fn dir(&self) -> &Path {
         &self.dir
@@ -458,6 +485,9 @@ impl RunOutput {
     /// Records a step and rewrites `history.csv`.
     pub fn record(&mut self, report: StepReport) -> Result<(), OutputError> {
         self.rows.push(report);
+        if !self.writes {
+            return Ok(());
+        }
         self.write_history()
     }
 
@@ -525,6 +555,9 @@ impl RunOutput {
 
     /// Writes the point fields of the current state (HDF5 + XDMF index) and a damage map (PNG).
     pub fn snapshot(&mut self, state: &State) -> Result<(), OutputError> {
+        if !self.writes {
+            return Ok(());
+        }
         let file = file::numbered(file::FIELDS, state.step);
         let path = self.dir.join(&file);
         let tmp = tmp_name(&path);
@@ -666,6 +699,9 @@ impl RunOutput {
 
     /// Damage map of the current state.
     pub fn damage_map(&self, state: &State, path: &Path) -> Result<(), OutputError> {
+        if !self.writes {
+            return Ok(());
+        }
         let p = &state.particles;
         let h = self.cell_size;
         let plot = ScatterField {
@@ -686,7 +722,7 @@ impl RunOutput {
     /// Reaction force against time and against the prescribed displacement, one curve per constraint set
     /// that moves (y components; N per mm thickness).
     pub fn force_plots(&self) -> Result<(), OutputError> {
-        let Some(first) = self.rows.first() else {
+        let Some(first) = self.rows.first().filter(|_| self.writes) else {
             return Ok(());
         };
         let mut vs_t = Vec::new();

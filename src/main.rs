@@ -368,6 +368,23 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
             preflight::check_petsc_options(&petsc_args[1..].join(" "))
                 .map_err(|e| bad(format!("command line: {e}")))?;
             let session = Session::initialize(petsc_args).context("starting PETSc")?;
+            if session.size() > 1 && std::env::var_os("RAYON_NUM_THREADS").is_none() {
+                // Several processes on a node share its cores: each gets its share of threads for the point
+                // loops (RAYON_NUM_THREADS overrides). The launcher says how many processes share the node.
+                let per_node = [
+                    "OMPI_COMM_WORLD_LOCAL_SIZE",
+                    "MPI_LOCALNRANKS",
+                    "SLURM_NTASKS_PER_NODE",
+                ]
+                .iter()
+                .find_map(|v| std::env::var(v).ok()?.parse::<usize>().ok())
+                .unwrap_or(session.size());
+                let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+                // Fails only if the pool already exists; it then keeps its size.
+                let _ = rayon::ThreadPoolBuilder::new()
+                    .num_threads((cores / per_node.max(1)).max(1))
+                    .build_global();
+            }
             smoke_test(&session, n, load, print_solution)?;
             Session::finalize(session)?;
             Ok(())
@@ -606,7 +623,9 @@ fn save_state(
 ) -> Result<()> {
     out.snapshot(&sim.state)?;
     out.force_plots()?;
-    checkpoint::save(dir, &sim.state, out, identity)?;
+    if out.writes() {
+        checkpoint::save(dir, &sim.state, out, identity)?;
+    }
     Ok(())
 }
 
@@ -666,18 +685,22 @@ fn run_simulation(
     }
 
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
-    if session.size() > 1 {
-        let first = session.rank() == 0;
-        let size = session.size();
-        Session::finalize(session)?;
-        return Err(bad(if first {
-            format!(
-                "`run` works on one process, not {size}: the distributed solver is not available yet \
-                 (start it without mpirun; `smoke` runs distributed)"
-            )
-        } else {
-            String::new()
-        }));
+    if session.size() > 1 && std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        // Several processes on a node share its cores: each gets its share of threads for the point
+        // loops (RAYON_NUM_THREADS overrides). The launcher says how many processes share the node.
+        let per_node = [
+            "OMPI_COMM_WORLD_LOCAL_SIZE",
+            "MPI_LOCALNRANKS",
+            "SLURM_NTASKS_PER_NODE",
+        ]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.parse::<usize>().ok())
+        .unwrap_or(session.size());
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        // Fails only if the pool already exists; it then keeps its size.
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads((cores / per_node.max(1)).max(1))
+            .build_global();
     }
     simulate(
         &session,
@@ -735,12 +758,17 @@ fn simulate(
     // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
     let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
     let mut sim = simulation(setup)?;
+    // On several processes every one holds the whole model and state and takes the same steps (the
+    // unknowns and PETSc's solvers are distributed, docs/theory.md "Processes"); process 0 alone writes.
+    let root = session.rank() == 0;
     if resume_from.is_some() {
         checkpoint::load(&dir, &sim.model, &mut sim.state).map_err(bad)?;
-        eprintln!(
-            "resuming at step {} (t = {:e} s)",
-            sim.state.step, sim.state.time
-        );
+        if root {
+            eprintln!(
+                "resuming at step {} (t = {:e} s)",
+                sim.state.step, sim.state.time
+            );
+        }
     }
     // Ctrl-C: finish the current step, write a checkpoint and the outputs, and stop.
     let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -751,18 +779,24 @@ fn simulate(
     }
     let np = sim.state.particles.len();
     let grid = &sim.model.grid;
-    eprintln!(
-        "{}: {np} material points, grid {}x{} cells of {} mm, {} steps of {:e} s, {} unknowns per node, output in {}",
-        cfg.run.name,
-        grid.nx(),
-        grid.ny(),
-        grid.cell_size(),
-        cfg.run.steps,
-        cfg.time.dt,
-        sim.model.layout().per_node(),
-        dir.display()
-    );
-    let bar = if flags.quiet {
+    if root {
+        eprintln!(
+            "{}: {np} material points, grid {}x{} cells of {} mm, {} steps of {:e} s, {} unknowns per node, {}output in {}",
+            cfg.run.name,
+            grid.nx(),
+            grid.ny(),
+            grid.cell_size(),
+            cfg.run.steps,
+            cfg.time.dt,
+            sim.model.layout().per_node(),
+            match session.size() {
+                1 => String::new(),
+                n => format!("{n} processes, "),
+            },
+            dir.display()
+        );
+    }
+    let bar = if flags.quiet || !root {
         indicatif::ProgressBar::hidden()
     } else {
         indicatif::ProgressBar::new(cfg.run.steps as u64)
@@ -813,7 +847,7 @@ fn simulate(
     }
 
     // The output: the directory now belongs to this run.
-    if flags.overwrite {
+    if flags.overwrite && root {
         let removed = rundir::remove_program_files(&dir).map_err(anyhow::Error::msg)?;
         if removed > 0 {
             eprintln!(
@@ -830,7 +864,11 @@ fn simulate(
     // The output's reference state (initial positions, the step-0 fields) is the model as built.
     let (initial_model, initial) =
         mpm_concrete::solver::split(model()?).map_err(|e| bad(format!("{file}: {e}")))?;
-    let mut out = RunOutput::create(&dir, &cfg.run.name, &config_copy, &initial_model, &initial)?;
+    let mut out = if root {
+        RunOutput::create(&dir, &cfg.run.name, &config_copy, &initial_model, &initial)?
+    } else {
+        RunOutput::mirror(&dir, &cfg.run.name, &config_copy, &initial_model, &initial)
+    };
     if let Some(ct) = &cfg.ct {
         out.track_crack(
             nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
@@ -854,7 +892,9 @@ fn simulate(
         reduced_steps: 0,
         note: None,
     };
-    record.write(&dir)?;
+    if root {
+        record.write(&dir)?;
+    }
     match &resume_from {
         Some(header) => header
             .restore_records(&mut out)
@@ -880,10 +920,12 @@ fn simulate(
             (Some(w), Some(n)) => Some(format!("{w}; {n}")),
             (w, n) => w.clone().or(n.clone()),
         };
-        if let Some(n) = &record.note {
-            append_history_note(&dir, n)?;
+        if root {
+            if let Some(n) = &record.note {
+                append_history_note(&dir, n)?;
+            }
+            record.write(&dir)?;
         }
-        record.write(&dir)?;
         Ok(note)
     };
     loop {
@@ -915,7 +957,7 @@ fn simulate(
             report.solve.linear_iterations,
             report.solve.reason_name
         );
-        if flags.quiet {
+        if flags.quiet && root {
             eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
         }
         bar.set_message(msg);
@@ -928,7 +970,9 @@ fn simulate(
             // run.json follows the checkpoint, so a run killed outright shows how far it got.
             record.steps_done = sim.state.step;
             record.time_reached = sim.state.time;
-            record.write(&dir)?;
+            if root {
+                record.write(&dir)?;
+            }
         }
         if stop && sim.state.step < cfg.run.steps {
             bar.abandon();
@@ -952,6 +996,9 @@ fn simulate(
     }
     bar.finish();
     let note = finish(&mut record, &out, &sim, "finished", None)?;
+    if !root {
+        return Ok(());
+    }
     summary(&out, started.elapsed().as_secs_f64(), note.as_deref());
     if let Some(n) = note {
         eprintln!("warning: {n}");

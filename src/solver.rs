@@ -14,12 +14,13 @@ use crate::material::{Constitutive, Material};
 use crate::model::{FemReference, InitialAcceleration, Method, Model, Setup, State};
 use crate::particles::Particles;
 use crate::petsc::{
-    self, CallbackError, IndexSet, LogEvent, Matrix, NonlinearProblem, PetscInt, SessionGuard,
-    Snes, SolveInfo, Tolerances, Vector,
+    self, BlockCsr, CallbackError, IndexSet, LogEvent, Matrix, NonlinearProblem, PetscInt,
+    SessionGuard, Snes, SolveInfo, Tolerances, Vector,
 };
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
 use nalgebra::Vector2;
+use std::ops::Range;
 use std::time::Instant;
 
 /// Most SNES solves of one step attempt while the contact active set and the pin rotations settle.
@@ -236,6 +237,10 @@ struct StepProblem<'a, 'b> {
     contact: &'a [Option<DeviceContact>],
     /// Scale of the constraint rows (MPa).
     row_scale: f64,
+    /// The block rows this process owns.
+    owned: &'a OwnedRows,
+    /// The residual of all unknowns (this process hands PETSc its own rows).
+    scratch: Vec<f64>,
 }
 
 impl NonlinearProblem for StepProblem<'_, '_> {
@@ -243,52 +248,47 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
-        let (asm, input) = (&mut *self.assembler, self.input);
+        let domain = |e: AssemblyError| CallbackError::Domain(e.to_string());
+        let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let (contact, s) = (self.contact, self.row_scale);
         let nf = input.dofs.fields();
-        let r = x
-            .read(|xs| asm.evaluate(input, xs))
-            .map_err(fatal)?
-            .map_err(|e| CallbackError::Domain(e.to_string()))
-            .and_then(|()| {
-                x.read(|xs| {
-                    f.write(|out| {
-                        asm.residual(input, xs, out, false)?;
-                        for d in contact.iter().flatten() {
-                            d.residual_rows(xs, out, nf, s);
-                        }
-                        Ok(())
-                    })
-                })
-                .map_err(fatal)?
-                .map_err(fatal)?
-                .map_err(|e: AssemblyError| CallbackError::Domain(e.to_string()))
-            });
+        let r = &mut self.scratch;
+        let result = owned.gather(x).map_err(fatal).and_then(|xs| {
+            asm.evaluate(input, &xs).map_err(domain)?;
+            r.resize(xs.len(), 0.0);
+            asm.residual(input, &xs, r, false).map_err(domain)?;
+            for d in contact.iter().flatten() {
+                d.residual_rows(&xs, r, nf, s);
+            }
+            f.write(|out| out.copy_from_slice(&r[owned.scalars()]))
+                .map_err(fatal)
+        });
         self.assembly_time += t.elapsed().as_secs_f64();
         self.residuals += 1;
-        r
+        result
     }
 
     fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
         let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
-        let (asm, input) = (&mut *self.assembler, self.input);
-        x.read(|xs| asm.evaluate(input, xs))
-            .map_err(fatal)?
+        let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
+        let xs = owned.gather(x).map_err(fatal)?;
+        asm.evaluate(input, &xs)
             .map_err(|e| CallbackError::Domain(e.to_string()))?;
         let (contact, s) = (self.contact, self.row_scale);
-        let pattern = asm.block_pattern(0);
+        let (pattern, own) = (owned.pattern(), owned.rows.clone());
         let r = jac
             .fill_block_rows(&pattern, |values, layout| {
-                asm.jacobian_into(input, values, layout);
+                asm.jacobian_into(input, own.clone(), values, layout);
                 let nf = input.dofs.fields();
                 let row_of = |a: usize| {
-                    let (lo, hi) = (pattern.row_ptr[a], pattern.row_ptr[a + 1]);
+                    let l = a.checked_sub(own.start).filter(|&l| l < own.len())?;
+                    let (lo, hi) = (pattern.row_ptr[l], pattern.row_ptr[l + 1]);
                     let diag = pattern.cols[lo..hi]
                         .binary_search(&(a as u32))
                         .expect("diagonal block in the pattern");
-                    (lo * nf * nf, hi - lo, diag)
+                    Some((lo * nf * nf, hi - lo, diag))
                 };
                 for d in contact.iter().flatten() {
                     d.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
@@ -303,6 +303,68 @@ impl NonlinearProblem for StepProblem<'_, '_> {
     }
 }
 
+/// The block rows (active nodes, in [`DofMap`] order) of the Jacobian and the unknowns this process
+/// owns: a contiguous range, the same share of the active nodes on every process. Every process holds
+/// all points and the whole grid (replicated), evaluates them at the gathered unknowns and hands PETSc
+/// its own rows; PETSc's vectors, matrix and solvers are distributed.
+struct OwnedRows {
+    /// Owned block rows.
+    rows: Range<usize>,
+    /// Their pattern (row pointers from 0, global block columns).
+    row_ptr: Vec<usize>,
+    cols: Vec<u32>,
+    /// Unknowns per node.
+    nf: usize,
+    /// More than one process: the unknowns of the others are gathered for every evaluation.
+    parallel: bool,
+}
+
+impl OwnedRows {
+    /// Block rows `rows.start * size / n ..` of `n` active nodes for this process of `size`.
+    fn new(session: &SessionGuard, asm: &Assembler, nodes: usize, nf: usize) -> Self {
+        let (rank, size) = (session.rank(), session.size());
+        let rows = nodes * rank / size..nodes * (rank + 1) / size;
+        let (mut row_ptr, mut cols) = (Vec::new(), Vec::new());
+        asm.block_rows_pattern(rows.clone(), &mut row_ptr, &mut cols);
+        Self {
+            rows,
+            row_ptr,
+            cols,
+            nf,
+            parallel: size > 1,
+        }
+    }
+
+    /// The owned part of the pattern.
+    fn pattern(&self) -> BlockCsr<'_> {
+        BlockCsr {
+            first: self.rows.start,
+            bs: self.nf,
+            row_ptr: &self.row_ptr,
+            cols: &self.cols,
+        }
+    }
+
+    /// The owned unknowns (indices into the vector of all unknowns).
+    fn scalars(&self) -> Range<usize> {
+        self.rows.start * self.nf..self.rows.end * self.nf
+    }
+
+    /// All unknowns of the distributed vector `x`, in [`DofMap`] order, on every process.
+    fn gather(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
+        if self.parallel {
+            x.gather_all()
+        } else {
+            x.read(|v| v.to_vec())
+        }
+    }
+
+    /// Writes this process's part of `all` (every unknown) into the distributed `x`.
+    fn scatter(&self, all: &[f64], x: &mut Vector) -> Result<(), petsc::PetscError> {
+        x.write(|v| v.copy_from_slice(&all[self.scalars()]))
+    }
+}
+
 /// The PETSc objects of the implicit step: the unknowns, the Jacobian with its block pattern, and the
 /// SNES (with its KSP and PC). They are kept from step to step while the active nodes and the pattern
 /// stay the same (at 1 us steps particles rarely cross a cell boundary), so the matrix structure, the
@@ -310,10 +372,13 @@ impl NonlinearProblem for StepProblem<'_, '_> {
 struct LinearSystem {
     /// Options prefix of the SNES.
     prefix: Option<String>,
-    /// Active grid nodes and block pattern the objects were built for.
+    /// Active grid nodes and block pattern the objects were built for (all rows: every process
+    /// decides alike whether they still fit).
     active: Vec<u32>,
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
+    /// The rows of this process.
+    owned: OwnedRows,
     x: Vector,
     jac: Matrix,
     snes: Snes,
@@ -327,7 +392,7 @@ struct LinearSystem {
 impl LinearSystem {
     /// True if the objects fit the step's unknowns and pattern.
     fn fits(&self, prefix: Option<&str>, dofs: &DofMap, asm: &Assembler) -> bool {
-        let p = asm.block_pattern(0);
+        let p = asm.block_pattern();
         self.prefix.as_deref() == prefix
             && self.active == dofs.active_nodes()
             && self.row_ptr == p.row_ptr
@@ -345,16 +410,22 @@ impl LinearSystem {
         asm: &Assembler,
     ) -> Result<Self, StepError> {
         let nf = dofs.fields();
-        let n = dofs.len();
+        let owned = OwnedRows::new(session, asm, dofs.active_nodes().len(), nf);
+        let n = owned.scalars().len();
         let x = Vector::new(session, n, nf)?;
         let first = x.ownership_range()?.start;
+        if first != owned.scalars().start {
+            return Err(StepError::Setup(format!(
+                "PETSc placed this process's unknowns at {first}, not at {}",
+                owned.scalars().start
+            )));
+        }
         // AIJ with the block size set (inode kernels). `-mat_type baij` makes ILU, triangular solves and
         // products 1.4-1.8x faster at the paper's size, but its block ILU(0) (no pivot shift) failed in 3
         // of 1000 steps of the half-resolution CT at 4.3 m/s where point ILU(0) with a nonzero shift passes
         // (docs/benchmarks.md); GAMG and the field split need AIJ anyway.
         let mut jac = Matrix::new(session, n, nf)?;
-        let pattern = asm.block_pattern(first / nf);
-        jac.set_block_pattern(&pattern)?;
+        jac.set_block_pattern(&owned.pattern())?;
         // Near-null space of the displacement block (two translations and the in-plane rotation) for
         // algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
         let mut modes = [
@@ -365,7 +436,7 @@ impl LinearSystem {
         for (k, mode) in modes.iter_mut().enumerate() {
             mode.write(|m| {
                 m.fill(0.0);
-                for (a, &node) in dofs.active_nodes().iter().enumerate() {
+                for (a, &node) in dofs.active_nodes()[owned.rows.clone()].iter().enumerate() {
                     let x = grid.node_position(node as usize);
                     let (ux, uy) = match k {
                         0 => (1.0, 0.0),
@@ -391,11 +462,13 @@ impl LinearSystem {
         }
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
+        let pattern = asm.block_pattern();
         Ok(Self {
             prefix: prefix.map(str::to_owned),
             active: dofs.active_nodes().to_vec(),
             row_ptr: pattern.row_ptr.to_vec(),
             cols: pattern.cols.to_vec(),
+            owned,
             x,
             jac,
             snes,
@@ -762,6 +835,7 @@ impl Step<'_> {
             snes,
             tolerances,
             lag,
+            owned,
             ..
         } = self.ws.system.as_mut().expect("linear system just built");
         // The first solve of an attempt runs with the configured tolerances and lag (the contact
@@ -776,7 +850,8 @@ impl Step<'_> {
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
         // increments into the body); eta_bar from the particles (mass-weighted projection).
         let nf = self.ws.dofs.fields();
-        x.write(|xs| {
+        let mut xs = vec![0.0; self.ws.dofs.len()];
+        {
             for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
                 let node = node as usize;
                 let du = match newmark {
@@ -798,9 +873,10 @@ impl Step<'_> {
                 }
             }
             for d in plan.devices.iter().flatten() {
-                d.project_guess(xs, nf);
+                d.project_guess(&mut xs, nf);
             }
-        })?;
+        }
+        owned.scatter(&xs, x)?;
         Ok(StepPlan {
             new_pattern,
             ..plan
@@ -846,6 +922,7 @@ impl Step<'_> {
             snes,
             tolerances,
             lag,
+            owned,
             ..
         } = system.as_mut().expect("prepared linear system");
         let h = grid.cell_size();
@@ -867,6 +944,8 @@ impl Step<'_> {
                 jacobians: 0,
                 contact: devices.as_slice(),
                 row_scale: input.row_scale,
+                owned,
+                scratch: Vec::new(),
             };
             let info = match snes.solve(&mut problem, x, jac) {
                 Ok(info) => info,
@@ -921,7 +1000,7 @@ impl Step<'_> {
                 break;
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
-            let xs = x.read(|v| v.to_vec())?;
+            let xs = owned.gather(x)?;
             assembler.evaluate(&input, &xs)?;
             assembler.residual(&input, &xs, &mut phys, true)?;
             let force_scale = devices
@@ -989,18 +1068,18 @@ impl Step<'_> {
                     if moments_ok { "met" } else { "not met" }
                 )));
             }
-            x.write(|xs| {
-                for d in devices.iter().flatten() {
-                    d.project_guess(xs, nf);
-                }
-            })?;
+            let mut xs = owned.gather(x)?;
+            for d in devices.iter().flatten() {
+                d.project_guess(&mut xs, nf);
+            }
+            owned.scatter(&xs, x)?;
         }
 
         let info = info_total.expect("at least one solve");
         let solve_time = t1.elapsed().as_secs_f64();
         // Converged: the physical residual (device forces, reactions) at the solution; the assembler keeps
         // the nodal increments of this evaluation for `finish`.
-        let xs = x.read(|v| v.to_vec())?;
+        let xs = owned.gather(x)?;
         assembler.evaluate(&input, &xs)?;
         assembler.residual(&input, &xs, &mut phys, true)?;
         Ok(Ok(Solved {

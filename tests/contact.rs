@@ -296,7 +296,7 @@ fn contact_rows_match_finite_differences() {
             d.jacobian_rows(
                 nf,
                 s,
-                |a| (a * nn * nf * nf, nn, a),
+                |a| Some((a * nn * nf * nf, nn, a)),
                 &mut values,
                 |ncols, i, pos, kk| layout.offset(ncols, nf, i, pos, kk),
             );

@@ -124,7 +124,20 @@ fn fd_check(
     asm.evaluate(&input, &x0).expect("evaluate");
     let (rows, cols) = asm.pattern();
     let mut vals = vec![0.0; asm.nonzeros()];
-    asm.jacobian_into(&input, &mut vals, BlockLayout::Rows);
+    let na = dofs.active_nodes().len();
+    asm.jacobian_into(&input, 0..na, &mut vals, BlockLayout::Rows);
+    // A process's block rows (the middle third) are the matching slice of the whole.
+    let part = na / 3..(2 * na / 3).max(na / 3 + 1);
+    let (mut part_rows, mut part_cols) = (Vec::new(), Vec::new());
+    asm.block_rows_pattern(part.clone(), &mut part_rows, &mut part_cols);
+    let mut sub = vec![0.0; part_cols.len() * fields * fields];
+    asm.jacobian_into(&input, part.clone(), &mut sub, BlockLayout::Rows);
+    let lo = asm.block_pattern().row_ptr[part.start] * fields * fields;
+    assert_eq!(
+        sub,
+        vals[lo..lo + sub.len()],
+        "rows {part:?} of the Jacobian"
+    );
     let mut jac = vec![0.0; n * n];
     for ((r, c), v) in rows.iter().zip(&cols).zip(&vals) {
         jac[r * n + c] += v;
