@@ -1,8 +1,10 @@
 //! Checkpoint and restart: the complete committed state of a run (every particle column, the rigid bodies,
 //! the counters) and what its output has recorded so far, in one HDF5 file `checkpoint.h5` written
 //! atomically at every output step, when a run is interrupted and when a step fails for good. A resumed run
-//! continues bit for bit: the step is deterministic (assembly by gather, ordered reductions), so it ends
-//! with the same results as an uninterrupted one.
+//! continues bit for bit on the same number of processes: the step is deterministic (assembly by gather,
+//! ordered reductions), so it ends with the same results as an uninterrupted one. The checkpoint holds the
+//! whole state, so it also resumes on another number of processes (then equal to the solvers' tolerance,
+//! docs/theory.md "Processes").
 //!
 //! A checkpoint proves what it holds: it carries the run's identity ([`RunIdentity`]: the effective
 //! configuration, program version and PETSc options) and every dataset carries a CRC-32 of its values in an
@@ -237,9 +239,9 @@ pub fn read_header(dir: &Path) -> Result<Header, CheckpointError> {
     open(dir).map(|(_, header, _)| header)
 }
 
-/// Restores `sim` (freshly built from the same configuration) from `dir/checkpoint.h5`: every dataset is
-/// read and checked against its checksum and the configuration before `sim` is changed. Returns the
-/// header (for the output's records).
+/// Restores `state` (freshly built from the same configuration as `model`) from `dir/checkpoint.h5`: every
+/// dataset is read and checked against its checksum and the configuration before `state` is changed.
+/// Returns the header (for the output's records).
 pub fn load(dir: &Path, model: &Model, state: &mut State) -> Result<Header, CheckpointError> {
     let (f, header, path) = open(dir)?;
     let shown = path.display().to_string();

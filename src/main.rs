@@ -368,23 +368,7 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
             preflight::check_petsc_options(&petsc_args[1..].join(" "))
                 .map_err(|e| bad(format!("command line: {e}")))?;
             let session = Session::initialize(petsc_args).context("starting PETSc")?;
-            if session.size() > 1 && std::env::var_os("RAYON_NUM_THREADS").is_none() {
-                // Several processes on a node share its cores: each gets its share of threads for the point
-                // loops (RAYON_NUM_THREADS overrides). The launcher says how many processes share the node.
-                let per_node = [
-                    "OMPI_COMM_WORLD_LOCAL_SIZE",
-                    "MPI_LOCALNRANKS",
-                    "SLURM_NTASKS_PER_NODE",
-                ]
-                .iter()
-                .find_map(|v| std::env::var(v).ok()?.parse::<usize>().ok())
-                .unwrap_or(session.size());
-                let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-                // Fails only if the pool already exists; it then keeps its size.
-                let _ = rayon::ThreadPoolBuilder::new()
-                    .num_threads((cores / per_node.max(1)).max(1))
-                    .build_global();
-            }
+            share_cores(&session);
             smoke_test(&session, n, load, print_solution)?;
             Session::finalize(session)?;
             Ok(())
@@ -629,6 +613,65 @@ fn save_state(
     Ok(())
 }
 
+/// Processes of this run on this node, as the launcher says (Open MPI, MPICH, Slurm); None outside one.
+fn processes_per_node() -> Option<usize> {
+    [
+        "OMPI_COMM_WORLD_LOCAL_SIZE",
+        "MPI_LOCALNRANKS",
+        "SLURM_NTASKS_PER_NODE",
+    ]
+    .iter()
+    .find_map(|v| std::env::var(v).ok()?.trim().parse().ok())
+    .filter(|&n: &usize| n > 0)
+}
+
+/// The number of processors the node has online (Linux), to tell a process bound to some cores from one
+/// that may use all.
+fn online_cpus() -> Option<usize> {
+    let text = std::fs::read_to_string("/sys/devices/system/cpu/online").ok()?;
+    text.trim()
+        .split(',')
+        .map(|range| {
+            let mut ends = range.split('-');
+            let lo: usize = ends.next()?.parse().ok()?;
+            let hi: usize = match ends.next() {
+                Some(hi) => hi.parse().ok()?,
+                None => lo,
+            };
+            Some(hi + 1 - lo)
+        })
+        .sum()
+}
+
+/// Threads of the point loops when several processes run: a process bound to some of the node's cores
+/// (by mpirun or srun) uses those; an unbound one its share of the node's cores among the processes on
+/// the node. `RAYON_NUM_THREADS` overrides both.
+fn share_cores(session: &SessionGuard) {
+    if session.size() == 1 || std::env::var_os("RAYON_NUM_THREADS").is_some() {
+        return;
+    }
+    let mine = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = if mine < online_cpus().unwrap_or(mine) {
+        mine
+    } else {
+        mine / processes_per_node().unwrap_or(session.size())
+    };
+    // Fails only if the pool already exists; it then keeps its size.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build_global();
+}
+
+/// True on every process if `flag` is true on any (collective: every process must call it).
+fn on_any_process(session: &SessionGuard, flag: bool) -> Result<bool> {
+    if session.size() == 1 {
+        return Ok(flag);
+    }
+    let mut v = mpm_concrete::petsc::Vector::new(session, 1, 1)?;
+    v.write(|x| x[0] = if flag { 1.0 } else { 0.0 })?;
+    Ok(v.norm2()? > 0.0)
+}
+
 fn run_simulation(
     own_args: &[String],
     petsc_args: &[String],
@@ -666,7 +709,9 @@ fn run_simulation(
         }
         None
     };
-    let need = preflight::memory_need(&cfg);
+    // Every process of a run holds all points: those sharing this node need as much each.
+    let mut need = preflight::memory_need(&cfg);
+    need.bytes *= processes_per_node().unwrap_or(1) as f64;
     if let Some(limit) = preflight::memory_limit()
         && need.bytes > limit.bytes
         && !flags.allow_large
@@ -685,23 +730,7 @@ fn run_simulation(
     }
 
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
-    if session.size() > 1 && std::env::var_os("RAYON_NUM_THREADS").is_none() {
-        // Several processes on a node share its cores: each gets its share of threads for the point
-        // loops (RAYON_NUM_THREADS overrides). The launcher says how many processes share the node.
-        let per_node = [
-            "OMPI_COMM_WORLD_LOCAL_SIZE",
-            "MPI_LOCALNRANKS",
-            "SLURM_NTASKS_PER_NODE",
-        ]
-        .iter()
-        .find_map(|v| std::env::var(v).ok()?.parse::<usize>().ok())
-        .unwrap_or(session.size());
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        // Fails only if the pool already exists; it then keeps its size.
-        let _ = rayon::ThreadPoolBuilder::new()
-            .num_threads((cores / per_node.max(1)).max(1))
-            .build_global();
-    }
+    share_cores(&session);
     simulate(
         &session,
         own_args,
@@ -964,7 +993,11 @@ fn simulate(
         bar.inc(1);
         out.record(report)?;
         let every = cfg.run.output_every;
-        let stop = interrupted.load(std::sync::atomic::Ordering::SeqCst);
+        // Every process stops after the same step (a signal may reach them at different steps).
+        let stop = on_any_process(
+            session,
+            interrupted.load(std::sync::atomic::Ordering::SeqCst),
+        )?;
         if (every > 0 && sim.state.step % every == 0) || sim.state.step == cfg.run.steps || stop {
             save_state(&mut out, &sim, &dir, &identity)?;
             // run.json follows the checkpoint, so a run killed outright shows how far it got.

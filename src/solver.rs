@@ -170,7 +170,7 @@ pub struct Simulation {
 /// Per load, its active grid nodes and their shares of the resultant (summing to 1).
 type LoadNodes = Vec<Vec<(usize, f64)>>;
 
-/// What [`Simulation::prepare`] sets up for one step attempt, owned so that the later phases can borrow
+/// What `Step::prepare` sets up for one step attempt, owned so that the later phases can borrow
 /// the simulation freely.
 struct StepPlan {
     /// Time step of the attempt (s) and the time it reaches.
@@ -207,7 +207,7 @@ struct Loading {
     nodal_force: Vec<Vector2<f64>>,
 }
 
-/// What [`Simulation::solve`] hands to [`Simulation::finish`].
+/// What `Step::solve` hands to `Step::finish`.
 struct Solved {
     /// SNES statistics over all solves of the step.
     info: SolveInfo,
@@ -601,8 +601,8 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
 /// Advances `state` by one step of (at most) `state.dt` on `model`, with the scratch of `workspace`:
 /// halving the step on failure down to `dt_min`; after a reduced step the next one tries twice as long
 /// again, up to the nominal `dt`. The first step of a dynamic run starts with the consistent initial
-/// acceleration unless `initial_acceleration` is [`InitialAcceleration::Zero`]. A failed step leaves
-/// `state` as it was.
+/// acceleration unless `initial_acceleration` is [`InitialAcceleration::Zero`] (computed into `state`
+/// before the first attempt). A failed attempt leaves `state` as it was.
 pub fn advance(
     model: &Model,
     state: &mut State,
@@ -685,9 +685,9 @@ impl Step<'_> {
 
     /// One attempt: `Ok(Ok(report))` converged and committed, `Ok(Err(reason))` did not converge
     /// (nothing changed), `Err` a failure that a smaller step cannot fix. The attempt runs in three
-    /// phases: [`Simulation::prepare`] (grid, unknowns, constraints, devices, loads, PETSc objects, first
-    /// guess), [`Simulation::solve`] (SNES, repeated while the contact active set and the pin rotations
-    /// settle) and [`Simulation::finish`] (reactions, accelerations, G2P, commit, report).
+    /// phases: `Step::prepare` (grid, unknowns, constraints, devices, loads, PETSc objects, first
+    /// guess), `Step::solve` (SNES, repeated while the contact active set and the pin rotations
+    /// settle) and `Step::finish` (reactions, accelerations, G2P, commit, report).
     fn try_step(
         &mut self,
         session: &SessionGuard,
@@ -1399,7 +1399,7 @@ impl Step<'_> {
             .collect()
     }
 
-    /// Prescribes `values` (one per set, as from [`Simulation::constraint_values`]) on the active nodes of
+    /// Prescribes `values` (one per set, as from `Step::constraint_values`) on the active nodes of
     /// every constraint set; returns each set's constrained unknowns.
     fn constrain(&mut self, values: &[[Option<f64>; 2]]) -> Result<Vec<Vec<usize>>, StepError> {
         let s = self.m;
