@@ -194,6 +194,11 @@ pub struct Assembler {
     /// The iterate the cache was computed at.
     key: Vec<f64>,
     key_valid: bool,
+    /// The cache holds every point (false: only those of `owned_points`).
+    key_all: bool,
+    /// Per point, whether it supports a block row this process owns ([`Assembler::restrict_to_rows`]);
+    /// empty: every point.
+    owned_points: Vec<bool>,
 }
 
 impl Assembler {
@@ -312,6 +317,25 @@ impl Assembler {
         self.du.resize(nodes, Vector2::zeros());
         self.eb.resize(nodes, 0.0);
         self.key_valid = false;
+        self.owned_points.clear();
+    }
+
+    /// Restricts [`Assembler::evaluate_owned`] to the points in the support of the block rows `rows`
+    /// (active nodes) until the next [`Assembler::begin_step`]: what a process needs for its own rows of
+    /// the residual and the Jacobian. All rows: no restriction.
+    pub fn restrict_to_rows(&mut self, input: &StepInput<'_>, rows: std::ops::Range<usize>) {
+        self.owned_points.clear();
+        self.key_valid = false;
+        if rows.len() == self.row_ptr.len() - 1 {
+            return;
+        }
+        self.owned_points.resize(input.particles.len(), false);
+        for a in rows {
+            let node = input.dofs.node(a);
+            for &(p, _) in &self.inc_entries[self.inc_offsets[node]..self.inc_offsets[node + 1]] {
+                self.owned_points[p as usize] = true;
+            }
+        }
     }
 
     /// Number of nonzero entries of the Jacobian (blocks times fields^2).
@@ -368,10 +392,31 @@ impl Assembler {
     /// Evaluates every particle at the iterate `x` (unknowns in [`DofMap`] order) unless the cache
     /// already holds `x`. Trial history is written to the workspace, never to the particles.
     pub fn evaluate(&mut self, input: &StepInput<'_>, x: &[f64]) -> Result<(), AssemblyError> {
-        if self.key_valid && self.key.as_slice() == x {
+        self.evaluate_points(input, x, true)
+    }
+
+    /// As [`Assembler::evaluate`] for the points of this process's rows only
+    /// ([`Assembler::restrict_to_rows`]; all points without a restriction): enough for those rows of the
+    /// residual and the Jacobian. The other points keep stale values until the next full evaluation.
+    pub fn evaluate_owned(
+        &mut self,
+        input: &StepInput<'_>,
+        x: &[f64],
+    ) -> Result<(), AssemblyError> {
+        self.evaluate_points(input, x, false)
+    }
+
+    fn evaluate_points(
+        &mut self,
+        input: &StepInput<'_>,
+        x: &[f64],
+        all: bool,
+    ) -> Result<(), AssemblyError> {
+        if self.key_valid && (self.key_all || !all) && self.key.as_slice() == x {
             return Ok(());
         }
         self.key_valid = false;
+        let mask: &[bool] = if all { &[] } else { &self.owned_points };
         let nf = self.layout.per_node();
         let dofs = input.dofs;
         // Scatter the unknowns to grid nodes (inactive nodes stay zero).
@@ -393,6 +438,9 @@ impl Assembler {
             .zip(self.trial_history.par_chunks_mut(hs.max(1)))
             .enumerate()
             .try_for_each(|(p, (ev, h_trial))| {
+                if mask.get(p) == Some(&false) {
+                    return Ok(());
+                }
                 let ws = table.weights(p);
                 let mut grad_du = Matrix2::zeros();
                 let (mut ebp, mut geb) = (0.0, Vector2::zeros());
@@ -474,6 +522,7 @@ impl Assembler {
         self.key.clear();
         self.key.extend_from_slice(x);
         self.key_valid = true;
+        self.key_all = all || self.owned_points.is_empty();
         Ok(())
     }
 
@@ -487,12 +536,30 @@ impl Assembler {
         out: &mut [f64],
         physical: bool,
     ) -> Result<(), AssemblyError> {
+        let rows = 0..self.row_ptr.len() - 1;
+        self.residual_rows(input, x, out, physical, rows)
+    }
+
+    /// As [`Assembler::residual`] for the block rows `rows` only (the others are set to zero): after
+    /// [`Assembler::evaluate_owned`] with these rows.
+    pub fn residual_rows(
+        &self,
+        input: &StepInput<'_>,
+        x: &[f64],
+        out: &mut [f64],
+        physical: bool,
+        rows: std::ops::Range<usize>,
+    ) -> Result<(), AssemblyError> {
         let nf = self.layout.per_node();
         let eta_bar = self.layout.eta_bar();
         let (table, particles, dofs) = (input.table, input.particles, input.dofs);
         let stride = table.stride();
         let s = input.row_scale;
         out.par_chunks_mut(nf).enumerate().for_each(|(a, r)| {
+            if !rows.contains(&a) {
+                r.fill(0.0);
+                return;
+            }
             let node = dofs.node(a);
             let mut ru = Vector2::zeros();
             let mut reb = 0.0;

@@ -662,16 +662,6 @@ fn share_cores(session: &SessionGuard) {
         .build_global();
 }
 
-/// True on every process if `flag` is true on any (collective: every process must call it).
-fn on_any_process(session: &SessionGuard, flag: bool) -> Result<bool> {
-    if session.size() == 1 {
-        return Ok(flag);
-    }
-    let mut v = mpm_concrete::petsc::Vector::new(session, 1, 1)?;
-    v.write(|x| x[0] = if flag { 1.0 } else { 0.0 })?;
-    Ok(v.norm2()? > 0.0)
-}
-
 fn run_simulation(
     own_args: &[String],
     petsc_args: &[String],
@@ -994,10 +984,7 @@ fn simulate(
         out.record(report)?;
         let every = cfg.run.output_every;
         // Every process stops after the same step (a signal may reach them at different steps).
-        let stop = on_any_process(
-            session,
-            interrupted.load(std::sync::atomic::Ordering::SeqCst),
-        )?;
+        let stop = session.any(interrupted.load(std::sync::atomic::Ordering::SeqCst));
         if (every > 0 && sim.state.step % every == 0) || sim.state.step == cfg.run.steps || stop {
             save_state(&mut out, &sim, &dir, &identity)?;
             // run.json follows the checkpoint, so a run killed outright shows how far it got.

@@ -239,6 +239,8 @@ struct StepProblem<'a, 'b> {
     row_scale: f64,
     /// The block rows this process owns.
     owned: &'a OwnedRows,
+    /// For the processes' agreement on domain errors.
+    session: &'a SessionGuard,
     /// The residual of all unknowns (this process hands PETSc its own rows).
     scratch: Vec<f64>,
 }
@@ -248,15 +250,17 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
-        let domain = |e: AssemblyError| CallbackError::Domain(e.to_string());
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let (contact, s) = (self.contact, self.row_scale);
         let nf = input.dofs.fields();
         let r = &mut self.scratch;
-        let result = owned.gather(x).map_err(fatal).and_then(|xs| {
-            asm.evaluate(input, &xs).map_err(domain)?;
+        let xs = owned.gather(x).map_err(fatal)?;
+        // Only this process's rows: the points in their support, the rows themselves.
+        let local = asm.evaluate_owned(input, &xs).and_then(|()| {
             r.resize(xs.len(), 0.0);
-            asm.residual(input, &xs, r, false).map_err(domain)?;
+            asm.residual_rows(input, &xs, r, false, owned.rows.clone())
+        });
+        let result = agree(self.session, local).and_then(|()| {
             for d in contact.iter().flatten() {
                 d.residual_rows(&xs, r, nf, s);
             }
@@ -274,8 +278,7 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let xs = owned.gather(x).map_err(fatal)?;
-        asm.evaluate(input, &xs)
-            .map_err(|e| CallbackError::Domain(e.to_string()))?;
+        agree(self.session, asm.evaluate_owned(input, &xs))?;
         let (contact, s) = (self.contact, self.row_scale);
         let (pattern, own) = (owned.pattern(), owned.rows.clone());
         let r = jac
@@ -300,6 +303,20 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         self.assembly_time += t.elapsed().as_secs_f64();
         self.jacobians += 1;
         r
+    }
+}
+
+/// A domain error (an inverted point, a failed material update) on any process, reported on all: SNES
+/// takes domain errors collectively, and with each process evaluating the points of its own rows only
+/// one of them may meet it.
+fn agree(session: &SessionGuard, local: Result<(), AssemblyError>) -> Result<(), CallbackError> {
+    let any = session.any(local.is_err());
+    match local {
+        Err(e) => Err(CallbackError::Domain(e.to_string())),
+        Ok(()) if any => Err(CallbackError::Domain(
+            "a point of another process left its domain".into(),
+        )),
+        Ok(()) => Ok(()),
     }
 }
 
@@ -709,7 +726,7 @@ impl Step<'_> {
         let mut plan = self.prepare(session, dt, prefix)?;
         drop(setup_guard);
         plan.setup_time = t0.elapsed().as_secs_f64();
-        let solved = match self.solve(&mut plan, events[1])? {
+        let solved = match self.solve(session, &mut plan, events[1])? {
             Ok(solved) => solved,
             Err(reason) => return Ok(Err(reason)),
         };
@@ -888,6 +905,7 @@ impl Step<'_> {
     /// devices"). `Ok(Err(reason))` if a solve fails (nothing committed).
     fn solve(
         &mut self,
+        session: &SessionGuard,
         plan: &mut StepPlan,
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, String>, StepError> {
@@ -933,6 +951,9 @@ impl Step<'_> {
         let mut frozen = false;
         let mut secant: Vec<Option<(f64, f64)>> = vec![None; devices.len()];
         let mut phys = vec![0.0; n];
+        // During the solves each process evaluates the points of its own rows; the physical residual
+        // after each solve and the commit evaluate them all.
+        assembler.restrict_to_rows(&input, owned.rows.clone());
         loop {
             contact_iterations += 1;
             let mut problem = StepProblem {
@@ -945,6 +966,7 @@ impl Step<'_> {
                 contact: devices.as_slice(),
                 row_scale: input.row_scale,
                 owned,
+                session,
                 scratch: Vec::new(),
             };
             let info = match snes.solve(&mut problem, x, jac) {

@@ -138,6 +138,29 @@ fn fd_check(
         vals[lo..lo + sub.len()],
         "rows {part:?} of the Jacobian"
     );
+    // A process evaluating only the points of its rows (the others left at another iterate) assembles
+    // the same rows of the Jacobian and the residual.
+    let mut full_r = vec![0.0; n];
+    asm.residual(&input, &x0, &mut full_r, false)
+        .expect("residual");
+    let x1: Vec<f64> = x0.iter().map(|v| 1.7 * v + 1e-4).collect();
+    asm.evaluate(&input, &x1).expect("evaluate x1");
+    asm.restrict_to_rows(&input, part.clone());
+    asm.evaluate_owned(&input, &x0).expect("evaluate owned");
+    let mut own = vec![0.0; part_cols.len() * fields * fields];
+    asm.jacobian_into(&input, part.clone(), &mut own, BlockLayout::Rows);
+    assert_eq!(own, sub, "rows {part:?} from the points of these rows");
+    let mut part_r = vec![0.0; n];
+    asm.residual_rows(&input, &x0, &mut part_r, false, part.clone())
+        .expect("residual rows");
+    let scalars = part.start * fields..part.end * fields;
+    assert_eq!(
+        part_r[scalars.clone()],
+        full_r[scalars],
+        "residual rows {part:?}"
+    );
+    // The whole again for the finite-difference check below.
+    asm.evaluate(&input, &x0).expect("evaluate x0");
     let mut jac = vec![0.0; n * n];
     for ((r, c), v) in rows.iter().zip(&cols).zip(&vals) {
         jac[r * n + c] += v;

@@ -148,6 +148,16 @@ impl Session {
         unsafe { sys::mpmc_world_size() as usize }
     }
 
+    /// True on every process if `flag` is true on any (collective: every process must call it; one
+    /// process: `flag`).
+    pub fn any(&self, flag: bool) -> bool {
+        if self.size() == 1 {
+            return flag;
+        }
+        // SAFETY: as above; an MPI_Allreduce over the world communicator.
+        unsafe { sys::mpmc_world_any(i32::from(flag)) != 0 }
+    }
+
     /// Registers a logging stage (shown by `-log_view`).
     pub fn register_stage(&self, name: &str) -> Result<sys::PetscLogStage> {
         let c = cstring(name)?;

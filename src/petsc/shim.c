@@ -19,6 +19,13 @@ int mpmc_world_size(void)
   return size;
 }
 
+int mpmc_world_any(int flag)
+{
+  int any = flag;
+  MPI_Allreduce(&flag, &any, 1, MPI_INT, MPI_LOR, PETSC_COMM_WORLD);
+  return any;
+}
+
 PetscInt mpmc_petsc_decide(void) { return PETSC_DECIDE; }
 PetscErrorCode mpmc_log_event_begin(PetscLogEvent e) { return PetscLogEventBegin(e, 0, 0, 0, 0); }
 PetscErrorCode mpmc_log_event_end(PetscLogEvent e) { return PetscLogEventEnd(e, 0, 0, 0, 0); }

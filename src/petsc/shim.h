@@ -11,6 +11,8 @@ MPI_Comm mpmc_comm_self(void);
 /* Rank and size of PETSC_COMM_WORLD. */
 int mpmc_world_rank(void);
 int mpmc_world_size(void);
+/* Logical OR of `flag` over PETSC_COMM_WORLD (collective). */
+int mpmc_world_any(int flag);
 /* PETSC_DECIDE as a value. */
 PetscInt mpmc_petsc_decide(void);
 /* PetscLogEventBegin/End are macros in 3.18. */
