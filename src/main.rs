@@ -190,21 +190,36 @@ fn main() -> std::process::ExitCode {
             &petsc_args[1..],
         ));
     }
+    // Under mpirun every process meets the same bad input and the same failed step: process 0 reports
+    // them; the others report only what process 0 may not have met (errors other than bad input),
+    // naming themselves.
+    let rank = launcher_rank();
     match run(cli, &own, &petsc_args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => match e.chain().find_map(|c| c.downcast_ref::<BadInput>()) {
             Some(b) => {
-                if !b.0.is_empty() {
+                if !b.0.is_empty() && rank == 0 {
                     eprintln!("error: {e:#}");
                 }
                 std::process::ExitCode::from(2)
             }
             None => {
-                eprintln!("error: {e:#}");
+                match rank {
+                    0 => eprintln!("error: {e:#}"),
+                    r => eprintln!("error (process {r}): {e:#}"),
+                }
                 std::process::ExitCode::FAILURE
             }
         },
     }
+}
+
+/// This process's rank as the MPI launcher says (Open MPI, MPICH, Slurm); 0 outside a launcher.
+fn launcher_rank() -> usize {
+    ["OMPI_COMM_WORLD_RANK", "PMI_RANK", "SLURM_PROCID"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.trim().parse().ok())
+        .unwrap_or(0)
 }
 
 /// Commands without PETSc accept no PETSc options (they would be silently ignored).
