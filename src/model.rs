@@ -188,8 +188,8 @@ pub struct Model {
     pub options_prefix: Option<String>,
     /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
     pub mass_tolerance: f64,
-    /// Options prefix of a fallback SNES tried at the same time step when the main one fails, before
-    /// the time step is halved; None: halve at once.
+    /// Options prefix of a fallback SNES tried at the same time step when the main one's linear solver
+    /// fails, before the time step is halved; None: halve at once.
     pub fallback_prefix: Option<String>,
     /// Node shares of every load (see [`NodalLoad::shares`]).
     pub(crate) load_shares: Vec<Vec<(usize, f64)>>,
@@ -237,6 +237,8 @@ pub struct State {
     pub step: usize,
     /// Time step to try next (s).
     pub dt: f64,
+    /// Steps in a row that converged at their first try (a reduced `dt` grows again after a few).
+    pub calm_steps: usize,
     /// Work of reactions and body forces so far (N mm per mm thickness).
     pub external_work: f64,
     /// Accumulated prescribed displacement per constraint set (mm), in report order.
@@ -266,6 +268,7 @@ impl State {
             time: 0.0,
             step: 0,
             dt,
+            calm_steps: 0,
             external_work: 0.0,
             accumulated: vec![[0.0; 2]; nsets],
             last_reactions: vec![[0.0; 2]; nsets],
@@ -282,6 +285,7 @@ impl State {
             time: self.time,
             step: self.step,
             dt: self.dt,
+            calm_steps: self.calm_steps,
             external_work: self.external_work,
             accumulated: self.accumulated.clone(),
             last_reactions: self.last_reactions.clone(),
@@ -298,6 +302,7 @@ impl State {
         self.time = c.time;
         self.step = c.step;
         self.dt = c.dt;
+        self.calm_steps = c.calm_steps;
         self.external_work = c.external_work;
         self.accumulated = c.accumulated;
         self.last_reactions = c.last_reactions;
@@ -319,6 +324,9 @@ pub struct Counters {
     pub step: usize,
     /// Time step to try next (s).
     pub dt: f64,
+    /// Steps in a row that converged at their first try (0 in checkpoints that predate it).
+    #[serde(default)]
+    pub calm_steps: usize,
     /// Work of reactions and body forces so far (N mm per mm thickness).
     pub external_work: f64,
     /// Accumulated prescribed displacement per constraint set (mm).

@@ -68,8 +68,8 @@ const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_
 /// Options prefix of the fallback solver.
 pub const FALLBACK_PREFIX: &str = "fallback_";
 
-/// Options of the fallback solver (prefix [`FALLBACK_PREFIX`]) tried at the same time step when the main one
-/// fails, before the step is halved: Newton with a fresh MUMPS LU every iteration (pivoting copes with the
+/// Options of the fallback solver (prefix [`FALLBACK_PREFIX`]) tried at the same time step when the main
+/// one's linear solver fails (a factorisation, GMRES, the line search), before the step is halved: Newton with a fresh MUMPS LU every iteration (pivoting copes with the
 /// indefinite tangents of strongly softening material), with MUMPS's null-pivot detection (`ICNTL(24) = 1`):
 /// late in the paper-size CT at 4.3 m/s with contact plates the Jacobian became numerically singular
 /// (MUMPS `INFOG(1) = -10`) and the step failed down to dt = 1.6e-8 s; with the detection the same step

@@ -658,3 +658,49 @@ fn a_petsc_error_inside_a_solve_fails_the_attempt_not_the_run() {
     assert_eq!(record(&dir.join("d")).steps_done, 4);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// After a halved step the run keeps the reduced step until three steps in a row converged at their first
+/// try, then doubles it (docs/theory.md, "The implicit MPM step"); Newton running out of iterations goes
+/// straight to a smaller step, the fallback solver being for failures of the linear solver.
+#[test]
+fn a_reduced_step_grows_back_after_three_calm_steps() {
+    let dir = scratch("grow");
+    // Two Newton iterations are too few at the nominal step from step 2 on, enough at half of it.
+    let o = run_tiny(&dir, &["--steps", "12", "-snes_max_it", "2"]);
+    succeeds(&o);
+    let err = stderr(&o);
+    assert!(!err.contains("fallback"), "{err}");
+    let history = std::fs::read_to_string(dir.join("d/history.csv")).unwrap();
+    let mut lines = history.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (c_dt, c_attempts) = (col("dt"), col("attempts"));
+    let rows: Vec<(f64, usize)> = lines
+        .map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            (v[c_dt].parse().unwrap(), v[c_attempts].parse().unwrap())
+        })
+        .collect();
+    // Each step starts at the step the rule gives from the steps before it: the last step's, doubled
+    // after three first-try steps in a row while below the nominal step.
+    let nominal = rows[0].0;
+    let (mut calm, mut grown, mut retried) = (0, 0, 0);
+    for pair in rows.windows(2) {
+        let ((dt, attempts), (next_dt, next_attempts)) = (pair[0], pair[1]);
+        calm = if attempts == 1 { calm + 1 } else { 0 };
+        let mut start = dt;
+        if dt < nominal && calm >= 3 {
+            start = (2.0 * dt).min(nominal);
+            calm = 0;
+            grown += 1;
+        }
+        if next_attempts == 1 {
+            assert_eq!(next_dt, start, "{rows:?}");
+        } else {
+            retried += 1;
+            assert!(next_dt < start, "{rows:?}");
+        }
+    }
+    assert!(retried > 0 && grown > 0, "{rows:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
