@@ -68,7 +68,8 @@ pub mod history {
     pub const EXTERNAL_WORK: &str = "external_work";
     /// See [`KINETIC_ENERGY`].
     pub const DISSIPATED_ENERGY: &str = "dissipated_energy";
-    /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve, total.
+    /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve of the converged
+    /// attempt, and the total of the step with its failed attempts.
     pub const WALL_SETUP: &str = "wall_setup";
     /// See [`WALL_SETUP`].
     pub const WALL_ASSEMBLY: &str = "wall_assembly";

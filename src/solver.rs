@@ -127,7 +127,8 @@ pub struct StepReport {
     pub wall_assembly: f64,
     /// Residual and Jacobian evaluations during the solve.
     pub evaluations: [usize; 2],
-    /// Wall time of the whole step (s).
+    /// Wall time of the whole step (s), its failed attempts included (the other wall times are those of
+    /// the converged attempt).
     pub wall_total: f64,
     /// True if the step's Jacobian pattern differed from the last step's, so the PETSc objects (matrix,
     /// SNES, preconditioner) were built anew; false if they were reused.
@@ -669,6 +670,7 @@ impl Step<'_> {
         {
             self.initialize_acceleration()?;
         }
+        let started = Instant::now();
         let mut dt = self.st.dt;
         let mut attempts = 0;
         // The main solver first; after a linear-solver failure the fallback solver (if any) at the same
@@ -679,6 +681,7 @@ impl Step<'_> {
             match self.try_step(session, dt, prefix.as_deref())? {
                 Ok(mut report) => {
                     report.attempts = attempts;
+                    report.wall_total = started.elapsed().as_secs_f64();
                     // A reduced step is kept until GROW_AFTER steps in a row converged at the first try,
                     // then doubled (up to the nominal dt).
                     let st = &mut *self.st;
