@@ -77,8 +77,9 @@ fn history(dir: &std::path::Path) -> std::collections::HashMap<String, Vec<f64>>
     columns
 }
 
-/// Runs the CT demo for `steps` steps on `ranks` processes (1: without mpirun) into `out`; returns stderr.
-fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path) -> String {
+/// Runs the CT demo to step `steps` on `ranks` processes (1: without mpirun) into `out`, with `extra`
+/// arguments (e.g. `--resume`); returns stderr.
+fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path, extra: &[&str]) -> String {
     let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/ct-demo.toml");
     let exe = env!("CARGO_BIN_EXE_mpm-concrete");
     let mut cmd = if ranks == 1 {
@@ -92,12 +93,13 @@ fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path) -> String {
     };
     let o = cmd
         .args(["run", config, "--quiet", "--steps", &steps.to_string()])
+        .args(extra)
         .arg("--output")
         .arg(out)
         .output()
         .expect("failed to start (is Open MPI's mpirun installed? scripts/install-deps.sh)");
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert!(o.status.success(), "{ranks} processes: {err}");
+    assert!(o.status.success(), "{ranks} processes {extra:?}: {err}");
     err
 }
 
@@ -112,11 +114,11 @@ fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path) -> String {
 fn run_on_two_and_three_processes_matches_serial() {
     let base = std::env::temp_dir().join(format!("mpmc-mpi-ct-{}", std::process::id()));
     let steps = 30;
-    ct_demo(1, steps, &base.join("serial"));
+    ct_demo(1, steps, &base.join("serial"), &[]);
     let serial = history(&base.join("serial"));
     for ranks in [2, 3] {
         let dir = base.join(format!("ranks{ranks}"));
-        let err = ct_demo(ranks, steps, &dir);
+        let err = ct_demo(ranks, steps, &dir, &[]);
         let headers = err
             .lines()
             .filter(|l| l.contains("material points"))
@@ -177,29 +179,7 @@ fn run_on_two_and_three_processes_matches_serial() {
     // A checkpoint written by 2 processes continues on 1, one written by 1 continues on 2 (the state is
     // whole in either): both reach the same history to step 40.
     let resume = |ranks: usize, dir: &std::path::Path| {
-        let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/ct-demo.toml");
-        let exe = env!("CARGO_BIN_EXE_mpm-concrete");
-        let mut cmd = if ranks == 1 {
-            Command::new(exe)
-        } else {
-            let mut c = Command::new("mpirun");
-            c.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-                .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-                .args(["--oversubscribe", "-n", &ranks.to_string(), exe]);
-            c
-        };
-        let o = cmd
-            .args([
-                "run", config, "--quiet", "--resume", "--steps", "40", "--output",
-            ])
-            .arg(dir)
-            .output()
-            .expect("resume");
-        assert!(
-            o.status.success(),
-            "resume on {ranks}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        ct_demo(ranks, 40, dir, &["--resume"]);
         history(dir)
     };
     let (from_two, from_one) = (
