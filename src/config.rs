@@ -388,6 +388,32 @@ impl TryFrom<String> for LoadIntroduction {
     }
 }
 
+/// The end of the CT notch (`[ct] notch_tip`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub enum NotchTip {
+    /// A square end at `x = notch_length` with two corners (the source paper's rectangular notch).
+    #[default]
+    Flat,
+    /// A semicircular end of radius `notch_width / 2` whose apex lies at `x = notch_length` (a sawn notch).
+    Round,
+}
+
+impl TryFrom<String> for NotchTip {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<Self, String> {
+        match name.as_str() {
+            "flat" => Ok(Self::Flat),
+            "round" => Ok(Self::Round),
+            _ => Err(format!(
+                "field `ct.notch_tip` = \"{name}\": \"flat\" (square end with two corners) or \"round\" \
+                 (semicircular end of radius notch_width / 2, apex at notch_length)"
+            )),
+        }
+    }
+}
+
 /// `[ct]`: the compact tension specimen of the source paper (spec 03-ct-test.md; the defaults are the
 /// project's reconstruction). A plate with a straight notch from the left edge along mid-height; a rigid
 /// loading plate on the lower notch face near the mouth moves down at `loading_rate`; a rigid support plate
@@ -407,6 +433,10 @@ pub struct CtSection {
     /// Notch width (mm), centred on mid-height.
     #[serde(default = "ct_notch_width")]
     pub notch_width: f64,
+    /// End of the notch: "flat" (default, square with two corners) or "round" (semicircle of radius
+    /// `notch_width / 2`, apex at `notch_length`).
+    #[serde(default)]
+    pub notch_tip: NotchTip,
     /// x range of the loading and support plates on the notch faces (mm).
     #[serde(default = "ct_load_zone")]
     pub load_zone: [f64; 2],
@@ -444,6 +474,16 @@ pub struct CtSection {
     pub density: f64,
     /// Constitutive law of the concrete.
     pub material: MaterialConfig,
+}
+
+impl CtSection {
+    /// Where the straight notch faces end (mm): `notch_length`, less the radius of a round tip.
+    pub fn straight_faces_end(&self) -> f64 {
+        match self.notch_tip {
+            NotchTip::Flat => self.notch_length,
+            NotchTip::Round => self.notch_length - 0.5 * self.notch_width,
+        }
+    }
 }
 
 fn ct_width() -> f64 {
@@ -853,21 +893,36 @@ impl RunConfig {
                     "0 < notch_width < height (mm)",
                 ));
             }
+            if ct.notch_tip == NotchTip::Round && ct.notch_length <= 0.5 * ct.notch_width {
+                return Err(bad(
+                    "ct.notch_length",
+                    ct.notch_length.to_string(),
+                    "notch_length > notch_width / 2 with notch_tip = \"round\" (mm)",
+                ));
+            }
+            // The plates bear on the straight faces, which end where a round tip begins.
+            let end = ct.straight_faces_end();
             let [a, b] = ct.load_zone;
-            if !(a >= 0.0 && a < b && b <= ct.notch_length) {
+            if !(a >= 0.0 && a < b && b <= end) {
                 return Err(bad(
                     "ct.load_zone",
                     format!("{:?}", ct.load_zone),
-                    "an x range [a, b] on the notch faces: 0 <= a < b <= notch_length (mm)",
+                    &format!(
+                        "an x range [a, b] on the straight notch faces: 0 <= a < b <= notch_length \
+                         (less notch_width / 2 with a round tip), here {end} (mm)"
+                    ),
                 ));
             }
             if let Some(z) = ct.support_zone {
                 let [a, b] = z;
-                if !(a >= 0.0 && a < b && b <= ct.notch_length) {
+                if !(a >= 0.0 && a < b && b <= end) {
                     return Err(bad(
                         "ct.support_zone",
                         format!("{z:?}"),
-                        "an x range [a, b] on the upper notch face: 0 <= a < b <= notch_length (mm)",
+                        &format!(
+                            "an x range [a, b] on the straight upper notch face: 0 <= a < b <= \
+                             notch_length (less notch_width / 2 with a round tip), here {end} (mm)"
+                        ),
                     ));
                 }
             }

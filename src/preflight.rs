@@ -2,7 +2,7 @@
 //! instead of after its first step or with an allocation failure: the values of common PETSc options and
 //! the memory the run will need.
 
-use crate::config::RunConfig;
+use crate::config::{NotchTip, RunConfig};
 use crate::particles::{Geometry, Region};
 
 /// What the value of a checked PETSc option must be.
@@ -126,7 +126,14 @@ pub fn memory_need(cfg: &RunConfig) -> MemoryNeed {
     let mut area = 0.0;
     let mut boxes: Vec<([f64; 2], [f64; 2])> = Vec::new();
     if let Some(ct) = &cfg.ct {
-        area += ct.width * ct.height - ct.notch_length * ct.notch_width;
+        let half = 0.5 * ct.notch_width;
+        let notch = match ct.notch_tip {
+            NotchTip::Flat => ct.notch_length * ct.notch_width,
+            NotchTip::Round => {
+                (ct.notch_length - half) * ct.notch_width + 0.5 * std::f64::consts::PI * half * half
+            }
+        };
+        area += ct.width * ct.height - notch;
         area += 2.0 * (ct.load_zone[1] - ct.load_zone[0]) * ct.plate_thickness;
         boxes.push(([0.0, 0.0], [ct.width, ct.height]));
     }
@@ -177,6 +184,7 @@ fn geometry_area(g: &Geometry) -> f64 {
                     .sum();
                 0.5 * twice.abs()
             }
+            Region::Disk { radius, .. } => std::f64::consts::PI * radius * radius,
         })
         .sum()
 }

@@ -3,8 +3,8 @@
 
 use crate::boundary::{NodalLoad, NodeBox, RigidBody};
 use crate::config::{
-    ConstraintSection, ContactSection, Keyword, LoadIntroduction, MotionSpec, RigidBodySection,
-    RunConfig,
+    ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction, MotionSpec, NotchTip,
+    RigidBodySection, RunConfig,
 };
 use crate::contact::Contact;
 use crate::grid::{Grid, GridError};
@@ -78,6 +78,26 @@ fn box_holds_a_node(grid: &Grid, min: [f64; 2], max: [f64; 2]) -> bool {
     })
 }
 
+/// The notch cut out of the CT plate: a strip from beyond the left edge to the tip, square-ended
+/// (`flat`) or ended by a semicircle of radius `notch_width / 2` whose apex is at `notch_length` (`round`).
+fn notch(ct: &CtSection) -> Vec<Region> {
+    let (mid, half) = (0.5 * ct.height, 0.5 * ct.notch_width);
+    let strip = Region::Rect {
+        min: [-1.0, mid - half],
+        max: [ct.straight_faces_end(), mid + half],
+    };
+    match ct.notch_tip {
+        NotchTip::Flat => vec![strip],
+        NotchTip::Round => vec![
+            strip,
+            Region::Disk {
+                centre: [ct.straight_faces_end(), mid],
+                radius: half,
+            },
+        ],
+    }
+}
+
 /// A deformable body before seeding.
 struct BodyDef {
     name: String,
@@ -108,10 +128,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
                     min: [0.0, 0.0],
                     max: [ct.width, ct.height],
                 }],
-                exclude: vec![Region::Rect {
-                    min: [-1.0, lower],
-                    max: [ct.notch_length, upper],
-                }],
+                exclude: notch(ct),
             },
             density: ct.density,
             material: ct

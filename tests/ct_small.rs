@@ -77,6 +77,49 @@ fn damage_starts_at_the_notch_tip_and_the_opening_force_is_positive() {
 }
 
 #[test]
+fn a_round_notch_tip_removes_the_corners_and_keeps_the_apex() {
+    let with_tip = |tip: &str| {
+        let text = CONFIG.replace(
+            "notch_width = 8.0",
+            &format!("notch_width = 8.0\nnotch_tip = \"{tip}\""),
+        );
+        let cfg = RunConfig::from_str_named(&text, "ct-small").expect("config");
+        scenario::build(&cfg).expect("model").particles
+    };
+    let (flat, round) = (with_tip("flat"), with_tip("round"));
+    // Notch: y in (46, 54), tip at x = 56; the round end is the half disk of radius 4 about (52, 50).
+    let inside_notch = |x: &nalgebra::Vector2<f64>, round: bool| {
+        let strip = x.y > 46.0 && x.y < 54.0;
+        if round {
+            strip && (x.x < 52.0 || (x - nalgebra::Vector2::new(52.0, 50.0)).norm() < 4.0)
+        } else {
+            strip && x.x < 56.0
+        }
+    };
+    assert!(flat.x.iter().all(|x| !inside_notch(x, false)));
+    assert!(round.x.iter().all(|x| !inside_notch(x, true)));
+    // The round tip puts material back into the square end's corners (x in (52, 56), |y - 50| near 4),
+    // nothing ahead of the apex on the axis changes, and the material added is the corners' area,
+    // (4 - pi) r^2 / 2 with r = 4 mm, to one point's volume (2 mm point spacing: 4 mm^2).
+    let corner = |x: &nalgebra::Vector2<f64>| {
+        x.x > 54.0 && x.x < 56.0 && (x.y - 50.0).abs() > 2.5 && (x.y - 50.0).abs() < 4.0
+    };
+    assert!(!flat.x.iter().any(corner) && round.x.iter().any(corner));
+    let on_axis_ahead = |p: &mpm_concrete::particles::Particles| {
+        p.x.iter()
+            .filter(|x| x.x > 56.0 && (x.y - 50.0).abs() < 1.0)
+            .count()
+    };
+    assert_eq!(on_axis_ahead(&flat), on_axis_ahead(&round));
+    let added: f64 = round.vol.iter().sum::<f64>() - flat.vol.iter().sum::<f64>();
+    let expected = 0.5 * (4.0 - std::f64::consts::PI) * 16.0;
+    assert!(
+        (added - expected).abs() < 4.0,
+        "added {added} mm^2, expected {expected}"
+    );
+}
+
+#[test]
 fn eroded_points_carry_no_stress_and_keep_their_deformation_gradient() {
     // The localizing gradient activity concentrates the band into a cell or two, where points would
     // otherwise stretch until they invert; with `erosion_damage` they turn into voids that keep their

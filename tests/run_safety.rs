@@ -174,6 +174,17 @@ fn bad_input_is_refused_before_anything_is_written() {
             vec!["ct.load_zone", "0 <= a < b <= notch_length"],
         ),
         (
+            vec!["--set", "ct.notch_tip=\"pointed\""],
+            vec![],
+            vec![
+                "tiny.toml",
+                "ct.notch_tip",
+                "pointed",
+                "\"flat\"",
+                "\"round\"",
+            ],
+        ),
+        (
             vec!["--set", "grid.cell_sise=2.0"],
             vec![],
             vec!["tiny.toml", "cell_sise"],
