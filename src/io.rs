@@ -7,7 +7,8 @@
 //!   displacement, velocity, Cauchy stress, damage, eta_bar, history maximum), each dataset with `units`
 //!   and `description` attributes; open `fields.xdmf` in ParaView (`docs/paraview.md`);
 //! * `damage_NNNNNN.png`: damage maps; `force_time.png`, `force_displacement.png`: reaction curves;
-//! * `crack.json`: crack metrics at every output step (see [`crate::crack`]) when a notch tip is known.
+//! * `crack.json`: crack metrics at every output step (see [`crate::crack`]) when a notch tip is known,
+//!   with `crack_length.png` and `band_width.png` drawn from them.
 
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::model::{Model, State};
@@ -229,7 +230,42 @@ fn write_crack_json(
         path: path.display().to_string(),
         message: e.to_string(),
     })?;
-    write_atomic(&path, text.as_bytes())
+    write_atomic(&path, text.as_bytes())?;
+    crack_plots(dir, cracks)
+}
+
+/// `crack_length.png` and `band_width.png`: the crack length and the width of the `d >= 0.9` zone across
+/// the bands (median and largest crossing) at the output steps.
+fn crack_plots(dir: &Path, cracks: &[CrackState]) -> Result<(), OutputError> {
+    let points = |value: fn(&CrackState) -> f64| -> Vec<(f64, f64)> {
+        cracks.iter().map(|c| (c.time * 1e6, value(c))).collect()
+    };
+    let save = |plot: LinePlot, file: &str| {
+        let path = dir.join(file);
+        plot.save_png(&path).map_err(|e| OutputError::Plot {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })
+    };
+    save(
+        LinePlot::new(
+            "crack length",
+            "time [us]",
+            "length of the d >= 0.9 zone [mm]",
+        )
+        .with_series("", points(|c| c.length)),
+        file::CRACK_LENGTH,
+    )?;
+    save(
+        LinePlot::new(
+            "width of the damage bands (d >= 0.9 across the band)",
+            "time [us]",
+            "width [mm]",
+        )
+        .with_series("median of the stations", points(|c| c.band_width))
+        .with_series("largest crossing", points(|c| c.band_width_max)),
+        file::BAND_WIDTH,
+    )
 }
 
 /// Re-measures the crack metrics of a finished CT run in `dir` from its snapshots `fields_*.h5` with the

@@ -30,6 +30,8 @@ pub fn is_program_file(name: &str) -> bool {
         file::FORCE_TIME,
         file::FORCE_DISPLACEMENT,
         file::CRACK,
+        file::CRACK_LENGTH,
+        file::BAND_WIDTH,
         file::CHECKPOINT,
     ]
     .contains(&name)

@@ -23,6 +23,10 @@ pub mod file {
     pub const FORCE_TIME: &str = "force_time.png";
     /// Reaction forces over the loading device's displacement.
     pub const FORCE_DISPLACEMENT: &str = "force_displacement.png";
+    /// Crack length over time (CT runs).
+    pub const CRACK_LENGTH: &str = "crack_length.png";
+    /// Width of the damage bands over time (CT runs).
+    pub const BAND_WIDTH: &str = "band_width.png";
     /// Prefix and suffix of the point fields of one output step, `fields_NNNNNN.h5`.
     pub const FIELDS: (&str, &str) = ("fields_", ".h5");
     /// Prefix and suffix of the damage map of one output step, `damage_NNNNNN.png`.

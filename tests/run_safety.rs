@@ -607,10 +607,17 @@ fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
         v["states"].as_array().expect("states").clone()
     };
     let written = states(&dir.join("d"));
+    // The crack length and band width over time are drawn beside crack.json, and drawn again by `crack`.
+    for png in ["crack_length.png", "band_width.png"] {
+        let bytes = std::fs::read(dir.join("d").join(png)).expect(png);
+        assert!(bytes.starts_with(b"\x89PNG"), "{png} is a PNG");
+        std::fs::remove_file(dir.join("d").join(png)).expect("remove");
+    }
     std::fs::remove_file(dir.join("d/crack.json")).expect("remove crack.json");
     let o = run(&dir, &["crack", "d"]);
     succeeds(&o);
     let remeasured = states(&dir.join("d"));
+    assert!(dir.join("d/crack_length.png").is_file() && dir.join("d/band_width.png").is_file());
     // Same criteria, same snapshots: the same states as the run wrote (one per snapshot).
     let snapshots = std::fs::read_dir(dir.join("d"))
         .expect("dir")
