@@ -173,10 +173,17 @@ fn misplaced_program_option(petsc_args: &[String]) -> Option<String> {
 }
 
 fn main() -> std::process::ExitCode {
+    // Under mpirun every process takes the same decisions: process 0 logs them, the others only warn.
+    let rank = launcher_rank();
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_target(false)
         .without_time()
+        .with_max_level(if rank == 0 {
+            tracing::Level::INFO
+        } else {
+            tracing::Level::WARN
+        })
         .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
     let cli = Cli::parse_from(&own);
@@ -193,7 +200,6 @@ fn main() -> std::process::ExitCode {
     // Under mpirun every process meets the same bad input and the same failed step: process 0 reports
     // them; the others report only what process 0 may not have met (errors other than bad input),
     // naming themselves.
-    let rank = launcher_rank();
     match run(cli, &own, &petsc_args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => match e.chain().find_map(|c| c.downcast_ref::<BadInput>()) {
