@@ -68,7 +68,7 @@ fn main() {
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",
         "SNES(GetConvergedReasonString|SetUp|GetLinearSolveFailures|GetTolerances|GetLagPreconditioner|SetLagPreconditioner)|KSPGetConvergedReasonString|MatNullSpaceCreateRigidBody",
-        "IS(CreateGeneral|CreateStride|Destroy)",
+        "IS(CreateGeneral|CreateStride|Destroy|SetBlockSize)",
         "mpmc_.*",
     ];
     let mut builder = bindgen::Builder::default()

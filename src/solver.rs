@@ -488,7 +488,7 @@ impl LinearSystem {
             let (u, eb): (Vec<i32>, Vec<i32>) = (0..n)
                 .map(|i| (first + i) as i32)
                 .partition(|i| (*i as usize - first) % nf != e);
-            let is_u = IndexSet::new(session, &u)?;
+            let is_u = IndexSet::new(session, &u)?.with_block_size(dofs.layout().dim())?;
             let is_eb = IndexSet::new(session, &eb)?;
             snes.set_fieldsplit(&[("u", &is_u), ("eta_bar", &is_eb)])?;
         }

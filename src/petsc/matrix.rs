@@ -515,6 +515,18 @@ impl IndexSet {
         )?;
         Ok(Self { raw })
     }
+
+    /// Declares the indices to come in blocks of `bs` consecutive unknowns (e.g. the displacement
+    /// components of a node), which a preconditioner of the sub-matrix may use (BoomerAMG then coarsens
+    /// the components as separate functions).
+    pub fn with_block_size(self, bs: usize) -> Result<Self> {
+        // SAFETY: valid IS.
+        check(
+            unsafe { sys::ISSetBlockSize(self.raw, to_petsc_int(bs, "ISSetBlockSize")?) },
+            "ISSetBlockSize",
+        )?;
+        Ok(self)
+    }
 }
 
 impl Drop for IndexSet {
