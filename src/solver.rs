@@ -1029,10 +1029,10 @@ impl Step<'_> {
                 // Re-solves after a change of the contact active set are held to the step's own standard,
                 // `|R| <= max(atol, rtol |R_0|)` with `R_0` the residual at the start of the first solve,
                 // rather than to `rtol` times their own (often tiny) initial residual. Where the
-                // preconditioner is lagged anyway (`lag > 1`, e.g. the LU of stiffness-dominated steps),
+                // preconditioner is lagged anyway (`lag > 1`, e.g. the multigrid of stiffness-dominated steps),
                 // they keep the last one of the first solve (lag -1: never rebuilt; a lag that persists
                 // through solves would carry its count into later steps): a changed active set changes a
-                // few rows, which GMRES absorbs in a few iterations, far cheaper than a new factorisation
+                // few rows, which GMRES absorbs in a few iterations, far cheaper than a new set-up
                 // (docs/theory.md, "Contact with rigid devices").
                 let r0 = info.residual_norms.first().copied().unwrap_or(0.0);
                 snes.set_tolerances(&Tolerances {

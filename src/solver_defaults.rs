@@ -29,8 +29,8 @@ pub enum StepClass {
         /// The ratio `r`.
         ratio: f64,
     },
-    /// Dynamic, `r < 0.01`: GMRES with algebraic multigrid (displacements only) or a lagged LU
-    /// (gradient-enhanced models).
+    /// Dynamic, `r < 0.01`: GMRES with algebraic multigrid (displacements only) or a field split of
+    /// (u, eta_bar) with multigrid on u (gradient-enhanced models).
     StiffnessDominated {
         /// The ratio `r`.
         ratio: f64,
@@ -168,12 +168,19 @@ pub fn apply(
         petsc::set_option(session, "snes_lag_preconditioner", Some("1"))?;
         applied.retain(|o| *o != lag);
     }
-    // A preconditioner set in the config or on the command line replaces the class's.
+    // A different preconditioner set in the config or on the command line replaces the class's.
+    let own_pc = main_options(class, layout)
+        .split_whitespace()
+        .skip_while(|o| *o != "-pc_type")
+        .nth(1)
+        .map(str::to_owned);
     match petsc::option_string(session, "pc_type")? {
-        Some(pc) if !applied.iter().any(|o| o == "-pc_type") => tracing::info!(
-            "solver for {}: replaced by the given -pc_type {pc}",
-            describe(class, gradient)
-        ),
+        Some(pc) if !applied.iter().any(|o| o == "-pc_type") && Some(&pc) != own_pc.as_ref() => {
+            tracing::info!(
+                "solver for {}: replaced by the given -pc_type {pc}",
+                describe(class, gradient)
+            )
+        }
         _ => tracing::info!("default solver for {}", describe(class, gradient)),
     }
     Ok((class, applied))
