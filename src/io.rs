@@ -234,19 +234,21 @@ fn write_crack_json(
     crack_plots(dir, cracks)
 }
 
+/// Draws `plot` into the PNG `path`, naming the file in an error.
+fn save_line_plot(plot: &LinePlot, path: &Path) -> Result<(), OutputError> {
+    plot.save_png(path).map_err(|e| OutputError::Plot {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })
+}
+
 /// `crack_length.png` and `band_width.png`: the crack length and the width of the `d >= 0.9` zone across
 /// the bands (median and largest crossing) at the output steps.
 fn crack_plots(dir: &Path, cracks: &[CrackState]) -> Result<(), OutputError> {
     let points = |value: fn(&CrackState) -> f64| -> Vec<(f64, f64)> {
         cracks.iter().map(|c| (c.time * 1e6, value(c))).collect()
     };
-    let save = |plot: LinePlot, file: &str| {
-        let path = dir.join(file);
-        plot.save_png(&path).map_err(|e| OutputError::Plot {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })
-    };
+    let save = |plot: LinePlot, file: &str| save_line_plot(&plot, &dir.join(file));
     save(
         LinePlot::new(
             "crack length",
@@ -785,13 +787,7 @@ impl RunOutput {
                 });
             }
         }
-        let save = |plot: LinePlot, file: &str| {
-            let path = self.dir.join(file);
-            plot.save_png(&path).map_err(|e| OutputError::Plot {
-                path: path.display().to_string(),
-                message: e.to_string(),
-            })
-        };
+        let save = |plot: LinePlot, file: &str| save_line_plot(&plot, &self.dir.join(file));
         save(
             LinePlot {
                 title: format!("{}: reaction force", self.title),

@@ -129,18 +129,7 @@ pub struct Setup {
     pub fallback_prefix: Option<String>,
 }
 
-/// The unknowns of a node for these materials: the plane displacement, and `eta_bar` if any material is
-/// gradient-enhanced.
-fn layout_of(materials: &[Material]) -> FieldLayout {
-    FieldLayout::new(2, materials.iter().any(Material::is_nonlocal))
-}
-
 impl Setup {
-    /// The unknowns of a node (as [`Model::layout`]).
-    pub fn layout(&self) -> FieldLayout {
-        layout_of(&self.materials)
-    }
-
     /// A model of the deformable points `particles` (body tag = index into `materials`) on `grid`, with
     /// the defaults of a configuration file for the rest: no constraints, rigid bodies, loads or body
     /// force, MPM, nodes with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a
@@ -221,7 +210,7 @@ impl Model {
     /// The unknowns of a node: the plane displacement, and `eta_bar` if any material is
     /// gradient-enhanced.
     pub fn layout(&self) -> FieldLayout {
-        layout_of(&self.materials)
+        FieldLayout::new(2, self.materials.iter().any(Material::is_nonlocal))
     }
 
     /// Names of the constraint sets in report order: node boxes, rigid bodies, loads.

@@ -14,7 +14,6 @@
 //! needs a multigrid or a direct method. Every choice below can be overridden by `run.petsc_options` and,
 //! with the final word, by the command line.
 
-use crate::dofs::FieldLayout;
 use crate::model::Setup;
 use crate::petsc::{self, SessionGuard};
 
@@ -127,16 +126,14 @@ pub fn classify(setup: &Setup) -> StepClass {
     }
 }
 
-/// The default options of the main solver for a class and the unknowns per node (`layout`: whether the
-/// model solves for eta_bar too).
-pub fn main_options(class: StepClass, layout: FieldLayout) -> String {
+/// The default options of the main solver for a class; `gradient` tells whether the model solves for
+/// eta_bar too.
+pub fn main_options(class: StepClass, gradient: bool) -> String {
     let solver = match class {
-        StepClass::InertiaDominated { .. } => INERTIA.to_owned(),
-        StepClass::StiffnessDominated { .. } if layout.eta_bar().is_some() => {
-            STIFFNESS_FIELD_SPLIT.to_owned()
-        }
-        StepClass::StiffnessDominated { .. } => STIFFNESS_AMG.to_owned(),
-        StepClass::QuasiStatic => QUASI_STATIC.to_owned(),
+        StepClass::InertiaDominated { .. } => INERTIA,
+        StepClass::StiffnessDominated { .. } if gradient => STIFFNESS_FIELD_SPLIT,
+        StepClass::StiffnessDominated { .. } => STIFFNESS_AMG,
+        StepClass::QuasiStatic => QUASI_STATIC,
     };
     format!("{NEWTON} {solver}")
 }
@@ -153,14 +150,13 @@ pub fn apply(
 ) -> Result<(StepClass, Vec<String>), petsc::PetscError> {
     setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
-    let layout = setup.layout();
-    let gradient = layout.eta_bar().is_some();
-    let mut applied: Vec<String> =
-        petsc::apply_default_options(session, &main_options(class, layout))?
-            .into_iter()
-            .chain(petsc::apply_default_options(session, FALLBACK)?)
-            .map(|(name, _)| format!("-{name}"))
-            .collect();
+    let gradient = setup.materials.iter().any(|m| m.is_nonlocal());
+    let options = main_options(class, gradient);
+    let mut applied: Vec<String> = petsc::apply_default_options(session, &options)?
+        .into_iter()
+        .chain(petsc::apply_default_options(session, FALLBACK)?)
+        .map(|(name, _)| format!("-{name}"))
+        .collect();
     let lag = "-snes_lag_preconditioner".to_owned();
     if applied.contains(&lag)
         && petsc::option_string(session, "ksp_type")?.as_deref() == Some("preonly")
@@ -169,7 +165,7 @@ pub fn apply(
         applied.retain(|o| *o != lag);
     }
     // A different preconditioner set in the config or on the command line replaces the class's.
-    let own_pc = main_options(class, layout)
+    let own_pc = options
         .split_whitespace()
         .skip_while(|o| *o != "-pc_type")
         .nth(1)
@@ -239,12 +235,11 @@ mod tests {
             class_of("configs/crosscheck-cantilever.toml"),
             StepClass::QuasiStatic
         );
-        let (plain, gradient) = (FieldLayout::new(2, false), FieldLayout::new(2, true));
-        assert!(main_options(StepClass::QuasiStatic, gradient).contains("mumps"));
-        let amg = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, plain);
+        assert!(main_options(StepClass::QuasiStatic, true).contains("mumps"));
+        let amg = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, false);
         assert!(amg.contains("-pc_type hypre"), "{amg}");
         // The coupled system: the solver's named splits, displacements by AMG, eta_bar by ILU.
-        let split = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, gradient);
+        let split = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, true);
         for o in [
             "-pc_type fieldsplit",
             "-fieldsplit_u_pc_type hypre",
