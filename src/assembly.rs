@@ -85,6 +85,10 @@ pub struct StepInput<'a> {
     pub nodal_force: &'a [Vector2<f64>],
     /// Scale of constrained rows and of the Helmholtz rows (MPa), about the stiffness of the body.
     pub row_scale: f64,
+    /// Per node copy, the copy of another velocity field it is paired with in contact between bodies
+    /// ([`INACTIVE`](crate::dofs::INACTIVE): none); the block rows of a pair get the union of their
+    /// columns, so that contact rows can combine them. Empty: no pairs.
+    pub partners: &'a [u32],
 }
 
 /// A failed evaluation at a Newton iterate (reported to SNES as a domain error).
@@ -255,7 +259,15 @@ impl Assembler {
                     unique.clear();
                     let entries = &self.inc_entries
                         [self.inc_offsets[node as usize]..self.inc_offsets[node as usize + 1]];
-                    for &(p, _) in entries {
+                    // A contact pair's rows share the union of their columns.
+                    let partner = match input.partners.get(node as usize) {
+                        Some(&q) if q != crate::dofs::INACTIVE => {
+                            &self.inc_entries
+                                [self.inc_offsets[q as usize]..self.inc_offsets[q as usize + 1]]
+                        }
+                        _ => &[],
+                    };
+                    for &(p, _) in entries.iter().chain(partner) {
                         for w in table.weights(p as usize) {
                             let g = w.node as usize;
                             if node_index[g] != crate::dofs::INACTIVE && stamp[g] != row {
@@ -485,8 +497,10 @@ impl Assembler {
                     0.0,
                     1.0,
                 );
-                let h_n = particles.history(p);
-                let h_trial = &mut h_trial[..hs];
+                // The point's own law's history: the stride is the longest of all bodies' laws.
+                let hl = material.history_len();
+                let h_n = &particles.history(p)[..hl];
+                let h_trial = &mut h_trial[..hl];
                 let mut r = Response::zeros();
                 let err = |source| AssemblyError::Material {
                     particle: p,

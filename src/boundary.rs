@@ -132,6 +132,9 @@ pub struct RigidBody {
     pub rise_time: f64,
     /// Unilateral contact instead of gluing (both motion components must then be prescribed).
     pub contact: Option<Contact>,
+    /// The velocity field it holds or pushes ([`Setup::fields`](crate::model::Setup::fields); 0: the
+    /// specimen's).
+    pub field: u16,
 }
 
 /// Displacement of a component moving with velocity `v` that rises linearly over `rise` from 0, between

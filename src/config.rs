@@ -14,7 +14,7 @@
 //!
 //! Every error names the file, the field and what is allowed.
 
-use crate::material::MaterialConfig;
+use crate::material::{ElasticConfig, MaterialConfig};
 use crate::model::{InitialAcceleration, Method};
 use crate::particles::Geometry;
 use crate::shape::ShapeKind;
@@ -229,6 +229,11 @@ pub struct BodySection {
     /// Initial velocity (mm/s).
     #[serde(default)]
     pub initial_velocity: [f64; 2],
+    /// The body has its own velocity field on the grid and meets the specimen (the first body) only
+    /// through frictionless unilateral contact; default false: it shares the specimen's grid nodes
+    /// (bonded where they touch).
+    #[serde(default)]
+    pub own_field: bool,
 }
 
 /// Motion of one component: "free", "fixed" or `{ velocity = v }` (mm/s).
@@ -336,6 +341,10 @@ pub struct RigidBodySection {
     /// Unilateral contact with the specimen instead of gluing (default: glued).
     #[serde(default)]
     pub contact: Option<ContactSection>,
+    /// The `[[body]]` with `own_field = true` it holds or pushes (by name); default: the specimen and
+    /// the bodies that share its nodes.
+    #[serde(default)]
+    pub acts_on: Option<String>,
 }
 
 /// `contact = { normal = [nx, ny], friction = mu, pin = [x, y] }` of a `[[rigid_body]]`: the device pushes
@@ -369,6 +378,10 @@ pub enum LoadIntroduction {
     /// Rigid plates in unilateral contact, each driven at a pin and free to turn about it (a testing
     /// machine's clevis and pin; the support is a pinned seat).
     Pin,
+    /// Deformable steel inserts on the notch faces, each a body with its own velocity field in
+    /// frictionless contact with the concrete, pushed by a pin-driven plate (a testing machine's
+    /// loading device).
+    Inserts,
 }
 
 impl TryFrom<String> for LoadIntroduction {
@@ -379,10 +392,12 @@ impl TryFrom<String> for LoadIntroduction {
             "glued" => Ok(Self::Glued),
             "contact" => Ok(Self::Contact),
             "pin" => Ok(Self::Pin),
+            "inserts" => Ok(Self::Inserts),
             _ => Err(format!(
                 "field `ct.load_introduction` = \"{name}\": \"glued\" (plates glued to the notch faces), \
-                 \"contact\" (plates pushing through unilateral contact) or \"pin\" (contact plates \
-                 turning freely about a pin)"
+                 \"contact\" (plates pushing through unilateral contact), \"pin\" (contact plates \
+                 turning freely about a pin) or \"inserts\" (steel inserts in contact with the concrete, \
+                 pushed by pinned plates)"
             )),
         }
     }
@@ -469,6 +484,16 @@ pub struct CtSection {
     /// half the plate thickness.
     #[serde(default)]
     pub pin_offset: Option<f64>,
+    /// Thickness of the steel inserts on the notch faces (mm), for "inserts"; at least one cell, and
+    /// the two inserts and plates leave a cell free in the notch.
+    #[serde(default)]
+    pub insert_thickness: Option<f64>,
+    /// Constitutive law of the inserts; default: steel as neo-Hooke, E = 210,000 MPa, nu = 0.3.
+    #[serde(default = "ct_insert_material")]
+    pub insert_material: MaterialConfig,
+    /// Density of the inserts (t/mm^3); default 7.85e-9 (steel).
+    #[serde(default = "ct_insert_density")]
+    pub insert_density: f64,
     /// Density of the concrete (t/mm^3).
     #[serde(default = "ct_density")]
     pub density: f64,
@@ -506,6 +531,16 @@ fn ct_plate_thickness() -> f64 {
 }
 fn ct_density() -> f64 {
     2.4e-9
+}
+fn ct_insert_density() -> f64 {
+    7.85e-9
+}
+fn ct_insert_material() -> MaterialConfig {
+    MaterialConfig::NeoHookean(ElasticConfig {
+        youngs_modulus: Some(210_000.0),
+        poisson_ratio: Some(0.3),
+        ..ElasticConfig::default()
+    })
 }
 
 /// How errors name a configuration file read with `overrides`: `configs/x.toml (with --set a=1)`.
@@ -751,6 +786,14 @@ impl RunConfig {
                     &e.to_string(),
                 )
             })?;
+            if b.own_field && i == 0 && self.ct.is_none() {
+                return Err(bad(
+                    "body[0].own_field",
+                    "true".into(),
+                    "false: the first body is the specimen, which the bodies with their own field meet \
+                     in contact",
+                ));
+            }
         }
         // Constraint sets, rigid bodies and loads name the columns of history.csv.
         let mut sets: Vec<(String, &str)> = Vec::new();
@@ -792,6 +835,21 @@ impl RunConfig {
         for (i, rb) in self.rigid_body.iter().enumerate() {
             let field = format!("rigid_body[{i}]");
             sets.push((field.clone(), &rb.name));
+            if let Some(name) = &rb.acts_on
+                && !self.body.iter().any(|b| b.own_field && &b.name == name)
+            {
+                let own: Vec<&str> = self
+                    .body
+                    .iter()
+                    .filter(|b| b.own_field)
+                    .map(|b| b.name.as_str())
+                    .collect();
+                return Err(bad(
+                    &format!("{field}.acts_on"),
+                    format!("{name:?}"),
+                    &format!("the name of a [[body]] with own_field = true: {own:?}"),
+                ));
+            }
             rb.geometry
                 .validate()
                 .map_err(|e| bad(&format!("{field}.geometry"), String::new(), &e.to_string()))?;
@@ -933,12 +991,15 @@ impl RunConfig {
                     "a Coulomb coefficient >= 0 (0 = frictionless)",
                 ));
             }
-            let pinned = ct.load_introduction == LoadIntroduction::Pin;
+            let pinned = matches!(
+                ct.load_introduction,
+                LoadIntroduction::Pin | LoadIntroduction::Inserts
+            );
             if !pinned && (ct.pin_x.is_some() || ct.pin_offset.is_some()) {
                 return Err(bad(
                     "ct.pin_x/pin_offset",
                     format!("{:?}/{:?}", ct.pin_x, ct.pin_offset),
-                    "only with load_introduction = \"pin\"",
+                    "only with load_introduction = \"pin\" or \"inserts\"",
                 ));
             }
             if ct.load_introduction == LoadIntroduction::Glued && ct.friction != 0.0 {
@@ -974,6 +1035,56 @@ impl RunConfig {
                     ct.plate_thickness.to_string(),
                     "0 < plate_thickness < notch_width / 2 (mm)",
                 ));
+            }
+            let inserts = ct.load_introduction == LoadIntroduction::Inserts;
+            match (inserts, ct.insert_thickness) {
+                (false, Some(ti)) => {
+                    return Err(bad(
+                        "ct.insert_thickness",
+                        ti.to_string(),
+                        "only with load_introduction = \"inserts\"",
+                    ));
+                }
+                (true, None) => {
+                    return Err(bad(
+                        "ct.insert_thickness",
+                        "(missing)".into(),
+                        "the thickness of the steel inserts (mm), required with load_introduction = \
+                         \"inserts\"",
+                    ));
+                }
+                (true, Some(ti)) => {
+                    let h = self.grid.cell_size;
+                    let room = ct.notch_width - 2.0 * (ti + ct.plate_thickness);
+                    if !(ti >= h - 1e-9 && room >= h - 1e-9) {
+                        return Err(bad(
+                            "ct.insert_thickness",
+                            ti.to_string(),
+                            &format!(
+                                "at least one cell ({h} mm), with a cell left free between the two \
+                                 inserts and their plates: notch_width - 2 (insert_thickness + \
+                                 plate_thickness) >= cell_size (mm); here {room} mm"
+                            ),
+                        ));
+                    }
+                }
+                (false, None) => {}
+            }
+            if inserts {
+                if !density_ok(ct.insert_density) {
+                    return Err(bad(
+                        "ct.insert_density",
+                        ct.insert_density.to_string(),
+                        "a density > 0 (t/mm^3)",
+                    ));
+                }
+                ct.insert_material.build().map_err(|e| {
+                    bad(
+                        "ct.insert_material",
+                        format!("{:?}", ct.insert_material),
+                        &e.to_string(),
+                    )
+                })?;
             }
             if !density_ok(ct.density) {
                 return Err(bad(

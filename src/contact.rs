@@ -95,14 +95,8 @@ impl DeviceContact {
         }
     }
 
-    /// The block-row components of the normal and the tangential row and their signs: the normal
-    /// constraint takes the component in which `n` is largest, each row is signed so that its diagonal
-    /// entry is positive (pivoting-free factorisations need non-zero pivots).
     fn row_order(&self) -> ((usize, f64), (usize, f64)) {
-        let (n, t) = (self.normal, self.tangent());
-        let rn = if n.y.abs() > n.x.abs() { 1 } else { 0 };
-        let rt = 1 - rn;
-        ((rn, n[rn].signum()), (rt, t[rt].signum()))
+        row_order(self.normal)
     }
 
     /// Rewrites the residual block rows of the closed nodes (`r`: the physical residual, `nf` unknowns
@@ -283,6 +277,177 @@ impl DeviceContact {
             m += r.x * fi.y - r.y * fi.x;
         }
         (f, m)
+    }
+}
+
+/// The block-row components of the normal and the tangential row for the unit normal `n` and their
+/// signs: the normal constraint takes the component in which `n` is largest, each row is signed so that
+/// its diagonal entry is positive (pivoting-free factorisations need non-zero pivots).
+fn row_order(n: Vector2<f64>) -> ((usize, f64), (usize, f64)) {
+    let t = Vector2::new(-n.y, n.x);
+    let rn = if n.y.abs() > n.x.abs() { 1 } else { 0 };
+    let rt = 1 - rn;
+    ((rn, n[rn].signum()), (rt, t[rt].signum()))
+}
+
+/// One node of two-body grid contact in a step: the copies of a grid node in the velocity field of the
+/// specimen (`a`) and of another body (`b`), both active (`docs/theory.md`, "Contact between bodies").
+#[derive(Debug, Clone)]
+pub struct NodePair {
+    /// Grid node copies of the two fields (virtual node ids) and their active-node indices (block rows).
+    pub node_a: usize,
+    pub node_b: usize,
+    pub row_a: usize,
+    pub row_b: usize,
+    /// Unit normal from body `a` into body `b` (from the nodal mass gradients of the two fields).
+    pub normal: Vector2<f64>,
+    /// Gap between the bodies along the normal at the start of the step (mm), >= 0.
+    pub gap: f64,
+    /// Whether the normal constraint is active (frictionless: no tangential force when it is).
+    pub closed: bool,
+}
+
+impl NodePair {
+    /// Unit tangent `t = (-n_y, n_x)`.
+    pub fn tangent(&self) -> Vector2<f64> {
+        Vector2::new(-self.normal.y, self.normal.x)
+    }
+}
+
+/// Frictionless unilateral contact between the specimen's velocity field and the fields of other
+/// deformable bodies (multi-velocity-field grid contact after Bardenhagen et al. 2001, with the
+/// displacement gap of Nairn 2013), enforced with an active set settled within the step like
+/// [`DeviceContact`]. At a closed pair the four block rows `R_a`, `R_b` (the physical residuals of the
+/// two copies, i.e. the contact forces on the two bodies) become
+///
+/// ```text
+/// R_a + R_b = 0                       (the contact forces are equal and opposite: momentum)
+/// s (g + n . (du_b - du_a)) = 0       (no gap left, no penetration)
+/// t . R_b = 0                         (frictionless)
+/// ```
+///
+/// in the rows of copy `a` (both components) and of copy `b` (normal, tangential component). All are
+/// linear in the physical rows or in `du`, so the Jacobian stays exact; the two rows of a pair share
+/// their block columns (the assembler's pattern joins them), so the sum is formed entry by entry.
+/// A closed pair opens when the normal force on `b` pulls (`n . R_b < 0`), an open one closes when the
+/// bodies overlap (`g + n . (du_b - du_a) < 0`).
+#[derive(Debug, Clone, Default)]
+pub struct BodyContact {
+    /// The pairs of the step.
+    pub pairs: Vec<NodePair>,
+}
+
+impl BodyContact {
+    /// Rewrites the residual block rows of the closed pairs (`r`: the physical residual, `nf` unknowns
+    /// per node, `x` the iterate, `s` the row scale in MPa).
+    pub fn residual_rows(&self, x: &[f64], r: &mut [f64], nf: usize, s: f64) {
+        for c in self.pairs.iter().filter(|c| c.closed) {
+            let (n, t) = (c.normal, c.tangent());
+            let ((rn, sn), (rt, st)) = row_order(n);
+            let (a, b) = (c.row_a * nf, c.row_b * nf);
+            let dua = Vector2::new(x[a], x[a + 1]);
+            let dub = Vector2::new(x[b], x[b + 1]);
+            let rb = Vector2::new(r[b], r[b + 1]);
+            r[a] += rb.x;
+            r[a + 1] += rb.y;
+            r[b + rn] = sn * s * (c.gap + n.dot(&(dub - dua)));
+            r[b + rt] = st * t.dot(&rb);
+        }
+    }
+
+    /// Rewrites the Jacobian block rows of the closed pairs in place (`row_of` and `offset` as in
+    /// [`DeviceContact::jacobian_rows`]; the two rows of a pair have the same block columns).
+    pub fn jacobian_rows(
+        &self,
+        nf: usize,
+        s: f64,
+        row_of: impl Fn(usize) -> Option<(usize, usize, usize)>,
+        values: &mut [f64],
+        offset: impl Fn(usize, usize, usize, usize) -> usize,
+    ) {
+        for c in self.pairs.iter().filter(|c| c.closed) {
+            let (Some((sa, ncols, diag_a)), Some((sb, ncols_b, diag_b))) =
+                (row_of(c.row_a), row_of(c.row_b))
+            else {
+                continue;
+            };
+            debug_assert_eq!(
+                ncols, ncols_b,
+                "the rows of a contact pair share their columns"
+            );
+            let (n, t) = (c.normal, c.tangent());
+            let ((rn, sn), (rt, st)) = row_order(n);
+            for pos in 0..ncols {
+                for k in 0..nf {
+                    let (b0, b1) = (
+                        values[sb + offset(ncols, 0, pos, k)],
+                        values[sb + offset(ncols, 1, pos, k)],
+                    );
+                    values[sa + offset(ncols, 0, pos, k)] += b0;
+                    values[sa + offset(ncols, 1, pos, k)] += b1;
+                    values[sb + offset(ncols, rt, pos, k)] = st * (t.x * b0 + t.y * b1);
+                    values[sb + offset(ncols, rn, pos, k)] = 0.0;
+                }
+            }
+            for k in 0..2 {
+                values[sb + offset(ncols, rn, diag_b, k)] = sn * s * n[k];
+                values[sb + offset(ncols, rn, diag_a, k)] = -sn * s * n[k];
+            }
+        }
+    }
+
+    /// Projects the initial guess of the closed pairs onto their constraints, moving the two copies
+    /// against each other in inverse proportion to their masses (`mass(node)`, t) so that their
+    /// momentum is kept.
+    pub fn project_guess(&self, x: &mut [f64], nf: usize, mass: impl Fn(usize) -> f64) {
+        for c in self.pairs.iter().filter(|c| c.closed) {
+            let (a, b) = (c.row_a * nf, c.row_b * nf);
+            let n = c.normal;
+            let dua = Vector2::new(x[a], x[a + 1]);
+            let dub = Vector2::new(x[b], x[b + 1]);
+            let excess = c.gap + n.dot(&(dub - dua));
+            let (ma, mb) = (mass(c.node_a), mass(c.node_b));
+            let (wa, wb) = (mb / (ma + mb), ma / (ma + mb));
+            let (na, nb) = (dua + wa * excess * n, dub - wb * excess * n);
+            (x[a], x[a + 1], x[b], x[b + 1]) = (na.x, na.y, nb.x, nb.y);
+        }
+    }
+
+    /// Updates the statuses from a converged solve (`x` the solution, `phys` the physical residual):
+    /// pairs pulling by more than `force_tol` (N per mm thickness) open, open pairs overlapping by more
+    /// than `gap_tol` (mm) close. Returns the number of changes.
+    pub fn update(
+        &mut self,
+        x: &[f64],
+        phys: &[f64],
+        nf: usize,
+        force_tol: f64,
+        gap_tol: f64,
+    ) -> usize {
+        let mut changes = 0;
+        for c in &mut self.pairs {
+            let (a, b) = (c.row_a * nf, c.row_b * nf);
+            let next = if c.closed {
+                c.normal.dot(&Vector2::new(phys[b], phys[b + 1])) >= -force_tol
+            } else {
+                let rel = Vector2::new(x[b] - x[a], x[b + 1] - x[a + 1]);
+                c.gap + c.normal.dot(&rel) < -gap_tol
+            };
+            if next != c.closed {
+                c.closed = next;
+                changes += 1;
+            }
+        }
+        changes
+    }
+
+    /// The largest contact force of the closed pairs (N per mm thickness), the scale of the sign tests.
+    pub fn force_scale(&self, phys: &[f64], nf: usize) -> f64 {
+        self.pairs
+            .iter()
+            .filter(|c| c.closed)
+            .map(|c| Vector2::new(phys[c.row_b * nf], phys[c.row_b * nf + 1]).norm())
+            .fold(0.0, f64::max)
     }
 }
 

@@ -207,12 +207,14 @@ impl Grid {
         i + j * self.nx
     }
 
-    /// Lattice indices `(i, j)` of node `I`.
+    /// Lattice indices `(i, j)` of node `I`; the copy `I + f N` of node `I` in velocity field `f`
+    /// ([`ShapeTable::offset_fields`](crate::shape::ShapeTable::offset_fields)) maps to node `I`.
     pub fn node_ij(&self, node: usize) -> (usize, usize) {
+        let node = node % self.num_nodes();
         (node % (self.nx + 1), node / (self.nx + 1))
     }
 
-    /// Position `x_I` of node `I` (mm).
+    /// Position `x_I` of node `I` (mm), also of its copies in other velocity fields.
     pub fn node_position(&self, node: usize) -> Vector2<f64> {
         let (i, j) = self.node_ij(node);
         self.origin + Vector2::new(i as f64, j as f64) * self.h

@@ -101,6 +101,11 @@ pub struct Setup {
     pub particles: Particles,
     /// One constitutive law per body tag.
     pub materials: Vec<Material>,
+    /// The velocity field of each body tag on the grid (multi-velocity-field contact): bodies of field
+    /// 0 share the grid's nodes (bonded), a body of a field `f >= 1` has its own copies of the nodes and
+    /// meets the bodies of field 0 through frictionless unilateral contact (`docs/theory.md`, "Contact
+    /// between bodies"). Empty: every body on field 0.
+    pub fields: Vec<u16>,
     /// Interpolator.
     pub shape: ShapeKind,
     /// Time integration.
@@ -146,6 +151,7 @@ impl Setup {
             grid,
             particles,
             materials,
+            fields: Vec::new(),
             shape,
             time,
             body_force: Vector2::zeros(),
@@ -168,6 +174,8 @@ pub struct Model {
     pub grid: Grid,
     /// One constitutive law per body tag.
     pub materials: Vec<Material>,
+    /// The velocity field of each body tag (one entry per material; see [`Setup::fields`]).
+    pub fields: Vec<u16>,
     /// Interpolator.
     pub shape: ShapeKind,
     /// Time integration.
@@ -213,6 +221,21 @@ impl Model {
         FieldLayout::new(2, self.materials.iter().any(Material::is_nonlocal))
     }
 
+    /// Number of velocity fields (1 without contact between deformable bodies).
+    pub fn num_fields(&self) -> usize {
+        self.fields
+            .iter()
+            .map(|&f| f as usize + 1)
+            .max()
+            .unwrap_or(1)
+    }
+
+    /// Grid node copies over all fields: field `f`'s copy of grid node `I` is node `I + f N` (the
+    /// node ids of the shape-function table, the grid state and the unknowns).
+    pub fn field_nodes(&self) -> usize {
+        self.grid.num_nodes() * self.num_fields()
+    }
+
     /// Names of the constraint sets in report order: node boxes, rigid bodies, loads.
     pub fn set_names(&self) -> Vec<String> {
         self.boxes
@@ -252,6 +275,9 @@ pub struct State {
     /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step
     /// (the first guess of the next step's active set).
     pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
+    /// The closed pairs of contact between bodies at the end of the last step (the other body's node
+    /// copies, sorted): with the predicted overlap, the first guess of the next step's active set.
+    pub closed_pairs: Vec<usize>,
     /// FEM mode: the nodal velocity and acceleration carried to the next step (None in MPM mode and
     /// before the first step).
     pub fem_nodal: Option<NodalState>,
@@ -275,6 +301,7 @@ impl State {
             rotations: vec![0.0; nrigid],
             rotation_rates: vec![0.0; nrigid],
             contact_statuses: vec![Vec::new(); nrigid],
+            closed_pairs: Vec::new(),
             fem_nodal: None,
         }
     }
@@ -292,6 +319,7 @@ impl State {
             rotations: self.rotations.clone(),
             rotation_rates: self.rotation_rates.clone(),
             contact_statuses: self.contact_statuses.clone(),
+            closed_pairs: self.closed_pairs.clone(),
         }
     }
 
@@ -312,6 +340,7 @@ impl State {
         self.rotation_rates.resize(nr, 0.0);
         self.contact_statuses = c.contact_statuses;
         self.contact_statuses.resize(nr, Vec::new());
+        self.closed_pairs = c.closed_pairs;
     }
 }
 
@@ -343,6 +372,10 @@ pub struct Counters {
     /// first guess of the next step's active set, so that a resumed run takes the same steps.
     #[serde(default)]
     pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
+    /// The closed pairs of contact between bodies at the end of the last step (see
+    /// [`State::closed_pairs`]).
+    #[serde(default)]
+    pub closed_pairs: Vec<usize>,
 }
 
 /// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.

@@ -105,6 +105,8 @@ struct BodyDef {
     density: f64,
     material: Material,
     velocity: Vector2<f64>,
+    /// Its own velocity field (contact with the specimen) instead of the specimen's.
+    own_field: bool,
 }
 
 /// The run described by `cfg` (options prefix: none, so plain `-snes_*` options apply).
@@ -139,6 +141,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
                     source,
                 })?,
             velocity: Vector2::zeros(),
+            own_field: false,
         });
         let [a, b] = ct.load_zone;
         let [sa, sb] = ct.support_zone.unwrap_or(ct.load_zone);
@@ -167,18 +170,53 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
                 friction: ct.friction,
                 pin: None,
             }),
-            LoadIntroduction::Pin => Some(ContactSection {
+            LoadIntroduction::Pin | LoadIntroduction::Inserts => Some(ContactSection {
                 normal,
                 friction: ct.friction,
                 pin: Some(pin),
             }),
         };
+        // Steel inserts on the notch faces, each on its own velocity field; the plates then push on the
+        // inserts' inner faces.
+        let ti = match ct.load_introduction {
+            LoadIntroduction::Inserts => ct.insert_thickness.unwrap_or(0.0),
+            _ => 0.0,
+        };
+        let (load_face, support_face) = (lower + ti, upper - ti);
+        let mut acts_on = [None, None];
+        if ti > 0.0 {
+            for (k, (name, min, max)) in [
+                ("loading_insert", [a, lower], [b, load_face]),
+                ("support_insert", [sa, support_face], [sb, upper]),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                bodies.push(BodyDef {
+                    name: name.into(),
+                    geometry: Geometry {
+                        include: vec![Region::Rect { min, max }],
+                        exclude: vec![],
+                    },
+                    density: ct.insert_density,
+                    material: ct.insert_material.build().map_err(|source| {
+                        ScenarioError::Material {
+                            what: "ct.insert_material".into(),
+                            source,
+                        }
+                    })?,
+                    velocity: Vector2::zeros(),
+                    own_field: true,
+                });
+                acts_on[k] = Some(name.to_string());
+            }
+        }
         rigid_defs.push(RigidBodySection {
             name: "loading_plate".into(),
             geometry: Geometry {
                 include: vec![Region::Rect {
-                    min: [a, lower],
-                    max: [b, lower + t],
+                    min: [a, load_face],
+                    max: [b, load_face + t],
                 }],
                 exclude: vec![],
             },
@@ -187,15 +225,16 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             rise_time: ct.rise_time,
             contact: contact(
                 [0.0, -1.0],
-                [ct.pin_x.unwrap_or(0.5 * (a + b)), lower + offset],
+                [ct.pin_x.unwrap_or(0.5 * (a + b)), load_face + offset],
             ),
+            acts_on: acts_on[0].clone(),
         });
         rigid_defs.push(RigidBodySection {
             name: "support_plate".into(),
             geometry: Geometry {
                 include: vec![Region::Rect {
-                    min: [sa, upper - t],
-                    max: [sb, upper],
+                    min: [sa, support_face - t],
+                    max: [sb, support_face],
                 }],
                 exclude: vec![],
             },
@@ -204,8 +243,9 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             rise_time: ct.rise_time,
             contact: contact(
                 [0.0, 1.0],
-                [ct.pin_x.unwrap_or(0.5 * (sa + sb)), upper - offset],
+                [ct.pin_x.unwrap_or(0.5 * (sa + sb)), support_face - offset],
             ),
+            acts_on: acts_on[1].clone(),
         });
     }
     for (i, b) in cfg.body.iter().enumerate() {
@@ -221,7 +261,23 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
                     source,
                 })?,
             velocity: Vector2::new(b.initial_velocity[0], b.initial_velocity[1]),
+            own_field: b.own_field,
         });
+    }
+    // Velocity fields: 0 for the specimen and the bodies bonded to it, 1, 2, ... for the bodies with
+    // their own (in order).
+    let mut fields = Vec::with_capacity(bodies.len());
+    let mut field_of = std::collections::HashMap::new();
+    for body in &bodies {
+        let f = if body.own_field {
+            field_of.len() as u16 + 1
+        } else {
+            0
+        };
+        if body.own_field {
+            field_of.insert(body.name.clone(), f);
+        }
+        fields.push(f);
     }
     let mut particles = Particles::new();
     let mut materials = Vec::new();
@@ -267,6 +323,11 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             name: r.name.clone(),
             motion: [r.x.motion(), r.y.motion()],
             rise_time: r.rise_time,
+            field: r
+                .acts_on
+                .as_ref()
+                .and_then(|name| field_of.get(name).copied())
+                .unwrap_or(0),
             contact: r.contact.as_ref().map(|c| Contact {
                 normal: Vector2::from(c.normal).normalize(),
                 friction: c.friction,
@@ -314,6 +375,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         grid,
         particles,
         materials,
+        fields,
         shape: cfg.shape.kind,
         time: TimeIntegration {
             dt: t.dt,

@@ -7,8 +7,8 @@
 
 use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
 use crate::boundary::{Motion, prescribed_acceleration, prescribed_increment};
-use crate::contact::{self, ContactNode, DeviceContact, NodeStatus};
-use crate::dofs::DofMap;
+use crate::contact::{self, BodyContact, ContactNode, DeviceContact, NodePair, NodeStatus};
+use crate::dofs::{DofMap, INACTIVE};
 use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
 use crate::model::{FemReference, InitialAcceleration, Method, Model, Setup, State};
@@ -158,6 +158,8 @@ pub struct Workspace {
     grid_state: GridState,
     /// The unknowns and their constraints.
     dofs: DofMap,
+    /// Per node copy, its partner in contact between bodies ([`INACTIVE`]: none; empty: one field).
+    partners: Vec<u32>,
     assembler: Assembler,
     /// PETSc objects reused while the pattern does not change.
     system: Option<LinearSystem>,
@@ -203,6 +205,8 @@ struct StepPlan {
     /// Per rigid body, its contact with the specimen (`None` without contact) and its face length (mm).
     devices: Vec<Option<DeviceContact>>,
     face_lengths: Vec<f64>,
+    /// Contact between the specimen and bodies of other velocity fields.
+    bodies: BodyContact,
     /// Inertia and applied forces of the step, and the nodes of each load.
     loading: Loading,
     load_nodes: LoadNodes,
@@ -250,6 +254,8 @@ struct StepProblem<'a, 'b> {
     jacobians: usize,
     /// The contact devices of the step (closed nodes get constraint rows).
     contact: &'a [Option<DeviceContact>],
+    /// Contact between bodies (closed pairs get constraint rows).
+    bodies: &'a BodyContact,
     /// Scale of the constraint rows (MPa).
     row_scale: f64,
     /// The block rows this process owns.
@@ -279,6 +285,7 @@ impl NonlinearProblem for StepProblem<'_, '_> {
             for d in contact.iter().flatten() {
                 d.residual_rows(&xs, r, nf, s);
             }
+            self.bodies.residual_rows(&xs, r, nf, s);
             f.write(|out| out.copy_from_slice(&r[owned.scalars()]))
                 .map_err(fatal)
         });
@@ -294,7 +301,7 @@ impl NonlinearProblem for StepProblem<'_, '_> {
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let xs = owned.gather(x).map_err(fatal)?;
         agree(self.session, asm.evaluate_owned(input, &xs))?;
-        let (contact, s) = (self.contact, self.row_scale);
+        let (contact, bodies, s) = (self.contact, self.bodies, self.row_scale);
         let (pattern, own) = (owned.pattern(), owned.rows.clone());
         let r = jac
             .fill_block_rows(&pattern, |values, layout| {
@@ -313,6 +320,9 @@ impl NonlinearProblem for StepProblem<'_, '_> {
                         layout.offset(ncols, nf, i, pos, k)
                     });
                 }
+                bodies.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
+                    layout.offset(ncols, nf, i, pos, k)
+                });
             })
             .map_err(fatal);
         self.assembly_time += t.elapsed().as_secs_f64();
@@ -537,6 +547,7 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
         grid,
         mut particles,
         materials,
+        fields,
         shape,
         time,
         body_force,
@@ -558,6 +569,32 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
             "{} rigid bodies but {} sets of rigid-body points",
             rigid.len(),
             rigid_points.len()
+        )));
+    }
+    let fields = if fields.is_empty() {
+        vec![0; materials.len()]
+    } else {
+        fields
+    };
+    if fields.len() != materials.len() {
+        return Err(StepError::Setup(format!(
+            "{} velocity fields for {} materials (one per body tag)",
+            fields.len(),
+            materials.len()
+        )));
+    }
+    let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
+    if nfields > 1 && (shape == ShapeKind::Cpdi2 || method == Method::Fem) {
+        return Err(StepError::Setup(
+            "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
+             GIMP, CPDI1 or B-spline interpolator (CPDI2 moves its corners on one field)"
+                .into(),
+        ));
+    }
+    if let Some(rb) = rigid.iter().find(|r| r.field as usize >= nfields) {
+        return Err(StepError::Setup(format!(
+            "rigid body `{}` acts on velocity field {}, but the bodies use {nfields}",
+            rb.name, rb.field
         )));
     }
     let stride = materials.iter().map(|m| m.history_len()).max().unwrap_or(0);
@@ -613,6 +650,7 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
     let model = Model {
         grid,
         materials,
+        fields,
         shape,
         time,
         body_force,
@@ -769,6 +807,7 @@ impl Step<'_> {
         dofs: &'a DofMap,
         grid_state: &'a GridState,
         loading: &'a Loading,
+        partners: &'a [u32],
     ) -> StepInput<'a> {
         StepInput {
             table,
@@ -782,6 +821,7 @@ impl Step<'_> {
             body_force: model.body_force * loading.load_factor,
             nodal_force: &loading.nodal_force,
             row_scale: row_scale(&model.materials),
+            partners,
         }
     }
 
@@ -794,6 +834,13 @@ impl Step<'_> {
         dt: f64,
         prefix: Option<&str>,
     ) -> Result<StepPlan, StepError> {
+        if session.size() > 1 && self.m.num_fields() > 1 {
+            return Err(StepError::Setup(
+                "contact between bodies (a body with its own velocity field) runs on one process: \
+                 its contact rows combine the rows of two node copies, which a process may not both own"
+                    .into(),
+            ));
+        }
         self.project_to_grid()?;
         // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
         let set_du =
@@ -815,6 +862,7 @@ impl Step<'_> {
             })
             .collect();
         let (devices, face_lengths) = self.contact_devices(&translations, &pins, &dtheta, dt);
+        let bodies = self.body_pairs(&devices, dt)?;
         let t_new = self.st.time + dt;
         // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
         let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
@@ -840,6 +888,7 @@ impl Step<'_> {
             dtheta,
             devices,
             face_lengths,
+            bodies,
             loading: Loading {
                 newmark,
                 load_factor,
@@ -856,6 +905,7 @@ impl Step<'_> {
             &self.ws.dofs,
             &self.ws.grid_state,
             &plan.loading,
+            &self.ws.partners,
         );
         self.ws.assembler.begin_step(&input);
         // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged.
@@ -919,6 +969,8 @@ impl Step<'_> {
             for d in plan.devices.iter().flatten() {
                 d.project_guess(&mut xs, nf);
             }
+            let mass = &self.ws.grid_state.mass;
+            plan.bodies.project_guess(&mut xs, nf, |node| mass[node]);
         }
         owned.scatter(&xs, x)?;
         Ok(StepPlan {
@@ -946,10 +998,12 @@ impl Step<'_> {
             grid_state,
             assembler,
             system,
+            partners,
             ..
         } = &mut *self.ws;
         let StepPlan {
             devices,
+            bodies,
             dtheta,
             pins,
             translations,
@@ -957,7 +1011,7 @@ impl Step<'_> {
             loading,
             ..
         } = plan;
-        let input = Self::step_input(s, particles, table, dofs, grid_state, loading);
+        let input = Self::step_input(s, particles, table, dofs, grid_state, loading, partners);
         let grid = &s.grid;
         let nf = dofs.fields();
         let n = dofs.len();
@@ -991,6 +1045,7 @@ impl Step<'_> {
                 residuals: 0,
                 jacobians: 0,
                 contact: devices.as_slice(),
+                bodies,
                 row_scale: input.row_scale,
                 owned,
                 session,
@@ -1025,7 +1080,8 @@ impl Step<'_> {
                     ),
                 }));
             }
-            if info_total.is_none() && devices.iter().any(Option::is_some) {
+            let in_contact = devices.iter().any(Option::is_some) || !bodies.pairs.is_empty();
+            if info_total.is_none() && in_contact {
                 // Re-solves after a change of the contact active set are held to the step's own standard,
                 // `|R| <= max(atol, rtol |R_0|)` with `R_0` the residual at the start of the first solve,
                 // rather than to `rtol` times their own (often tiny) initial residual. Where the
@@ -1054,7 +1110,7 @@ impl Step<'_> {
                     t
                 }
             });
-            if devices.iter().all(Option::is_none) {
+            if !in_contact {
                 break;
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
@@ -1067,17 +1123,22 @@ impl Step<'_> {
                 .flat_map(|d| d.nodes.iter())
                 .filter(|c| c.status.closed())
                 .map(|c| Vector2::new(phys[c.row * nf], phys[c.row * nf + 1]).norm())
-                .fold(0.0, f64::max);
-            let (force_tol, gap_tol) = (1e-9 * force_scale.max(1e-300), 1e-9 * h);
+                .fold(bodies.force_scale(&phys, nf), f64::max);
+            let (force_tol, gap_tol) = (1e-6 * force_scale.max(1e-300), 1e-6 * h);
             let mut changes = 0;
             if !frozen {
                 for d in devices.iter_mut().flatten() {
                     changes += d.update(&xs, &phys, nf, force_tol, gap_tol);
                 }
+                changes += bodies.update(&xs, &phys, nf, force_tol, gap_tol);
                 let statuses: Vec<NodeStatus> = devices
                     .iter()
                     .flatten()
                     .flat_map(|d| d.nodes.iter().map(|c| c.status))
+                    .chain(bodies.pairs.iter().map(|c| match c.closed {
+                        true => NodeStatus::Slide,
+                        false => NodeStatus::Open,
+                    }))
                     .collect();
                 if changes > 0 && seen.contains(&statuses) {
                     // A cycle of sets: keep the current one (only the pin rotations may still change).
@@ -1097,8 +1158,11 @@ impl Step<'_> {
                 };
                 let (f, m) = d.resultant(&phys, nf, |i| grid.node_position(i), pin);
                 // Balanced to 1e-5 of the force times the face length (the resultant within 1e-5 of the
-                // face length from the pin).
-                let tol = 1e-5 * f.norm() * face_lengths[k] + 1e-12;
+                // face length from the pin), the force taken at least as `1e-4 s h` (a strain of 1e-4
+                // over one cell): a device that barely touches (a support the wave has not reached, a
+                // plate the arm flies away from) has a moment of round-off, discontinuous in `dtheta`
+                // as nodes open and close, which the secant would chase until the step fails.
+                let tol = 1e-5 * f.norm().max(1e-4 * input.row_scale * h) * face_lengths[k] + 1e-12;
                 if m.abs() <= tol || d.nodes.iter().all(|c| !c.status.closed()) {
                     continue;
                 }
@@ -1133,6 +1197,7 @@ impl Step<'_> {
             for d in devices.iter().flatten() {
                 d.project_guess(&mut xs, nf);
             }
+            bodies.project_guess(&mut xs, nf, |node| grid_state.mass[node]);
             owned.scatter(&xs, x)?;
         }
 
@@ -1169,6 +1234,7 @@ impl Step<'_> {
             pins,
             dtheta,
             devices,
+            bodies,
             load_nodes,
             loading:
                 Loading {
@@ -1209,7 +1275,7 @@ impl Step<'_> {
                 reactions[s.boxes.len() + k] = [f.x, f.y];
             }
         }
-        let nodes = grid.num_nodes();
+        let nodes = s.field_nodes();
         let du_nodes = self.ws.assembler.nodal_du().to_vec();
         let mut acc_nodes = vec![Vector2::zeros(); nodes];
         if let Some(nm) = newmark {
@@ -1254,6 +1320,27 @@ impl Step<'_> {
                     reactions[first + k][0] += f.x;
                     reactions[first + k][1] += f.y;
                 }
+            }
+            // Closed pairs between bodies leave the step with one normal velocity, the mass-weighted mean
+            // of the two copies' (the same perfectly inelastic impact); the two corrections are equal
+            // and opposite impulses, so the momentum of the pair is kept.
+            let gs = &self.ws.grid_state;
+            for c in bodies.pairs.iter().filter(|c| c.closed) {
+                let n = c.normal;
+                let normal_velocity = |node: usize, acc: &Vector2<f64>| {
+                    n.dot(
+                        &(gs.velocity[node]
+                            + dt * ((1.0 - nm.gamma) * gs.acceleration[node] + nm.gamma * acc)),
+                    )
+                };
+                let (va, vb) = (
+                    normal_velocity(c.node_a, &acc_nodes[c.node_a]),
+                    normal_velocity(c.node_b, &acc_nodes[c.node_b]),
+                );
+                let (ma, mb) = (gs.mass[c.node_a], gs.mass[c.node_b]);
+                let common = (ma * va + mb * vb) / (ma + mb);
+                acc_nodes[c.node_a] += n * ((common - va) / (nm.gamma * dt));
+                acc_nodes[c.node_b] += n * ((common - vb) / (nm.gamma * dt));
             }
         }
         // Work of the constraints (trapezoidal in the set's reaction; every node of a set moves by the same
@@ -1353,6 +1440,13 @@ impl Step<'_> {
                 self.st.contact_statuses[k] = d.nodes.iter().map(|c| (c.node, c.status)).collect();
             }
         }
+        self.st.closed_pairs = bodies
+            .pairs
+            .iter()
+            .filter(|c| c.closed)
+            .map(|c| c.node_b)
+            .collect();
+        self.st.closed_pairs.sort_unstable();
         for (acc, du) in self.st.accumulated.iter_mut().zip(&displacements) {
             acc[0] += du[0];
             acc[1] += du[1];
@@ -1426,6 +1520,13 @@ impl Step<'_> {
             None => self.ws.table.compute(s.shape, &s.grid, ps)?,
             Some(fem) => self.ws.table.push_forward(&fem.points, &ps.f)?,
         }
+        let fields = s.num_fields();
+        if fields > 1 {
+            let (nodes, body) = (s.grid.num_nodes(), &ps.body);
+            self.ws
+                .table
+                .offset_fields(nodes, fields, |p| s.fields[body[p] as usize] as usize);
+        }
         transfer::particles_to_grid(
             &self.ws.table,
             ps,
@@ -1469,7 +1570,8 @@ impl Step<'_> {
         let mut sets: Vec<Vec<usize>> = Vec::new();
         for (b, du) in s.boxes.iter().zip(values) {
             let mut dofs_of_set = Vec::new();
-            for node in 0..grid.num_nodes() {
+            // A box holds every body's copy of its nodes.
+            for node in 0..s.field_nodes() {
                 let x = grid.node_position(node);
                 let inside = (0..2).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
                 if let (true, Some(a)) = (inside, self.ws.dofs.active_index(node)) {
@@ -1501,15 +1603,18 @@ impl Step<'_> {
                 }
             };
             let mut dofs_of_set = Vec::new();
+            // The copies of the nodes in the velocity field the body holds.
+            let shift = rb.field as usize * grid.num_nodes();
             for p in 0..points.len() {
                 for w in rt.weights(p) {
                     if w.value <= 0.0 {
                         continue;
                     }
-                    if let Some(a) = self.ws.dofs.active_index(w.node as usize) {
+                    let node = w.node as usize + shift;
+                    if let Some(a) = self.ws.dofs.active_index(node) {
                         for (c, d) in du.iter().enumerate() {
                             if let Some(d) = d {
-                                self.ws.dofs.constrain(w.node as usize, c, *d);
+                                self.ws.dofs.constrain(node, c, *d);
                                 dofs_of_set.push(a * nf + c);
                             }
                         }
@@ -1551,7 +1656,7 @@ impl Step<'_> {
         let nf = self.ws.dofs.fields();
         let mut devices = Vec::with_capacity(s.rigid.len());
         let mut lengths = Vec::with_capacity(s.rigid.len());
-        let mut index = vec![usize::MAX; grid.num_nodes()];
+        let mut index = vec![usize::MAX; s.field_nodes()];
         for (k, rb) in s.rigid.iter().enumerate() {
             let Some(c) = &rb.contact else {
                 devices.push(None);
@@ -1580,7 +1685,8 @@ impl Step<'_> {
                 let node = node as usize;
                 let x = grid.node_position(node);
                 let tx = t.dot(&x);
-                if (n.dot(&x) - cf).abs() > 0.5 * h + 1e-9
+                if node / grid.num_nodes() != rb.field as usize
+                    || (n.dot(&x) - cf).abs() > 0.5 * h + 1e-9
                     || tx < lo[1] - 1e-9
                     || tx > hi[1] + 1e-9
                     || (0..2).any(|c| self.ws.dofs.is_constrained(a * nf + c))
@@ -1653,6 +1759,116 @@ impl Step<'_> {
             lengths.push(hi[1] - lo[1]);
         }
         (devices, lengths)
+    }
+
+    /// The contact pairs between the specimen (field 0) and the bodies of other velocity fields at the
+    /// start of the step (`docs/theory.md`, "Contact between bodies"), and the partner of every node copy
+    /// in `Workspace::partners` (for the pattern). A pair is a grid node whose copies in field 0 and in
+    /// one other field are both active and free (no constraint, no device); its normal points from the
+    /// specimen into the other body along the difference of the fields' nodal mass gradients
+    /// `sum_p m_p grad S_Ip` (which point out of a body: the specimen's minus the other's), its gap is the distance along the normal from the farthest corner of the
+    /// specimen's points to the nearest corner of the other body's points that interpolate to the node
+    /// (held at 0 when they overlap, as for the devices). A pair starts closed if the predicted increments
+    /// `dt v_I + dt^2/2 a_I` of its copies overlap, or if it touches and was closed at the end of the
+    /// last step.
+    fn body_pairs(
+        &mut self,
+        devices: &[Option<DeviceContact>],
+        dt: f64,
+    ) -> Result<BodyContact, StepError> {
+        let s = self.m;
+        let fields = s.num_fields();
+        self.ws.partners.clear();
+        if fields == 1 {
+            return Ok(BodyContact::default());
+        }
+        let grid = &s.grid;
+        let (nodes, all, h) = (grid.num_nodes(), s.field_nodes(), grid.cell_size());
+        let (p, table, dofs) = (&self.st.particles, &self.ws.table, &self.ws.dofs);
+        let nf = dofs.fields();
+        let mut grad_m = vec![Vector2::zeros(); all];
+        for q in 0..p.len() {
+            for w in table.weights(q) {
+                grad_m[w.node as usize] += p.mass[q] * w.grad;
+            }
+        }
+        let mut taken = vec![false; all];
+        for c in devices.iter().flatten().flat_map(|d| &d.nodes) {
+            taken[c.node] = true;
+        }
+        let free = |node: usize| {
+            dofs.active_index(node)
+                .filter(|&a| !taken[node] && (0..2).all(|c| !dofs.is_constrained(a * nf + c)))
+        };
+        let mut pairs = Vec::new();
+        let mut pair_of = vec![usize::MAX; all];
+        for i in 0..nodes {
+            if dofs.active_index(i).is_none() {
+                continue;
+            }
+            let mut others = (1..fields)
+                .map(|f| i + f * nodes)
+                .filter(|&b| dofs.active_index(b).is_some());
+            let Some(b) = others.next() else { continue };
+            if others.next().is_some() {
+                let x = grid.node_position(i);
+                return Err(StepError::Setup(format!(
+                    "the grid node at ({:.3}, {:.3}) mm carries the specimen and two other bodies: \
+                     contact is between the specimen and one body per node; keep the other bodies at \
+                     least two cells apart",
+                    x.x, x.y
+                )));
+            }
+            let (Some(row_a), Some(row_b)) = (free(i), free(b)) else {
+                continue;
+            };
+            // `sum_p m_p grad S_Ip` points out of a body at its boundary nodes.
+            let g = grad_m[i] - grad_m[b];
+            if g.norm() == 0.0 {
+                continue;
+            }
+            pair_of[i] = pairs.len();
+            pair_of[b] = pairs.len();
+            pairs.push(NodePair {
+                node_a: i,
+                node_b: b,
+                row_a,
+                row_b,
+                normal: g / g.norm(),
+                gap: 0.0,
+                closed: false,
+            });
+        }
+        let mut far_a = vec![f64::NEG_INFINITY; pairs.len()];
+        let mut near_b = vec![f64::INFINITY; pairs.len()];
+        for q in 0..p.len() {
+            for w in table.weights(q) {
+                let k = pair_of[w.node as usize];
+                if w.value <= 1e-12 || k == usize::MAX {
+                    continue;
+                }
+                let n = pairs[k].normal;
+                let along = p.corners[q].iter().map(|c| n.dot(c));
+                if w.node as usize == pairs[k].node_a {
+                    far_a[k] = along.fold(far_a[k], f64::max);
+                } else {
+                    near_b[k] = along.fold(near_b[k], f64::min);
+                }
+            }
+        }
+        self.ws.partners.resize(all, INACTIVE);
+        let gs = &self.ws.grid_state;
+        let predicted =
+            |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
+        for (k, c) in pairs.iter_mut().enumerate() {
+            c.gap = (near_b[k] - far_a[k]).max(0.0);
+            let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
+            let was_closed = self.st.closed_pairs.binary_search(&c.node_b).is_ok();
+            c.closed = overlap < -1e-9 * h || (c.gap <= 1e-9 * h && was_closed);
+            self.ws.partners[c.node_a] = c.node_b as u32;
+            self.ws.partners[c.node_b] = c.node_a as u32;
+        }
+        Ok(BodyContact { pairs })
     }
 
     /// The loads at time `t` on the active nodes: the nodal forces (one per grid node; empty without
@@ -1737,6 +1953,7 @@ impl Step<'_> {
             &self.ws.dofs,
             &self.ws.grid_state,
             &loading,
+            &[],
         );
         self.ws.assembler.begin_step(&input);
         let mut x = vec![0.0; self.ws.dofs.len()];
@@ -1749,7 +1966,7 @@ impl Step<'_> {
         // R = f_int - f_ext at du = 0 (no inertia), unbalanced forces in the constrained rows too.
         let mut r = vec![0.0; x.len()];
         self.ws.assembler.residual(&input, &x, &mut r, true)?;
-        let mut acc = vec![Vector2::zeros(); s.grid.num_nodes()];
+        let mut acc = vec![Vector2::zeros(); s.field_nodes()];
         for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
             let m = self.ws.grid_state.mass[node];

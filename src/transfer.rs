@@ -232,13 +232,14 @@ pub fn particles_to_grid(
     }
     check_len("the shape table", particles.len(), table.len())?;
     let (m, v, a) = (&particles.mass, &particles.v, &particles.a);
+    // All node copies of the table's velocity fields.
+    let nodes = grid.num_nodes() * table.fields();
     state
         .scatter
-        .scatter(table, grid.num_nodes(), &mut state.sums, |p, w| {
+        .scatter(table, nodes, &mut state.sums, |p, w| {
             let mp = w.value * m[p];
             [mp, mp * v[p].x, mp * v[p].y, mp * a[p].x, mp * a[p].y]
         });
-    let nodes = grid.num_nodes();
     let max_mass = state.sums.iter().fold(0.0_f64, |mx, s| mx.max(s[0]));
     let threshold = relative_tolerance * max_mass;
     state.mass.resize(nodes, 0.0);
@@ -300,12 +301,11 @@ pub fn grid_to_particles(
 ) -> Result<(), TransferError> {
     let kind = table.kind().ok_or(TransferError::NoShapeTable)?;
     check_len("the shape table", particles.len(), table.len())?;
-    check_len("du", grid.num_nodes(), solution.du.len())?;
-    check_len(
-        "the nodal acceleration",
-        grid.num_nodes(),
-        solution.acceleration.len(),
-    )?;
+    let nodes = grid.num_nodes() * table.fields();
+    check_len("du", nodes, solution.du.len())?;
+    check_len("the nodal acceleration", nodes, solution.acceleration.len())?;
+    // CPDI2 moves the corners with the grid's hat functions of field 0 (the solver rejects CPDI2 with
+    // several fields).
     let track_corners = kind == ShapeKind::Cpdi2;
     if track_corners {
         let outside = particles

@@ -109,6 +109,7 @@ fn fd_check(
         body_force: Vector2::new(0.0, -9810.0),
         nodal_force: &[],
         row_scale: 3e4,
+        partners: &[],
     };
     let mut asm = Assembler::new();
     asm.begin_step(&input);

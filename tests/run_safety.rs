@@ -185,6 +185,26 @@ fn bad_input_is_refused_before_anything_is_written() {
             ],
         ),
         (
+            vec!["--set", "ct.load_introduction=\"inserts\""],
+            vec![],
+            vec!["tiny.toml", "ct.insert_thickness", "(missing)", "required"],
+        ),
+        (
+            vec![
+                "--set",
+                "ct.load_introduction=\"inserts\"",
+                "--set",
+                "ct.insert_thickness=2.0",
+            ],
+            vec![],
+            vec![
+                "ct.insert_thickness",
+                "2",
+                "at least one cell (4 mm)",
+                "notch_width - 2 (insert_thickness + plate_thickness) >= cell_size",
+            ],
+        ),
+        (
             vec!["--set", "grid.cell_sise=2.0"],
             vec![],
             vec!["tiny.toml", "cell_sise"],

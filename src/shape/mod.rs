@@ -257,6 +257,8 @@ pub struct ShapeTable {
     stride: usize,
     weights: Vec<Weight>,
     counts: Vec<u8>,
+    /// Velocity fields of the node ids (0 or 1: one).
+    fields: usize,
 }
 
 impl ShapeTable {
@@ -278,6 +280,12 @@ impl ShapeTable {
     /// The interpolator of the last successful [`ShapeTable::compute`].
     pub fn kind(&self) -> Option<ShapeKind> {
         self.kind
+    }
+
+    /// Velocity fields the supports map onto (1 unless [`ShapeTable::offset_fields`] moved them): the
+    /// node ids run over `fields` copies of the grid's nodes.
+    pub fn fields(&self) -> usize {
+        self.fields.max(1)
     }
 
     /// Entries reserved per point.
@@ -313,6 +321,7 @@ impl ShapeTable {
             ShapeKind::Cpdi2 => self.fill(&Cpdi2, grid, particles),
             ShapeKind::Bspline2 => self.fill(&Bspline2, grid, particles),
         };
+        self.fields = 1;
         match result {
             Ok(()) => self.kind = Some(kind),
             Err(_) => {
@@ -341,6 +350,7 @@ impl ShapeTable {
             });
         }
         self.kind = reference.kind;
+        self.fields = reference.fields;
         self.stride = reference.stride;
         self.counts.clone_from(&reference.counts);
         self.weights
@@ -363,6 +373,28 @@ impl ShapeTable {
                 }
             });
         Ok(())
+    }
+
+    /// Moves every point's support onto the node copies of its velocity field (multi-velocity-field
+    /// contact): node `I` of a point `p` of field `f = field(p) < fields` becomes `I + f nodes`, with
+    /// `nodes` the number of grid nodes.
+    pub fn offset_fields(
+        &mut self,
+        nodes: usize,
+        fields: usize,
+        field: impl Fn(usize) -> usize + Sync,
+    ) {
+        self.fields = fields.max(1);
+        let stride = self.stride.max(1);
+        self.weights
+            .par_chunks_mut(stride)
+            .enumerate()
+            .for_each(|(p, ws)| {
+                let shift = (field(p) * nodes) as u32;
+                if shift > 0 {
+                    ws.iter_mut().for_each(|w| w.node += shift);
+                }
+            });
     }
 
     fn fill<I: Interpolator>(
