@@ -467,20 +467,22 @@ pub struct CtSection {
     /// the upper one.
     #[serde(default)]
     pub symmetric: bool,
-    /// How the plates act on the notch faces: "glued" (default), "contact" or "pin".
+    /// How the plates act on the notch faces: "glued" (default), "contact", "pin" or "inserts".
     #[serde(default)]
     pub load_introduction: LoadIntroduction,
-    /// Coulomb friction coefficient between the plates and the concrete (-), for "contact" and "pin";
+    /// Coulomb friction coefficient between the plates and what they push (-): the concrete for
+    /// "contact" and "pin", the inserts for "inserts" (whose contact with the concrete is frictionless);
     /// default 0 (frictionless).
     #[serde(default)]
     pub friction: f64,
     /// x range of the support plate on the upper notch face (mm); default: `load_zone`.
     #[serde(default)]
     pub support_zone: Option<[f64; 2]>,
-    /// x of the pins of both plates (mm), for "pin"; default: the middle of each plate.
+    /// x of the pins of both plates (mm), for "pin" and "inserts"; default: the middle of each plate.
     #[serde(default)]
     pub pin_x: Option<f64>,
-    /// Distance of the pins from the plates' contact faces into the plates (mm), for "pin"; default:
+    /// Distance of the pins from the plates' contact faces into the plates (mm), for "pin" and
+    /// "inserts"; default:
     /// half the plate thickness.
     #[serde(default)]
     pub pin_offset: Option<f64>,
@@ -758,6 +760,20 @@ impl RunConfig {
             if b.name.trim().is_empty() {
                 return Err(bad(&format!("body[{i}].name"), "\"\"".into(), "a name"));
             }
+            // Names are unique (`acts_on` refers to them), and [ct] names its own bodies.
+            let reserved: &[&str] = match &self.ct {
+                Some(_) => &["concrete", "loading_insert", "support_insert"],
+                None => &[],
+            };
+            if reserved.contains(&b.name.as_str())
+                || self.body[..i].iter().any(|other| other.name == b.name)
+            {
+                return Err(bad(
+                    &format!("body[{i}].name"),
+                    format!("{:?}", b.name),
+                    &format!("a name no other body has (with [ct] also not one of {reserved:?})"),
+                ));
+            }
             if !density_ok(b.density) {
                 return Err(bad(
                     &format!("body[{i}].density"),
@@ -1006,7 +1022,8 @@ impl RunConfig {
                 return Err(bad(
                     "ct.friction",
                     ct.friction.to_string(),
-                    "only with load_introduction = \"contact\" or \"pin\" (glued plates do not slide)",
+                    "only with load_introduction = \"contact\", \"pin\" or \"inserts\" (glued plates do \
+                     not slide)",
                 ));
             }
             if let Some(px) = ct.pin_x {

@@ -1,5 +1,6 @@
-//! Unilateral contact between rigid loading devices and the deformable bodies on the background grid
-//! (`docs/theory.md`, "Contact with rigid devices").
+//! Unilateral contact on the background grid: between rigid loading devices and the deformable bodies
+//! ([`DeviceContact`], `docs/theory.md`, "Contact with rigid devices"), and between the specimen and
+//! deformable bodies on their own velocity fields ([`BodyContact`], "Contact between bodies").
 //!
 //! A device has a flat contact face with the unit normal `n` (pointing from the device into the
 //! specimen) and the tangent `t = (-n_y, n_x)`. Its contact nodes are the active grid nodes of the node
@@ -294,10 +295,13 @@ fn row_order(n: Vector2<f64>) -> ((usize, f64), (usize, f64)) {
 /// specimen (`a`) and of another body (`b`), both active (`docs/theory.md`, "Contact between bodies").
 #[derive(Debug, Clone)]
 pub struct NodePair {
-    /// Grid node copies of the two fields (virtual node ids) and their active-node indices (block rows).
+    /// The specimen's copy of the grid node (field 0: the grid node id).
     pub node_a: usize,
+    /// The other body's copy, `node_a + f N` for field `f` and `N` grid nodes.
     pub node_b: usize,
+    /// Active-node index (block row) of `node_a`.
     pub row_a: usize,
+    /// Active-node index (block row) of `node_b`.
     pub row_b: usize,
     /// Unit normal from body `a` into body `b` (from the nodal mass gradients of the two fields).
     pub normal: Vector2<f64>,

@@ -1087,6 +1087,14 @@ fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
         newton as f64 / rows.len().max(1) as f64
     );
     println!("| linear iterations | {linear} |");
+    let contact: usize = rows.iter().map(|r| r.contact_solves).sum();
+    if contact > rows.len() {
+        println!(
+            "| contact solves | {contact} ({:.2} per step: SNES solves while the contact active sets and \
+             pin rotations settled) |",
+            contact as f64 / rows.len().max(1) as f64
+        );
+    }
     // The steps' times cover the whole run, also the part before a resume; `wall` is this process's.
     let steps_wall: f64 = rows.iter().map(|r| r.wall_total).sum();
     println!(

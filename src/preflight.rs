@@ -2,7 +2,7 @@
 //! instead of after its first step or with an allocation failure: the values of common PETSc options and
 //! the memory the run will need.
 
-use crate::config::{NotchTip, RunConfig};
+use crate::config::{LoadIntroduction, NotchTip, RunConfig};
 use crate::particles::{Geometry, Region};
 
 /// What the value of a checked PETSc option must be.
@@ -159,7 +159,15 @@ pub fn memory_need(cfg: &RunConfig) -> MemoryNeed {
         },
     );
     let margin = 2.0 * cfg.grid.margin_cells.max(1) as f64 + 1.0;
-    let nodes = ((hi[0] - lo[0]) / h + margin).max(1.0) * ((hi[1] - lo[1]) / h + margin).max(1.0);
+    // One copy of the grid per velocity field (bodies with their own field, the CT's two inserts).
+    let inserts = cfg
+        .ct
+        .as_ref()
+        .is_some_and(|ct| ct.load_introduction == LoadIntroduction::Inserts);
+    let fields = 1 + cfg.body.iter().filter(|b| b.own_field).count() + 2 * usize::from(inserts);
+    let nodes = fields as f64
+        * ((hi[0] - lo[0]) / h + margin).max(1.0)
+        * ((hi[1] - lo[1]) / h + margin).max(1.0);
     let points = area * per_area;
     MemoryNeed {
         points,

@@ -93,28 +93,32 @@ pub const FALLBACK: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -f
      -fallback_ksp_type preonly -fallback_pc_type lu -fallback_pc_factor_mat_solver_type mumps \
      -fallback_mat_mumps_icntl_24 1";
 
-/// The ratio `r = rho h^2 / (beta dt^2 M)` of the model (smallest density, stiffest material), or `None`
-/// for a quasi-static model.
+/// The ratio `r = rho h^2 / (beta dt^2 M)` of the model, or `None` for a quasi-static model: the smallest
+/// over the bodies of their own `rho / M` (density, P-wave modulus `M = K + 4G/3`), so that a stiff and
+/// heavy second body (a steel insert) does not mix its modulus with the concrete's density.
 pub fn inertia_ratio(setup: &Setup) -> Option<f64> {
     if setup.time.quasi_static {
         return None;
     }
     let p = &setup.particles;
-    let rho = (0..p.len())
-        .filter(|&i| p.vol0[i] > 0.0)
-        .map(|i| p.mass[i] / p.vol0[i])
-        .fold(f64::INFINITY, f64::min);
-    let modulus = setup
+    let mut rho = vec![f64::INFINITY; setup.materials.len()];
+    for i in (0..p.len()).filter(|&i| p.vol0[i] > 0.0) {
+        let b = p.body[i] as usize;
+        rho[b] = rho[b].min(p.mass[i] / p.vol0[i]);
+    }
+    let ratio = setup
         .materials
         .iter()
-        .map(|m| {
+        .zip(&rho)
+        .filter(|(_, r)| r.is_finite())
+        .map(|(m, r)| {
             let e = m.elastic_moduli();
-            e.bulk + 4.0 * e.shear / 3.0
+            r / (e.bulk + 4.0 * e.shear / 3.0)
         })
-        .fold(0.0, f64::max);
+        .fold(f64::INFINITY, f64::min);
     let h = setup.grid.cell_size();
     let dt = setup.time.dt;
-    Some(rho * h * h / (setup.time.beta * dt * dt * modulus))
+    Some(ratio * h * h / (setup.time.beta * dt * dt))
 }
 
 /// The class of the model's steps.

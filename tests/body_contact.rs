@@ -261,3 +261,107 @@ fn pair_rows_match_finite_differences() {
         }
     }
 }
+
+/// The assembler gives the two block rows of every pair the same columns, the union of what their
+/// points reach (the pair rows add one row to the other entry by entry), and leaves other rows alone.
+#[test]
+fn paired_rows_share_the_union_of_their_columns() {
+    use mpm_concrete::assembly::{Assembler, StepInput};
+    use mpm_concrete::dofs::{DofMap, FieldLayout, INACTIVE};
+    use mpm_concrete::grid::Grid;
+    use mpm_concrete::material::{Material, MaterialConfig};
+    use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+    use mpm_concrete::shape::{ShapeKind, ShapeTable};
+    use mpm_concrete::transfer::{self, GridState};
+    use nalgebra::Vector2;
+    let block = |min: [f64; 2], max: [f64; 2], body: u16| {
+        let geometry = Geometry {
+            include: vec![Region::Rect { min, max }],
+            exclude: vec![],
+        };
+        let seeding = Seeding {
+            h: 1.0,
+            points_per_cell: 2,
+            density: 1e-9,
+            body,
+        };
+        Particles::seed(&geometry, &seeding).expect("seed")
+    };
+    let mut particles = block([0.0, 0.0], [3.0, 2.0], 0);
+    particles
+        .append(&block([3.0, 0.0], [5.0, 2.0], 1))
+        .expect("append");
+    let grid =
+        Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(5.0, 2.0), 1.0, 2).expect("grid");
+    let nodes = grid.num_nodes();
+    let mut table = ShapeTable::new();
+    table
+        .compute(ShapeKind::Cpdi1, &grid, &particles)
+        .expect("shape");
+    let body = particles.body.clone();
+    table.offset_fields(nodes, 2, |p| body[p] as usize);
+    let mut gs = GridState::new();
+    transfer::particles_to_grid(&table, &particles, &grid, 1e-10, &mut gs).expect("p2g");
+    let mut dofs = DofMap::default();
+    dofs.rebuild(&gs.active, FieldLayout::new(2, false));
+    // Pair every lattice node whose two copies are active (the interface column x = 3).
+    let mut partners = vec![INACTIVE; 2 * nodes];
+    for i in 0..nodes {
+        if gs.active[i] && gs.active[i + nodes] {
+            partners[i] = (i + nodes) as u32;
+            partners[i + nodes] = i as u32;
+        }
+    }
+    let paired = partners.iter().filter(|&&q| q != INACTIVE).count();
+    assert!(paired >= 6, "{paired} paired copies");
+    let cfg: MaterialConfig =
+        toml::from_str("model = \"neo_hookean\"\nyoungs_modulus = 1000.0\npoisson_ratio = 0.0")
+            .expect("material");
+    let materials: Vec<Material> = vec![cfg.build().expect("m"), cfg.build().expect("m")];
+    let input = StepInput {
+        table: &table,
+        particles: &particles,
+        materials: &materials,
+        dofs: &dofs,
+        mass: &gs.mass,
+        velocity: &gs.velocity,
+        acceleration: &gs.acceleration,
+        newmark: None,
+        body_force: Vector2::zeros(),
+        nodal_force: &[],
+        row_scale: 1e3,
+        partners: &partners,
+    };
+    let mut asm = Assembler::new();
+    asm.begin_step(&input);
+    let pattern = asm.block_pattern();
+    let row = |node: usize| {
+        let a = dofs.active_index(node).expect("active");
+        pattern.cols[pattern.row_ptr[a]..pattern.row_ptr[a + 1]].to_vec()
+    };
+    let mut without = Assembler::new();
+    without.begin_step(&StepInput {
+        partners: &[],
+        ..input
+    });
+    let plain = without.block_pattern();
+    let plain_row = |node: usize| {
+        let a = dofs.active_index(node).expect("active");
+        plain.cols[plain.row_ptr[a]..plain.row_ptr[a + 1]].to_vec()
+    };
+    for (i, &q) in partners.iter().enumerate() {
+        if q == INACTIVE {
+            if dofs.active_index(i).is_some() {
+                assert_eq!(row(i), plain_row(i), "unpaired node {i}");
+            }
+            continue;
+        }
+        let (own, other) = (plain_row(i), plain_row(q as usize));
+        let mut union: Vec<u32> = own.iter().chain(&other).copied().collect();
+        union.sort_unstable();
+        union.dedup();
+        assert_eq!(row(i), union, "node {i} paired with {q}");
+        // The fields meet only through the pairs: without them, no row reaches the other field.
+        assert!(own.iter().all(|c| !other.contains(c)), "node {i}");
+    }
+}

@@ -257,7 +257,7 @@ pub struct ShapeTable {
     stride: usize,
     weights: Vec<Weight>,
     counts: Vec<u8>,
-    /// Velocity fields of the node ids (0 or 1: one).
+    /// Velocity fields the node ids run over (set by `offset_fields`; 0, before any table, counts as 1).
     fields: usize,
 }
 
@@ -390,6 +390,11 @@ impl ShapeTable {
             .par_chunks_mut(stride)
             .enumerate()
             .for_each(|(p, ws)| {
+                debug_assert!(
+                    field(p) < fields,
+                    "point {p}: field {} of {fields}",
+                    field(p)
+                );
                 let shift = (field(p) * nodes) as u32;
                 if shift > 0 {
                     ws.iter_mut().for_each(|w| w.node += shift);
