@@ -9,6 +9,8 @@ use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::scenario;
 use mpm_concrete::solver::Simulation;
 
+mod contact_rows;
+
 /// Two 20 x 10 mm elastic bars (E = 1000 MPa, rho = 1e-9 t/mm^3, nu = 0: wave speed 1e6 mm/s) touching
 /// at x = 20 mm: the target at rest (the specimen, field 0) and the striker at 1000 mm/s on its own field.
 fn bars(own_field: bool) -> String {
@@ -167,19 +169,11 @@ fn bars_on_one_field_stay_bonded() {
 /// of the rewritten system the two contact forces are equal and opposite and normal, and the gap closed.
 #[test]
 fn pair_rows_match_finite_differences() {
+    use contact_rows::{LinearRows, NF, row_of};
     use mpm_concrete::contact::{BodyContact, NodePair};
-    use mpm_concrete::petsc::BlockLayout;
-    let (nf, nn) = (3, 2);
-    let n = nf * nn;
-    let k: Vec<f64> = (0..n * n)
-        .map(|i| ((i * 37 % 11) as f64 - 5.0) + if i % (n + 1) == 0 { 20.0 } else { 0.0 })
-        .collect();
-    let c: Vec<f64> = (0..n).map(|i| 0.3 * i as f64 - 1.0).collect();
-    let phys = |x: &[f64]| -> Vec<f64> {
-        (0..n)
-            .map(|i| c[i] + (0..n).map(|j| k[i * n + j] * x[j]).sum::<f64>())
-            .collect()
-    };
+    let rows = LinearRows::new();
+    let n = 2 * NF;
+    let x0: Vec<f64> = (0..n).map(|i| 0.01 * (i as f64 + 1.0)).collect();
     for normal in [
         nalgebra::Vector2::new(0.6, -0.8),
         nalgebra::Vector2::new(-0.96, 0.28),
@@ -197,68 +191,34 @@ fn pair_rows_match_finite_differences() {
         };
         let s = 250.0;
         let residual = |x: &[f64]| {
-            let mut r = phys(x);
-            bodies.residual_rows(x, &mut r, nf, s);
+            let mut r = rows.phys(x);
+            bodies.residual_rows(x, &mut r, NF, s);
             r
         };
-        for layout in [BlockLayout::Rows, BlockLayout::Blocks] {
-            let mut values = vec![0.0; n * n];
-            for a in 0..nn {
-                for i in 0..nf {
-                    for pos in 0..nn {
-                        for kk in 0..nf {
-                            values[a * nn * nf * nf + layout.offset(nn, nf, i, pos, kk)] =
-                                k[(a * nf + i) * n + pos * nf + kk];
-                        }
-                    }
-                }
-            }
-            bodies.jacobian_rows(
-                nf,
-                s,
-                |a| Some((a * nn * nf * nf, nn, a)),
-                &mut values,
-                |ncols, i, pos, kk| layout.offset(ncols, nf, i, pos, kk),
-            );
-            let x0: Vec<f64> = (0..n).map(|i| 0.01 * (i as f64 + 1.0)).collect();
-            let eps = 1e-6;
-            let mut dense = vec![0.0; n * n];
-            for j in 0..n {
-                let (mut xp, mut xm) = (x0.clone(), x0.clone());
-                xp[j] += eps;
-                xm[j] -= eps;
-                let (rp, rm) = (residual(&xp), residual(&xm));
-                for i in 0..n {
-                    let fd = (rp[i] - rm[i]) / (2.0 * eps);
-                    let (a, ii, pos, kk) = (i / nf, i % nf, j / nf, j % nf);
-                    let jac = values[a * nn * nf * nf + layout.offset(nn, nf, ii, pos, kk)];
-                    assert!(
-                        (fd - jac).abs() < 1e-6 * (1.0 + jac.abs()),
-                        "{layout:?}: J[{i}][{j}] = {jac} vs FD {fd}"
-                    );
-                    dense[i * n + j] = jac;
-                }
-            }
-            // Solve the rewritten (linear) system with one Newton step from x0 and check the pair.
-            let r0 = residual(&x0);
-            let m = nalgebra::DMatrix::from_row_slice(n, n, &dense);
-            let dx = m
-                .lu()
-                .solve(&nalgebra::DVector::from_column_slice(&r0))
-                .expect("regular");
-            let x: Vec<f64> = (0..n).map(|i| x0[i] - dx[i]).collect();
-            assert!(residual(&x).iter().all(|v| v.abs() < 1e-9), "solved");
-            let f = phys(&x);
-            let (fa, fb) = (
-                nalgebra::Vector2::new(f[0], f[1]),
-                nalgebra::Vector2::new(f[nf], f[nf + 1]),
-            );
-            let t = nalgebra::Vector2::new(-normal.y, normal.x);
-            assert!((fa + fb).norm() < 1e-9, "equal and opposite: {fa} {fb}");
-            assert!(t.dot(&fb).abs() < 1e-9, "frictionless: {fb}");
-            let gap = 0.02 + normal.dot(&nalgebra::Vector2::new(x[nf] - x[0], x[nf + 1] - x[1]));
-            assert!(gap.abs() < 1e-12, "closed: gap {gap}");
-        }
+        let rewrite = |values: &mut [f64], layout: mpm_concrete::petsc::BlockLayout| {
+            bodies.jacobian_rows(NF, s, row_of, values, |ncols, i, pos, k| {
+                layout.offset(ncols, NF, i, pos, k)
+            })
+        };
+        let dense = rows.check(residual, rewrite, &x0, &format!("normal {normal:?}"));
+        // Solve the rewritten (linear) system with one Newton step from x0 and check the pair.
+        let r0 = residual(&x0);
+        let dx = nalgebra::DMatrix::from_row_slice(n, n, &dense)
+            .lu()
+            .solve(&nalgebra::DVector::from_column_slice(&r0))
+            .expect("regular");
+        let x: Vec<f64> = (0..n).map(|i| x0[i] - dx[i]).collect();
+        assert!(residual(&x).iter().all(|v| v.abs() < 1e-9), "solved");
+        let f = rows.phys(&x);
+        let (fa, fb) = (
+            nalgebra::Vector2::new(f[0], f[1]),
+            nalgebra::Vector2::new(f[NF], f[NF + 1]),
+        );
+        let t = nalgebra::Vector2::new(-normal.y, normal.x);
+        assert!((fa + fb).norm() < 1e-9, "equal and opposite: {fa} {fb}");
+        assert!(t.dot(&fb).abs() < 1e-9, "frictionless: {fb}");
+        let gap = 0.02 + normal.dot(&nalgebra::Vector2::new(x[NF] - x[0], x[NF + 1] - x[1]));
+        assert!(gap.abs() < 1e-12, "closed: gap {gap}");
     }
 }
 

@@ -9,6 +9,8 @@ use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::scenario;
 use mpm_concrete::solver::Simulation;
 
+mod contact_rows;
+
 /// A 20 x 10 mm elastic block (E = 1000 MPa, rho = 1e-9 t/mm^3, nu = 0) moving at 1000 mm/s towards a
 /// rigid wall whose face is at x = 20 mm, the block's right face.
 const WALL: &str = r#"
@@ -244,20 +246,10 @@ fn frictionless_block_slides_at_constant_speed() {
 /// contact rows are linear in the physical rows and in `du`, so the difference is round-off).
 #[test]
 fn contact_rows_match_finite_differences() {
+    use contact_rows::{LinearRows, NF, row_of};
     use mpm_concrete::contact::{ContactNode, DeviceContact, NodeStatus};
-    use mpm_concrete::petsc::BlockLayout;
-    let (nf, nn) = (3, 2);
-    let n = nf * nn;
-    let k: Vec<f64> = (0..n * n)
-        .map(|i| ((i * 37 % 11) as f64 - 5.0) + if i % (n + 1) == 0 { 20.0 } else { 0.0 })
-        .collect();
-    let c: Vec<f64> = (0..n).map(|i| 0.3 * i as f64 - 1.0).collect();
-    let phys = |x: &[f64]| -> Vec<f64> {
-        (0..n)
-            .map(|i| c[i] + (0..n).map(|j| k[i * n + j] * x[j]).sum::<f64>())
-            .collect()
-    };
-    let normal = nalgebra::Vector2::new(0.6, -0.8);
+    let rows = LinearRows::new();
+    let x0: Vec<f64> = (0..NF * 2).map(|i| 0.01 * (i as f64 + 1.0)).collect();
     for status in [
         NodeStatus::Slide,
         NodeStatus::Stick,
@@ -265,7 +257,7 @@ fn contact_rows_match_finite_differences() {
         NodeStatus::Slip(-1),
     ] {
         let d = DeviceContact {
-            normal,
+            normal: nalgebra::Vector2::new(0.6, -0.8),
             friction: 0.4,
             nodes: vec![ContactNode {
                 node: 7,
@@ -277,47 +269,15 @@ fn contact_rows_match_finite_differences() {
         };
         let s = 250.0;
         let residual = |x: &[f64]| {
-            let mut r = phys(x);
-            d.residual_rows(x, &mut r, nf, s);
+            let mut r = rows.phys(x);
+            d.residual_rows(x, &mut r, NF, s);
             r
         };
-        for layout in [BlockLayout::Rows, BlockLayout::Blocks] {
-            // Dense 2 x 2 block pattern: block row a has block columns 0 and 1.
-            let mut values = vec![0.0; n * n];
-            for a in 0..nn {
-                for i in 0..nf {
-                    for pos in 0..nn {
-                        for kk in 0..nf {
-                            values[a * nn * nf * nf + layout.offset(nn, nf, i, pos, kk)] =
-                                k[(a * nf + i) * n + pos * nf + kk];
-                        }
-                    }
-                }
-            }
-            d.jacobian_rows(
-                nf,
-                s,
-                |a| Some((a * nn * nf * nf, nn, a)),
-                &mut values,
-                |ncols, i, pos, kk| layout.offset(ncols, nf, i, pos, kk),
-            );
-            let x0: Vec<f64> = (0..n).map(|i| 0.01 * (i as f64 + 1.0)).collect();
-            let eps = 1e-6;
-            for j in 0..n {
-                let (mut xp, mut xm) = (x0.clone(), x0.clone());
-                xp[j] += eps;
-                xm[j] -= eps;
-                let (rp, rm) = (residual(&xp), residual(&xm));
-                for i in 0..n {
-                    let fd = (rp[i] - rm[i]) / (2.0 * eps);
-                    let (a, ii, pos, kk) = (i / nf, i % nf, j / nf, j % nf);
-                    let jac = values[a * nn * nf * nf + layout.offset(nn, nf, ii, pos, kk)];
-                    assert!(
-                        (fd - jac).abs() < 1e-6 * (1.0 + jac.abs()),
-                        "{status:?} {layout:?}: J[{i}][{j}] = {jac} vs FD {fd}"
-                    );
-                }
-            }
-        }
+        let rewrite = |values: &mut [f64], layout: mpm_concrete::petsc::BlockLayout| {
+            d.jacobian_rows(NF, s, row_of, values, |ncols, i, pos, k| {
+                layout.offset(ncols, NF, i, pos, k)
+            })
+        };
+        rows.check(residual, rewrite, &x0, &format!("{status:?}"));
     }
 }

@@ -155,6 +155,27 @@ fn eroded_points_carry_no_stress_and_keep_their_deformation_gradient() {
     assert!(eroded > 10, "the band must erode ({eroded} points)");
 }
 
+/// Checks a step of a CT loaded through contact: the devices' work covers the kinetic and stored energy
+/// (`W - K - Psi >= 0` is the dissipation) and the loading plate never pulls; true if it pushes.
+fn balanced_push(r: &mpm_concrete::solver::StepReport) -> bool {
+    let w = r.external_work;
+    let balance = w - r.kinetic_energy - r.stored_energy;
+    assert!(
+        balance >= -1e-3 * w.abs().max(1e-6),
+        "step {}: work {w:.4e} < kinetic {:.4e} + stored {:.4e} N mm/mm",
+        r.step,
+        r.kinetic_energy,
+        r.stored_energy
+    );
+    let fy = r.reactions[0].1[1];
+    assert!(
+        fy <= 1e-9,
+        "step {}: the loading plate pulls ({fy} N/mm)",
+        r.step
+    );
+    fy < 0.0
+}
+
 #[test]
 fn contact_plates_do_no_more_work_than_the_specimen_takes_up() {
     // Energy balance with unilateral contact: the device's work must cover the kinetic and stored energy
@@ -176,22 +197,7 @@ fn contact_plates_do_no_more_work_than_the_specimen_takes_up() {
     let mut pushed = false;
     for _ in 0..120 {
         let r = sim.advance(&s).expect("step converges");
-        let w = r.external_work;
-        let balance = w - r.kinetic_energy - r.stored_energy;
-        assert!(
-            balance >= -1e-3 * w.abs().max(1e-6),
-            "step {}: work {w:.4e} < kinetic {:.4e} + stored {:.4e} N mm/mm",
-            r.step,
-            r.kinetic_energy,
-            r.stored_energy
-        );
-        let fy = r.reactions[0].1[1];
-        assert!(
-            fy <= 1e-9,
-            "step {}: the loading plate pulls ({fy} N/mm)",
-            r.step
-        );
-        pushed |= fy < 0.0;
+        pushed |= balanced_push(&r);
     }
     assert!(pushed, "the plate must push");
 }
@@ -225,22 +231,7 @@ fn steel_inserts_push_the_notch_faces_without_overlap_or_pull() {
     for _ in 0..40 {
         let r = sim.advance(&s).expect("step converges");
         solves += r.contact_solves;
-        let w = r.external_work;
-        let balance = w - r.kinetic_energy - r.stored_energy;
-        assert!(
-            balance >= -1e-3 * w.abs().max(1e-6),
-            "step {}: work {w:.4e} < kinetic {:.4e} + stored {:.4e} N mm/mm",
-            r.step,
-            r.kinetic_energy,
-            r.stored_energy
-        );
-        let fy = r.reactions[0].1[1];
-        assert!(
-            fy <= 1e-9,
-            "step {}: the loading plate pulls ({fy} N/mm)",
-            r.step
-        );
-        pushed |= fy < 0.0;
+        pushed |= balanced_push(&r);
         // Column by column (points seeded at the same x, 1 mm apart) over the insert's x range: the
         // lowest corner of the loading insert's points (body 1) against the highest corner of the
         // concrete points (body 0) below it.
