@@ -94,10 +94,9 @@ fn block_bounces_off_a_wall_without_tensile_reaction() {
         );
         resolved_steps += usize::from(r.contact_solves > 1);
         let f = r.reactions[0].1[0];
-        // The wall pushes the block towards -x, never pulls it (beyond the active set's sign test,
-        // 1e-6 of the largest force).
+        // The wall pushes the block towards -x, never pulls it.
         assert!(
-            f <= 1e-6 * max_push.max(1.0),
+            f <= 1e-9 * max_push.max(1.0),
             "step {}: wall force {f} N/mm pulls",
             r.step
         );
