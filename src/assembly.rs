@@ -667,8 +667,9 @@ impl Assembler {
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
     /// `sigma = P F^T / det F`, `eta_bar_p`, damage, the dissipation split and the damage gained while
     /// the local `eta < gamma_0` of the point's material. Returns the stored energy `sum_p V^0 Psi_p`
-    /// (N mm). `particles.f` must already hold the converged deformation gradients (after G2P).
-    pub fn commit(&self, particles: &mut Particles, materials: &[Material]) -> f64 {
+    /// (N mm) of the first `counted` points (a process's own; the rest are copies of other processes'
+    /// points). `particles.f` must already hold the converged deformation gradients (after G2P).
+    pub fn commit(&self, particles: &mut Particles, materials: &[Material], counted: usize) -> f64 {
         let hs = particles.history_stride();
         if hs > 0 {
             let n = particles.len() * hs;
@@ -701,7 +702,9 @@ impl Assembler {
             for (acc, d) in particles.dissipated[p].iter_mut().zip(ev.dissipation) {
                 *acc += particles.vol0[p] * d;
             }
-            energy += particles.vol0[p] * ev.energy;
+            if p < counted {
+                energy += particles.vol0[p] * ev.energy;
+            }
         }
         energy
     }

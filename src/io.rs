@@ -788,6 +788,10 @@ impl RunOutput {
             }
         }
         let save = |plot: LinePlot, file: &str| save_line_plot(&plot, &self.dir.join(file));
+        // A run without constraints, devices or loads (a free body) has no force to plot.
+        if vs_t.is_empty() {
+            return Ok(());
+        }
         save(
             LinePlot {
                 title: format!("{}: reaction force", self.title),

@@ -26,6 +26,7 @@ pub mod io;
 pub mod material;
 pub mod model;
 pub mod particles;
+pub mod partition;
 pub mod petsc;
 pub mod plot;
 pub mod preflight;

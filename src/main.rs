@@ -620,16 +620,24 @@ fn append_history_note(dir: &Path, note: &str) -> Result<()> {
 }
 
 /// Writes the point fields, the force plots and the checkpoint of the current state.
+/// Writes the point fields, the force plots and the checkpoint of the current state (with the points
+/// shared out over processes, process 0 gathers them first). Collective.
 fn save_state(
+    session: &SessionGuard,
     out: &mut RunOutput,
     sim: &Simulation,
     dir: &Path,
     identity: &RunIdentity,
 ) -> Result<()> {
-    out.snapshot(&sim.state)?;
+    let Some(state) = mpm_concrete::partition::whole_state(session, &sim.state)
+        .context("gathering the points on process 0")?
+    else {
+        return Ok(());
+    };
+    out.snapshot(&state)?;
     out.force_plots()?;
     if out.writes() {
-        checkpoint::save(dir, &sim.state, out, identity)?;
+        checkpoint::save(dir, &state, out, identity)?;
     }
     Ok(())
 }
@@ -798,8 +806,9 @@ fn simulate(
     // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
     let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
     let mut sim = simulation(setup)?;
-    // On several processes every one holds the whole model and state and takes the same steps (the
-    // unknowns and PETSc's solvers are distributed, docs/theory.md "Processes"); process 0 alone writes.
+    // On several processes every one holds the whole model and its own share of the points (from the
+    // first step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes");
+    // process 0 gathers the points and alone writes.
     let root = session.rank() == 0;
     if resume_from.is_some() {
         checkpoint::load(&dir, &sim.model, &mut sim.state).map_err(bad)?;
@@ -973,7 +982,7 @@ fn simulate(
             Ok(r) => r,
             Err(e) => {
                 bar.abandon();
-                save_state(&mut out, &sim, &dir, &identity)?;
+                save_state(session, &mut out, &sim, &dir, &identity)?;
                 let why = format!(
                     "step {} failed: {}",
                     sim.state.step + 1,
@@ -1007,7 +1016,7 @@ fn simulate(
         // Every process stops after the same step (a signal may reach them at different steps).
         let stop = session.any(interrupted.load(std::sync::atomic::Ordering::SeqCst));
         if (every > 0 && sim.state.step % every == 0) || sim.state.step == cfg.run.steps || stop {
-            save_state(&mut out, &sim, &dir, &identity)?;
+            save_state(session, &mut out, &sim, &dir, &identity)?;
             // run.json follows the checkpoint, so a run killed outright shows how far it got.
             record.steps_done = sim.state.step;
             record.time_reached = sim.state.time;
@@ -1093,6 +1102,14 @@ fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
             "| contact solves | {contact} ({:.2} per step: SNES solves while the contact active sets and \
              pin rotations settled) |",
             contact as f64 / rows.len().max(1) as f64
+        );
+    }
+    let ghosts: usize = rows.iter().map(|r| r.ghosts).sum();
+    if ghosts > 0 {
+        let migrated: usize = rows.iter().map(|r| r.migrated).sum();
+        println!(
+            "| points between processes | {migrated} moved to another process; {:.0} ghost copies per step |",
+            ghosts as f64 / rows.len().max(1) as f64
         );
     }
     // The steps' times cover the whole run, also the part before a resume; `wall` is this process's.

@@ -281,6 +281,10 @@ pub struct State {
     /// FEM mode: the nodal velocity and acceleration carried to the next step (None in MPM mode and
     /// before the first step).
     pub fem_nodal: Option<NodalState>,
+    /// `particles` holds this process's own points only (MPM on several processes, from the first
+    /// step on; [`crate::partition`]); false: every point. Not checkpointed: a checkpoint holds every
+    /// point, gathered ([`State::with_points`]).
+    pub distributed: bool,
 }
 
 impl State {
@@ -303,6 +307,24 @@ impl State {
             contact_statuses: vec![Vec::new(); nrigid],
             closed_pairs: Vec::new(),
             fem_nodal: None,
+            distributed: false,
+        }
+    }
+
+    /// This state with `particles` (e.g. every point, gathered from the processes) in place of its own.
+    pub fn with_points(&self, particles: Particles) -> State {
+        State {
+            particles,
+            rigid: self.rigid.clone(),
+            contact_statuses: self.contact_statuses.clone(),
+            closed_pairs: self.closed_pairs.clone(),
+            fem_nodal: self.fem_nodal.clone(),
+            accumulated: self.accumulated.clone(),
+            last_reactions: self.last_reactions.clone(),
+            rotations: self.rotations.clone(),
+            rotation_rates: self.rotation_rates.clone(),
+            distributed: false,
+            ..*self
         }
     }
 

@@ -276,12 +276,15 @@ impl Geometry {
     }
 }
 
+/// Values of a point record ([`Particles::pack`]) before its history.
+const RECORD_FIXED: usize = 45;
+
 /// Material points, structure of arrays: entry `p` of every column belongs to point `p`.
 ///
 /// Invariant: every per-point column has [`Particles::len`] entries and `history` has
 /// `len() * history_stride()` entries. Columns are public so that solver stages can borrow them
-/// disjointly; change their lengths only through [`Particles::seed`], [`Particles::append`] and
-/// [`Particles::resize_history`].
+/// disjointly; change their lengths only through [`Particles::seed`], [`Particles::append`],
+/// [`Particles::unpack`], [`Particles::retain`] and [`Particles::resize_history`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Particles {
     /// Position `x_p` (mm).
@@ -325,6 +328,9 @@ pub struct Particles {
     pub nonlocal_damage: Vec<f64>,
     /// Cauchy stress `sigma_p` (MPa), 3x3 with `sigma_13 = sigma_23 = 0` (plane strain, `sigma_33` for output).
     pub stress: Vec<Matrix3<f64>>,
+    /// The point's number in the whole set as built from the configuration (its place in output and
+    /// checkpoint files); kept when points move between processes.
+    pub id: Vec<u64>,
     history_stride: usize,
 }
 
@@ -520,6 +526,7 @@ impl Particles {
         self.dissipated.push([0.0; 2]);
         self.nonlocal_damage.push(0.0);
         self.stress.push(Matrix3::zeros());
+        self.id.push(self.id.len() as u64);
     }
 
     /// Seeds `n x n` points per cell over the material of `geometry` (see the module docs for positions,
@@ -643,7 +650,154 @@ impl Particles {
         self.nonlocal_damage
             .extend_from_slice(&other.nonlocal_damage);
         self.stress.extend_from_slice(&other.stress);
+        let first = self.id.len() as u64;
+        self.id.extend(other.id.iter().map(|i| first + i));
         Ok(())
+    }
+
+    /// Values per point in a record ([`Particles::pack`]): every column, the history and the id.
+    pub fn record_width(&self) -> usize {
+        RECORD_FIXED + self.history_stride
+    }
+
+    /// Appends point `p`'s record (every column, constant and evolving, and its id; integers as exact
+    /// doubles) to `out`: what moves a point to another process.
+    pub fn pack(&self, p: usize, out: &mut Vec<f64>) {
+        let v2 = |out: &mut Vec<f64>, v: &Vector2<f64>| out.extend_from_slice(&[v.x, v.y]);
+        v2(out, &self.x[p]);
+        out.extend_from_slice(&[self.vol0[p], self.vol[p], self.mass[p]]);
+        for v in [
+            &self.v[p],
+            &self.a[p],
+            &self.r1[p],
+            &self.r2[p],
+            &self.r1_0[p],
+            &self.r2_0[p],
+        ] {
+            v2(out, v);
+        }
+        out.extend_from_slice(self.f[p].as_slice());
+        for c in &self.corners[p] {
+            v2(out, c);
+        }
+        out.extend_from_slice(&[
+            f64::from(self.body[p]),
+            self.eta_bar[p],
+            self.damage[p],
+            self.dissipated[p][0],
+            self.dissipated[p][1],
+            self.nonlocal_damage[p],
+            self.id[p] as f64,
+        ]);
+        out.extend_from_slice(self.stress[p].as_slice());
+        out.extend_from_slice(self.history(p));
+    }
+
+    /// The id of the point in `record` ([`Particles::pack`]).
+    pub fn record_id(record: &[f64]) -> u64 {
+        record[35] as u64
+    }
+
+    /// Appends the point of `record` ([`Particles::pack`] of a set with the same history stride).
+    ///
+    /// # Panics
+    /// If `record` does not have [`Particles::record_width`] values.
+    pub fn unpack(&mut self, record: &[f64]) {
+        assert_eq!(record.len(), self.record_width(), "a point record's length");
+        let v2 = |k: usize| Vector2::new(record[k], record[k + 1]);
+        self.x.push(v2(0));
+        self.vol0.push(record[2]);
+        self.vol.push(record[3]);
+        self.mass.push(record[4]);
+        self.v.push(v2(5));
+        self.a.push(v2(7));
+        self.r1.push(v2(9));
+        self.r2.push(v2(11));
+        self.r1_0.push(v2(13));
+        self.r2_0.push(v2(15));
+        self.f.push(Matrix2::from_column_slice(&record[17..21]));
+        self.corners.push([v2(21), v2(23), v2(25), v2(27)]);
+        self.body.push(record[29] as u16);
+        self.eta_bar.push(record[30]);
+        self.damage.push(record[31]);
+        self.dissipated.push([record[32], record[33]]);
+        self.nonlocal_damage.push(record[34]);
+        self.id.push(record[35] as u64);
+        self.stress
+            .push(Matrix3::from_column_slice(&record[36..RECORD_FIXED]));
+        self.history.extend_from_slice(&record[RECORD_FIXED..]);
+    }
+
+    /// Keeps the points `p` with `keep[p]`, in their order.
+    ///
+    /// # Panics
+    /// If `keep` does not have one flag per point.
+    pub fn retain(&mut self, keep: &[bool]) {
+        assert_eq!(keep.len(), self.len(), "one flag per point");
+        fn filter<T>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().expect("one flag per point"));
+        }
+        filter(&mut self.x, keep);
+        filter(&mut self.vol0, keep);
+        filter(&mut self.vol, keep);
+        filter(&mut self.mass, keep);
+        filter(&mut self.v, keep);
+        filter(&mut self.a, keep);
+        filter(&mut self.f, keep);
+        filter(&mut self.r1, keep);
+        filter(&mut self.r2, keep);
+        filter(&mut self.r1_0, keep);
+        filter(&mut self.r2_0, keep);
+        filter(&mut self.corners, keep);
+        filter(&mut self.body, keep);
+        filter(&mut self.eta_bar, keep);
+        filter(&mut self.damage, keep);
+        filter(&mut self.dissipated, keep);
+        filter(&mut self.nonlocal_damage, keep);
+        filter(&mut self.stress, keep);
+        filter(&mut self.id, keep);
+        let hs = self.history_stride;
+        let mut w = 0;
+        for (p, &k) in keep.iter().enumerate() {
+            if k {
+                self.history.copy_within(p * hs..(p + 1) * hs, w * hs);
+                w += 1;
+            }
+        }
+        self.history.truncate(w * hs);
+    }
+
+    /// Keeps the first `n` points.
+    pub fn truncate(&mut self, n: usize) {
+        self.x.truncate(n);
+        self.vol0.truncate(n);
+        self.vol.truncate(n);
+        self.mass.truncate(n);
+        self.v.truncate(n);
+        self.a.truncate(n);
+        self.f.truncate(n);
+        self.r1.truncate(n);
+        self.r2.truncate(n);
+        self.r1_0.truncate(n);
+        self.r2_0.truncate(n);
+        self.corners.truncate(n);
+        self.body.truncate(n);
+        self.eta_bar.truncate(n);
+        self.damage.truncate(n);
+        self.dissipated.truncate(n);
+        self.nonlocal_damage.truncate(n);
+        self.stress.truncate(n);
+        self.id.truncate(n);
+        self.history.truncate(n * self.history_stride);
+    }
+
+    /// An empty set with the history stride of `self` (to unpack records into).
+    pub fn empty_like(&self) -> Self {
+        Self {
+            history_stride: self.history_stride,
+            ..Self::default()
+        }
     }
 
     /// Bounding box `(min, max)` (mm) of all positions and CPDI corners; `None` for an empty set. Feed it to
@@ -743,6 +897,66 @@ mod tests {
         assert!(e.contains("damage") && e.contains("3 points"), "{e}");
         assert!(q.set_column("bogus", &[]).is_err());
         assert!(q.column("bogus").is_none());
+    }
+
+    /// A point packed into a record and unpacked elsewhere is the same point in every column (constant
+    /// ones, the id and the history included); `retain` and `truncate` keep whole points.
+    #[test]
+    fn a_point_record_carries_the_whole_point() {
+        let mut p = Particles::new();
+        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
+        for k in 0..4 {
+            p.push(
+                Vector2::new(k as f64, 1.0),
+                0.25 + k as f64,
+                1e-9 * (k + 1) as f64,
+                r1,
+                r2,
+                k,
+            );
+        }
+        p.resize_history(5, 0.0);
+        let mut value = 0.5;
+        for (name, width) in p.state_columns() {
+            let data: Vec<f64> = (0..width * p.len())
+                .map(|_| {
+                    value += 1.0;
+                    value
+                })
+                .collect();
+            p.set_column(name, &data).unwrap();
+        }
+        p.r1_0[2] = Vector2::new(0.3, -0.1);
+        let mut records = Vec::new();
+        for k in [3, 1, 0, 2] {
+            p.pack(k, &mut records);
+        }
+        assert_eq!(records.len(), 4 * p.record_width());
+        let mut q = p.empty_like();
+        for r in records.chunks_exact(p.record_width()) {
+            q.unpack(r);
+        }
+        assert_eq!(q.id, vec![3, 1, 0, 2]);
+        let mut back = p.empty_like();
+        let mut sorted: Vec<&[f64]> = records.chunks_exact(p.record_width()).collect();
+        sorted.sort_by_key(|r| Particles::record_id(r));
+        for r in sorted {
+            back.unpack(r);
+        }
+        assert_eq!(back, p, "every column of every point");
+        // Keep points 1 and 3, then the first of them.
+        let mut kept = p.clone();
+        kept.retain(&[false, true, false, true]);
+        assert_eq!(kept.id, vec![1, 3]);
+        assert_eq!(kept.history(1), p.history(3));
+        assert_eq!(kept.body, vec![1, 3]);
+        kept.truncate(1);
+        assert_eq!((kept.len(), kept.history.len()), (1, 5));
+        assert_eq!(kept.stress[0], p.stress[1]);
+        // Appending renumbers the other set's ids after this one's.
+        let mut both = p.clone();
+        both.append(&p).unwrap();
+        assert_eq!(both.id, (0..8).collect::<Vec<u64>>());
     }
 
     /// The CT default plate: 200 x 200 mm minus a 110 x 10 mm notch from the left edge at mid-height.

@@ -13,6 +13,7 @@ use crate::grid::Grid;
 use crate::material::{Constitutive, Material};
 use crate::model::{FemReference, InitialAcceleration, Method, Model, Setup, State};
 use crate::particles::Particles;
+use crate::partition::{self, Partition};
 use crate::petsc::{
     self, BlockCsr, CallbackError, IndexSet, LogEvent, Matrix, NonlinearProblem, PetscInt,
     SessionGuard, Snes, SolveInfo, Tolerances, Vector,
@@ -89,6 +90,10 @@ pub enum StepError {
     /// interpolator).
     #[error("{0}")]
     Setup(String),
+    /// With the points shared out over processes: another process's point failed in this step (that
+    /// process reports which).
+    #[error("a point held by another process failed in this step (that process names it)")]
+    OtherProcess,
 }
 
 /// Per-step statistics and results.
@@ -142,6 +147,13 @@ pub struct StepReport {
     /// was being settled).
     #[serde(default)]
     pub contact_solves: usize,
+    /// MPM on several processes: points that moved to another process at the start of the step, and
+    /// ghost copies the processes received (sums over the processes; 0 on one process).
+    #[serde(default)]
+    pub migrated: usize,
+    /// See [`StepReport::migrated`].
+    #[serde(default)]
+    pub ghosts: usize,
 }
 
 /// The per-step scratch of the time step, reused from step to step: shape-function tables, grid fields,
@@ -166,6 +178,13 @@ pub struct Workspace {
     /// PETSc log events `MPMSetup` (shape functions, P2G, pattern) and `MPMAssembly` (residuals and
     /// Jacobians), registered at the first step.
     events: Option<[LogEvent; 2]>,
+    /// The processes' bands of cell rows (MPM on several processes), set at the first step.
+    partition: Option<Partition>,
+    /// This process's own points during a step: the first `own_points` of the state's points; the
+    /// others are copies of other processes' points (ghosts), dropped at the end of the attempt.
+    own_points: usize,
+    /// Points migrated and ghosts received at the start of the step, summed over the processes.
+    moved: [usize; 2],
 }
 
 impl Workspace {
@@ -345,10 +364,49 @@ fn agree(session: &SessionGuard, local: Result<(), AssemblyError>) -> Result<(),
     }
 }
 
+/// A result of this process's points agreed on by every process before the next collective call: with
+/// the points shared out (`shared`), a point's failure (it left the grid, its domain inverted) is met
+/// only by the processes that hold it. The failing processes keep their error, the others return
+/// [`StepError::OtherProcess`], so that all leave the step together.
+fn agreed<T>(
+    session: &SessionGuard,
+    shared: bool,
+    local: Result<T, StepError>,
+) -> Result<T, StepError> {
+    if !shared {
+        return local;
+    }
+    let failed = session.any(local.is_err());
+    match local {
+        Ok(_) if failed => Err(StepError::OtherProcess),
+        r => r,
+    }
+}
+
+/// Completes a residual `r` over all unknowns that this process evaluated from its own points and
+/// ghosts (`shared`): its own block rows `rows` are complete, the others partial; they are zeroed and
+/// the vectors summed over the processes, so that every process holds every row (the same bits on
+/// each). Without shared points every process evaluated every row: nothing to do.
+fn complete_rows(
+    session: &SessionGuard,
+    shared: bool,
+    rows: Range<usize>,
+    nf: usize,
+    r: &mut [f64],
+) -> Result<(), StepError> {
+    if !shared {
+        return Ok(());
+    }
+    r[..rows.start * nf].fill(0.0);
+    r[rows.end * nf..].fill(0.0);
+    session.sum(r)?;
+    Ok(())
+}
+
 /// The block rows (active nodes, in [`DofMap`] order) of the Jacobian and the unknowns this process
-/// owns: a contiguous range, the same share of the active nodes on every process. Every process holds
-/// all points and the whole grid (replicated), evaluates them at the gathered unknowns and hands PETSc
-/// its own rows; PETSc's vectors, matrix and solvers are distributed.
+/// owns: a contiguous range ([`Step::own_rows`]). The process evaluates the points in their support
+/// (its own and the ghosts of MPM on several processes, all points in FEM mode) at the gathered
+/// unknowns and hands PETSc its own rows; PETSc's vectors, matrix and solvers are distributed.
 struct OwnedRows {
     /// Owned block rows.
     rows: Range<usize>,
@@ -362,10 +420,9 @@ struct OwnedRows {
 }
 
 impl OwnedRows {
-    /// Block rows `rows.start * size / n ..` of `n` active nodes for this process of `size`.
-    fn new(session: &SessionGuard, asm: &Assembler, nodes: usize, nf: usize) -> Self {
-        let (rank, size) = (session.rank(), session.size());
-        let rows = nodes * rank / size..nodes * (rank + 1) / size;
+    /// The block rows `rows` (from [`Step::own_rows`]) with their pattern.
+    fn new(session: &SessionGuard, asm: &Assembler, rows: Range<usize>, nf: usize) -> Self {
+        let size = session.size();
         let (mut row_ptr, mut cols) = (Vec::new(), Vec::new());
         asm.block_rows_pattern(rows.clone(), &mut row_ptr, &mut cols);
         Self {
@@ -414,12 +471,9 @@ impl OwnedRows {
 struct LinearSystem {
     /// Options prefix of the SNES.
     prefix: Option<String>,
-    /// Active grid nodes and block pattern the objects were built for (all rows: every process
-    /// decides alike whether they still fit).
+    /// Active grid nodes the objects were built for.
     active: Vec<u32>,
-    row_ptr: Vec<usize>,
-    cols: Vec<u32>,
-    /// The rows of this process.
+    /// The rows of this process, with the pattern the objects were built for.
     owned: OwnedRows,
     x: Vector,
     jac: Matrix,
@@ -429,16 +483,25 @@ struct LinearSystem {
     tolerances: Tolerances,
     /// The lag of the preconditioner from the options database (`-snes_lag_preconditioner`).
     lag: PetscInt,
+    /// Nonzero entries of the whole Jacobian (over all processes).
+    nonzeros: usize,
 }
 
 impl LinearSystem {
-    /// True if the objects fit the step's unknowns and pattern.
+    /// True if the objects fit the step's unknowns and the pattern of this process's rows (the other
+    /// rows of a process holding part of the points are partial; every process decides on its own
+    /// rows, and the objects are rebuilt if any process's no longer fit).
     fn fits(&self, prefix: Option<&str>, dofs: &DofMap, asm: &Assembler) -> bool {
-        let p = asm.block_pattern();
-        self.prefix.as_deref() == prefix
-            && self.active == dofs.active_nodes()
-            && self.row_ptr == p.row_ptr
-            && self.cols == p.cols
+        if self.prefix.as_deref() != prefix || self.active != dofs.active_nodes() {
+            return false;
+        }
+        let (p, rows) = (asm.block_pattern(), self.owned.rows.clone());
+        let base = p.row_ptr[rows.start];
+        p.row_ptr[rows.start..=rows.end]
+            .iter()
+            .map(|r| r - base)
+            .eq(self.owned.row_ptr.iter().copied())
+            && p.cols[base..p.row_ptr[rows.end]] == self.owned.cols[..]
     }
 
     /// New objects for the step's pattern: vector, matrix (exact structure, the rigid-body near-null
@@ -450,9 +513,12 @@ impl LinearSystem {
         grid: &Grid,
         dofs: &DofMap,
         asm: &Assembler,
+        rows: Range<usize>,
     ) -> Result<Self, StepError> {
         let nf = dofs.fields();
-        let owned = OwnedRows::new(session, asm, dofs.active_nodes().len(), nf);
+        let owned = OwnedRows::new(session, asm, rows, nf);
+        let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
+        session.sum(&mut nonzeros)?;
         let n = owned.scalars().len();
         let x = Vector::new(session, n, nf)?;
         let first = x.ownership_range()?.start;
@@ -504,18 +570,16 @@ impl LinearSystem {
         }
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
-        let pattern = asm.block_pattern();
         Ok(Self {
             prefix: prefix.map(str::to_owned),
             active: dofs.active_nodes().to_vec(),
-            row_ptr: pattern.row_ptr.to_vec(),
-            cols: pattern.cols.to_vec(),
             owned,
             x,
             jac,
             snes,
             tolerances,
             lag,
+            nonzeros: nonzeros[0] as usize,
         })
     }
 }
@@ -706,17 +770,22 @@ impl Step<'_> {
             && !time.quasi_static
             && time.initial_acceleration == InitialAcceleration::Consistent
         {
-            self.initialize_acceleration()?;
+            let r = self.initialize_acceleration(session);
+            self.drop_ghosts();
+            r?;
         }
         let started = Instant::now();
         let mut dt = self.st.dt;
         let mut attempts = 0;
+        self.ws.moved = [0; 2];
         // The main solver first; after a linear-solver failure the fallback solver (if any) at the same
         // dt, then halving.
         let mut prefix = self.m.options_prefix.clone();
         loop {
             attempts += 1;
-            match self.try_step(session, dt, prefix.as_deref())? {
+            let attempt = self.try_step(session, dt, prefix.as_deref());
+            self.drop_ghosts();
+            match attempt? {
                 Ok(mut report) => {
                     report.attempts = attempts;
                     report.wall_total = started.elapsed().as_secs_f64();
@@ -795,7 +864,7 @@ impl Step<'_> {
             Ok(solved) => solved,
             Err(failure) => return Ok(Err(failure)),
         };
-        Ok(Ok(self.finish(plan, solved, t0)?))
+        Ok(Ok(self.finish(session, plan, solved, t0)?))
     }
 
     /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
@@ -841,7 +910,7 @@ impl Step<'_> {
                     .into(),
             ));
         }
-        self.project_to_grid()?;
+        self.project_to_grid(session)?;
         // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
         let set_du =
             self.constraint_values(|v, rise| prescribed_increment(v, rise, self.st.time, dt));
@@ -861,12 +930,13 @@ impl Step<'_> {
                 None => 0.0,
             })
             .collect();
-        let (devices, face_lengths) = self.contact_devices(&translations, &pins, &dtheta, dt);
+        let (devices, face_lengths) =
+            self.contact_devices(session, &translations, &pins, &dtheta, dt)?;
         let bodies = self.body_pairs(&devices, dt)?;
         let t_new = self.st.time + dt;
         // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
         let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
-        let eta_bar = self.nodal_eta_bar();
+        let eta_bar = self.nodal_eta_bar(session)?;
         let s = self.m;
         let newmark = (!s.time.quasi_static).then_some(Newmark {
             beta: s.time.beta,
@@ -908,20 +978,24 @@ impl Step<'_> {
             &self.ws.partners,
         );
         self.ws.assembler.begin_step(&input);
-        // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged.
-        let new_pattern = !self
+        // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged (on every
+        // process: with points shared out, each sees the pattern of its own points only).
+        let fits = self
             .ws
             .system
             .as_ref()
             .is_some_and(|sys| sys.fits(prefix, &self.ws.dofs, &self.ws.assembler));
+        let new_pattern = session.any(!fits);
         if new_pattern {
             self.ws.system = None; // free the old objects first
+            let rows = self.own_rows(session);
             self.ws.system = Some(LinearSystem::new(
                 session,
                 prefix,
                 &s.grid,
                 &self.ws.dofs,
                 &self.ws.assembler,
+                rows,
             )?);
         }
         let LinearSystem {
@@ -991,6 +1065,7 @@ impl Step<'_> {
         let t1 = Instant::now();
         let step = self.st.step;
         let s = self.m;
+        let shared = self.st.distributed;
         let particles = &self.st.particles;
         let Workspace {
             table,
@@ -1115,8 +1190,11 @@ impl Step<'_> {
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
             let xs = owned.gather(x)?;
-            assembler.evaluate(&input, &xs)?;
-            assembler.residual(&input, &xs, &mut phys, true)?;
+            let local = assembler
+                .evaluate(&input, &xs)
+                .and_then(|()| assembler.residual(&input, &xs, &mut phys, true));
+            agreed(session, shared, local.map_err(StepError::from))?;
+            complete_rows(session, shared, owned.rows.clone(), nf, &mut phys)?;
             let force_scale = devices
                 .iter()
                 .flatten()
@@ -1209,8 +1287,11 @@ impl Step<'_> {
         // Converged: the physical residual (device forces, reactions) at the solution; the assembler keeps
         // the nodal increments of this evaluation for `finish`.
         let xs = owned.gather(x)?;
-        assembler.evaluate(&input, &xs)?;
-        assembler.residual(&input, &xs, &mut phys, true)?;
+        let local = assembler
+            .evaluate(&input, &xs)
+            .and_then(|()| assembler.residual(&input, &xs, &mut phys, true));
+        agreed(session, shared, local.map_err(StepError::from))?;
+        complete_rows(session, shared, owned.rows.clone(), nf, &mut phys)?;
         Ok(Ok(Solved {
             info,
             phys,
@@ -1225,6 +1306,7 @@ impl Step<'_> {
     /// constraints, G2P and the commit of the material state, the motion of the rigid bodies; the report.
     fn finish(
         &mut self,
+        session: &SessionGuard,
         plan: StepPlan,
         solved: Solved,
         t0: Instant,
@@ -1376,6 +1458,8 @@ impl Step<'_> {
             }
         }
         let s = self.m;
+        // The energies of this process's own points (the ghosts are other processes').
+        let counted = self.own_point_count();
         let ps = &mut self.st.particles;
         // Eroded points (material `erosion_damage`) move with the grid but keep their deformation
         // gradient, volume and domain: a void does not deform, so it never inverts.
@@ -1393,7 +1477,8 @@ impl Step<'_> {
                 )
             })
             .collect();
-        transfer::grid_to_particles(&self.ws.table, &s.grid, &sol, ps)?;
+        let g2p = transfer::grid_to_particles(&self.ws.table, &s.grid, &sol, ps);
+        agreed(session, self.st.distributed, g2p.map_err(StepError::from))?;
         for (p, x, f, r1, r2, vol, corners) in frozen {
             let shift = ps.x[p] - x;
             ps.f[p] = f;
@@ -1420,7 +1505,7 @@ impl Step<'_> {
             ps.v.iter_mut().for_each(|v| *v = Vector2::zeros());
             ps.a.iter_mut().for_each(|a| *a = Vector2::zeros());
         }
-        let stored = self.ws.assembler.commit(ps, &s.materials);
+        let stored = self.ws.assembler.commit(ps, &s.materials, counted);
         for (k, (rb, du)) in self
             .st
             .rigid
@@ -1470,11 +1555,16 @@ impl Step<'_> {
                 .sum(),
             None => {
                 let ps = &self.st.particles;
-                (0..ps.len())
+                (0..counted)
                     .map(|p| 0.5 * ps.mass[p] * ps.v[p].norm_squared())
                     .sum()
             }
         };
+        let mut energies = [kinetic, stored];
+        if self.st.distributed {
+            session.sum(&mut energies)?;
+        }
+        let [kinetic, stored] = energies;
         let names = s.set_names();
 
         Ok(StepReport {
@@ -1484,7 +1574,11 @@ impl Step<'_> {
             attempts: 1,
             solve: info,
             unknowns: n,
-            nonzeros: self.ws.assembler.nonzeros(),
+            nonzeros: self
+                .ws
+                .system
+                .as_ref()
+                .map_or_else(|| self.ws.assembler.nonzeros(), |sys| sys.nonzeros),
             reactions: names
                 .iter()
                 .cloned()
@@ -1511,18 +1605,94 @@ impl Step<'_> {
                 .map(|(k, r)| (r.name.clone(), self.st.rotations[k]))
                 .collect(),
             contact_solves,
+            migrated: self.ws.moved[0],
+            ghosts: self.ws.moved[1],
         })
     }
 
-    /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and
-    /// acceleration replace the projected ones) and the numbering of the unknowns, nothing constrained yet.
-    fn project_to_grid(&mut self) -> Result<(), StepError> {
-        let s = self.m;
-        let ps = &self.st.particles;
-        match &s.fem {
-            None => self.ws.table.compute(s.shape, &s.grid, ps)?,
-            Some(fem) => self.ws.table.push_forward(&fem.points, &ps.f)?,
+    /// MPM on several processes: the points shared out (at the first step: each process keeps those of
+    /// its band; later: the points that left a band migrate), then the ghosts appended.
+    fn share_points(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        let st = &mut *self.st;
+        if self.ws.partition.is_none() {
+            let p = Partition::balanced(session, &self.m.grid, &st.particles, !st.distributed)
+                .map_err(StepError::Setup)?;
+            self.ws.partition = Some(p);
         }
+        let part = self.ws.partition.as_ref().expect("set above");
+        let migrated = if st.distributed {
+            partition::migrate(session, part, &mut st.particles)?
+        } else {
+            partition::keep_own(part, &mut st.particles);
+            st.distributed = true;
+            0
+        };
+        self.ws.own_points = st.particles.len();
+        let ghosts = partition::add_ghosts(session, part, &mut st.particles)?;
+        let mut moved = [migrated as f64, ghosts as f64];
+        session.sum(&mut moved)?;
+        // Points that migrated in any attempt of the step; the ghosts of the last attempt.
+        self.ws.moved = [self.ws.moved[0] + moved[0] as usize, moved[1] as usize];
+        Ok(())
+    }
+
+    /// This process's own points: the first of the state's (all of them unless shared out).
+    fn own_point_count(&self) -> usize {
+        if self.st.distributed {
+            self.ws.own_points
+        } else {
+            self.st.particles.len()
+        }
+    }
+
+    /// Drops the ghosts of the step (the state keeps this process's own points only).
+    fn drop_ghosts(&mut self) {
+        if self.st.distributed {
+            self.st.particles.truncate(self.ws.own_points);
+        }
+    }
+
+    /// The block rows this process owns: with the points shared out, the active nodes of its node
+    /// rows ([`Partition::owned_nodes`]); otherwise an equal share of the active nodes.
+    fn own_rows(&self, session: &SessionGuard) -> Range<usize> {
+        let active = self.ws.dofs.active_nodes();
+        match (&self.ws.partition, self.st.distributed) {
+            (Some(part), true) => {
+                let nodes = part.owned_nodes();
+                let first = |n: usize| active.partition_point(|&a| (a as usize) < n);
+                first(nodes.start)..first(nodes.end)
+            }
+            _ => {
+                let (rank, size, n) = (session.rank(), session.size(), active.len());
+                n * rank / size..n * (rank + 1) / size
+            }
+        }
+    }
+
+    /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and
+    /// acceleration replace the projected ones) and the numbering of the unknowns, nothing constrained
+    /// yet. MPM on several processes shares the points out first; P2G sums the own points' nodal values
+    /// over the processes, so every process holds the whole grid state.
+    fn project_to_grid(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        let s = self.m;
+        if session.size() > 1 && s.fem.is_none() {
+            self.share_points(session)?;
+        }
+        let ps = &self.st.particles;
+        let counted = self.own_point_count();
+        let shared = self.st.distributed;
+        let local = match &s.fem {
+            None => self.ws.table.compute(s.shape, &s.grid, ps),
+            Some(fem) => self.ws.table.push_forward(&fem.points, &ps.f),
+        }
+        .map_err(|e| StepError::from(e.renumbered(&ps.id)))
+        .and_then(|()| match (&self.ws.partition, shared) {
+            (Some(part), true) => part
+                .check_reach(&self.ws.table, ps, counted)
+                .map_err(StepError::Setup),
+            _ => Ok(()),
+        });
+        agreed(session, shared, local)?;
         let fields = s.num_fields();
         if fields > 1 {
             let (nodes, body) = (s.grid.num_nodes(), &ps.body);
@@ -1530,12 +1700,17 @@ impl Step<'_> {
                 .table
                 .offset_fields(nodes, fields, |p| s.fields[body[p] as usize] as usize);
         }
-        transfer::particles_to_grid(
+        transfer::particles_to_grid_shared(
             &self.ws.table,
             ps,
+            counted,
             &s.grid,
             s.mass_tolerance,
             &mut self.ws.grid_state,
+            |sums| match shared {
+                true => session.sum(sums).map_err(|e| e.to_string()),
+                false => Ok(()),
+            },
         )?;
         if let Some((v, a)) = &self.st.fem_nodal {
             // FEM: the nodal state carries over (the same nodes are active in every step).
@@ -1648,11 +1823,12 @@ impl Step<'_> {
     /// `dt` (s).
     fn contact_devices(
         &self,
+        session: &SessionGuard,
         translations: &[Vector2<f64>],
         pins: &[Option<Vector2<f64>>],
         dtheta: &[f64],
         dt: f64,
-    ) -> (Vec<Option<DeviceContact>>, Vec<f64>) {
+    ) -> Result<(Vec<Option<DeviceContact>>, Vec<f64>), StepError> {
         let s = self.m;
         let grid = &s.grid;
         let h = grid.cell_size();
@@ -1723,6 +1899,14 @@ impl Step<'_> {
                     }
                 }
             }
+            // The nearest corner over every process's points.
+            if self.st.distributed {
+                let mut gaps: Vec<f64> = nodes.iter().map(|c| c.gap).collect();
+                session.min(&mut gaps)?;
+                for (c, g) in nodes.iter_mut().zip(gaps) {
+                    c.gap = g;
+                }
+            }
             // An overlap found at the start of a step is held, not pushed back: a negative gap in the
             // constraint would move the node out by |g| within one step, work that no reaction force
             // accounts for (it made the kinetic and stored energy exceed the device's work in the CT).
@@ -1761,7 +1945,7 @@ impl Step<'_> {
             devices.push(Some(device));
             lengths.push(hi[1] - lo[1]);
         }
-        (devices, lengths)
+        Ok((devices, lengths))
     }
 
     /// The contact pairs between the specimen (field 0) and the bodies of other velocity fields at the
@@ -1912,21 +2096,24 @@ impl Step<'_> {
 
     /// The points' `eta_bar` projected to the active nodes (mass-weighted), one per grid node; empty for
     /// a run without gradient enhancement.
-    fn nodal_eta_bar(&self) -> Vec<f64> {
+    fn nodal_eta_bar(&self, session: &SessionGuard) -> Result<Vec<f64>, StepError> {
         if self.ws.dofs.layout().eta_bar().is_none() {
-            return Vec::new();
+            return Ok(Vec::new());
         }
         let p = &self.st.particles;
         let mut eb = vec![0.0; self.ws.grid_state.mass.len()];
-        for q in 0..p.len() {
+        for q in 0..self.own_point_count() {
             for w in self.ws.table.weights(q) {
                 eb[w.node as usize] += w.value * p.mass[q] * p.eta_bar[q];
             }
         }
+        if self.st.distributed {
+            session.sum(&mut eb)?;
+        }
         for &node in self.ws.dofs.active_nodes() {
             eb[node as usize] /= self.ws.grid_state.mass[node as usize];
         }
-        eb
+        Ok(eb)
     }
 
     /// The consistent initial acceleration of a dynamic run (`docs/theory.md`, "Initial acceleration"):
@@ -1936,13 +2123,13 @@ impl Step<'_> {
     /// motion ([`prescribed_acceleration`]). Carried to the points with the G2P interpolation,
     /// `a_p = sum_I S_Ip a_I`; in FEM mode it is also the carried nodal acceleration. The result depends
     /// only on the state at t = 0, not on the points' previous `a_p`.
-    fn initialize_acceleration(&mut self) -> Result<(), StepError> {
-        self.project_to_grid()?;
+    fn initialize_acceleration(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        self.project_to_grid(session)?;
         let t = self.st.time;
         let prescribed = self.constraint_values(|v, rise| prescribed_acceleration(v, rise, t));
         let sets = self.constrain(&prescribed)?;
         let (nodal_force, _) = self.nodal_loads(t)?;
-        let eta_bar = self.nodal_eta_bar();
+        let eta_bar = self.nodal_eta_bar(session)?;
         let nf = self.ws.dofs.fields();
         let s = self.m;
         // No inertia and the full body force at t = 0.
@@ -1967,10 +2154,16 @@ impl Step<'_> {
                 x[a * nf + e] = eta_bar[node as usize];
             }
         }
-        self.ws.assembler.evaluate(&input, &x)?;
         // R = f_int - f_ext at du = 0 (no inertia), unbalanced forces in the constrained rows too.
         let mut r = vec![0.0; x.len()];
-        self.ws.assembler.residual(&input, &x, &mut r, true)?;
+        let local = self
+            .ws
+            .assembler
+            .evaluate(&input, &x)
+            .and_then(|()| self.ws.assembler.residual(&input, &x, &mut r, true));
+        agreed(session, self.st.distributed, local.map_err(StepError::from))?;
+        let rows = self.own_rows(session);
+        complete_rows(session, self.st.distributed, rows, nf, &mut r)?;
         let mut acc = vec![Vector2::zeros(); s.field_nodes()];
         for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
@@ -1989,7 +2182,8 @@ impl Step<'_> {
             .map(|d| Vector2::new(d[0].unwrap_or(0.0), d[1].unwrap_or(0.0)))
             .collect();
         let pins: Vec<Option<Vector2<f64>>> = (0..s.rigid.len()).map(|k| self.pin_of(k)).collect();
-        let (devices, _) = self.contact_devices(&device_acc, &pins, &vec![0.0; s.rigid.len()], 0.0);
+        let (devices, _) =
+            self.contact_devices(session, &device_acc, &pins, &vec![0.0; s.rigid.len()], 0.0)?;
         let mut contact_forces = vec![Vector2::zeros(); devices.len()];
         for (k, d) in devices.iter().enumerate() {
             let Some(d) = d else { continue };

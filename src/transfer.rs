@@ -21,7 +21,7 @@ use crate::particles::{Particles, parallelogram_corners};
 use crate::shape::{ShapeKind, ShapeTable, Weight};
 
 /// Errors of the transfers (all detected before anything is modified).
-#[derive(Debug, Clone, Copy, PartialEq, Error)]
+#[derive(Debug, Clone, PartialEq, Error)]
 pub enum TransferError {
     /// An input array has the wrong length.
     #[error("{what} has {found} entries, expected {expected}")]
@@ -39,6 +39,9 @@ pub enum TransferError {
     /// A tracked CPDI2 corner lies outside the grid.
     #[error(transparent)]
     Grid(#[from] GridError),
+    /// Summing the nodal values over the processes failed.
+    #[error("summing the nodal P2G values over the processes: {0}")]
+    Reduce(String),
 }
 
 fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), TransferError> {
@@ -227,6 +230,30 @@ pub fn particles_to_grid(
     relative_tolerance: f64,
     state: &mut GridState,
 ) -> Result<(), TransferError> {
+    particles_to_grid_shared(
+        table,
+        particles,
+        particles.len(),
+        grid,
+        relative_tolerance,
+        state,
+        |_| Ok(()),
+    )
+}
+
+/// P2G as [`particles_to_grid`] for a process holding part of the points: only the first `counted`
+/// points contribute (the others are copies of other processes' points), and the nodal sums
+/// `[m, m v_x, m v_y, m a_x, m a_y]` per node pass through `reduce` (the sum over the processes) before
+/// the activity test and the divisions, so that every process gets the same grid state.
+pub fn particles_to_grid_shared(
+    table: &ShapeTable,
+    particles: &Particles,
+    counted: usize,
+    grid: &Grid,
+    relative_tolerance: f64,
+    state: &mut GridState,
+    reduce: impl FnOnce(&mut [f64]) -> Result<(), String>,
+) -> Result<(), TransferError> {
     if table.kind().is_none() {
         return Err(TransferError::NoShapeTable);
     }
@@ -237,9 +264,13 @@ pub fn particles_to_grid(
     state
         .scatter
         .scatter(table, nodes, &mut state.sums, |p, w| {
+            if p >= counted {
+                return [0.0; 5];
+            }
             let mp = w.value * m[p];
             [mp, mp * v[p].x, mp * v[p].y, mp * a[p].x, mp * a[p].y]
         });
+    reduce(state.sums.as_flattened_mut()).map_err(TransferError::Reduce)?;
     let max_mass = state.sums.iter().fold(0.0_f64, |mx, s| mx.max(s[0]));
     let threshold = relative_tolerance * max_mass;
     state.mass.resize(nodes, 0.0);

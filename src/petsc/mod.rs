@@ -158,6 +158,84 @@ impl Session {
         unsafe { sys::mpmc_world_any(i32::from(flag)) != 0 }
     }
 
+    /// `values[i]` summed over all processes, in place, with the same bits on every process (collective;
+    /// one process: unchanged).
+    pub fn sum(&self, values: &mut [f64]) -> Result<()> {
+        if self.size() == 1 {
+            return Ok(());
+        }
+        let n = to_petsc_int(values.len(), "values to sum")?;
+        // SAFETY: the buffer holds n doubles; an MPI reduction and broadcast over the world communicator.
+        check(
+            unsafe { sys::mpmc_sum_doubles(values.as_mut_ptr(), n) },
+            "MPI_Reduce (sum)",
+        )
+    }
+
+    /// `values[i]` replaced by its minimum over all processes, in place (collective; as [`Session::sum`]).
+    pub fn min(&self, values: &mut [f64]) -> Result<()> {
+        if self.size() == 1 {
+            return Ok(());
+        }
+        let n = to_petsc_int(values.len(), "values to reduce")?;
+        // SAFETY: as in `sum`.
+        check(
+            unsafe { sys::mpmc_min_doubles(values.as_mut_ptr(), n) },
+            "MPI_Reduce (min)",
+        )
+    }
+
+    /// Sends records of `width` values: `send` holds `counts[r]` records for process `r`, in process
+    /// order (`counts` has one entry per process). Returns the records sent to this process, ordered by
+    /// source process and, from one source, in its order. Built on a PetscSF whose roots are the outgoing
+    /// and whose leaves the incoming records (collective).
+    pub fn exchange(&self, width: usize, counts: &[usize], send: &[f64]) -> Result<Vec<f64>> {
+        let total: usize = counts.iter().sum();
+        if counts.len() != self.size() || send.len() != total * width || width == 0 {
+            return Err(PetscError {
+                code: 62, // PETSC_ERR_ARG_WRONG
+                call: "exchange",
+                message: format!(
+                    "{} record counts for {} processes, {} values for {total} records of {width}",
+                    counts.len(),
+                    self.size(),
+                    send.len()
+                ),
+            });
+        }
+        let counts = counts
+            .iter()
+            .map(|&c| to_petsc_int(c, "records to send"))
+            .collect::<Result<Vec<_>>>()?;
+        let width_p = to_petsc_int(width, "record width")?;
+        let (mut n, mut recv): (PetscInt, *mut f64) = (0, std::ptr::null_mut());
+        // SAFETY: counts has one entry per process and send the records they count; the shim allocates
+        // `recv` with PetscMalloc (n * width values), copied out and freed below.
+        check(
+            unsafe {
+                sys::mpmc_exchange_records(
+                    width_p,
+                    counts.as_ptr(),
+                    // Nothing to send: no pointer (a dangling one would reach MPI).
+                    if send.is_empty() {
+                        std::ptr::null()
+                    } else {
+                        send.as_ptr()
+                    },
+                    &mut n,
+                    &mut recv,
+                )
+            },
+            "PetscSFBcast (records)",
+        )?;
+        let len = n as usize * width;
+        // SAFETY: recv holds len doubles (allocated by the shim, which succeeded).
+        let out = unsafe { std::slice::from_raw_parts(recv, len) }.to_vec();
+        // SAFETY: allocated with PetscMalloc by the shim.
+        unsafe { sys::mpmc_free(recv.cast()) };
+        Ok(out)
+    }
+
     /// Registers a logging stage (shown by `-log_view`).
     pub fn register_stage(&self, name: &str) -> Result<sys::PetscLogStage> {
         let c = cstring(name)?;

@@ -1,6 +1,7 @@
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include "shim.h"
+#include <petscsf.h>
 
 MPI_Comm mpmc_comm_world(void) { return PETSC_COMM_WORLD; }
 MPI_Comm mpmc_comm_self(void) { return PETSC_COMM_SELF; }
@@ -37,3 +38,67 @@ int mpmc_openblas_set_threads(int n)
   set(n);
   return 1;
 }
+
+/* In place: buf[i] = op over all processes of buf[i], the same bits on every process (MPI_Allreduce may
+ * sum in another order on each process; a reduction on process 0 then a broadcast cannot). */
+static PetscErrorCode reduce_doubles(double *buf, PetscInt n, MPI_Op op)
+{
+  PetscMPIInt rank, count;
+  PetscFunctionBeginUser;
+  if (n <= 0) PetscFunctionReturn(0);
+  PetscCall(PetscMPIIntCast(n, &count));
+  PetscCallMPI(MPI_Comm_rank(PETSC_COMM_WORLD, &rank));
+  if (rank == 0) PetscCallMPI(MPI_Reduce(MPI_IN_PLACE, buf, count, MPI_DOUBLE, op, 0, PETSC_COMM_WORLD));
+  else PetscCallMPI(MPI_Reduce(buf, NULL, count, MPI_DOUBLE, op, 0, PETSC_COMM_WORLD));
+  PetscCallMPI(MPI_Bcast(buf, count, MPI_DOUBLE, 0, PETSC_COMM_WORLD));
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode mpmc_sum_doubles(double *buf, PetscInt n) { return reduce_doubles(buf, n, MPI_SUM); }
+PetscErrorCode mpmc_min_doubles(double *buf, PetscInt n) { return reduce_doubles(buf, n, MPI_MIN); }
+
+PetscErrorCode mpmc_exchange_records(PetscInt width, const PetscInt *sendcounts, const double *send,
+                                     PetscInt *nrecv, double **recv)
+{
+  PetscMPIInt  size, rank, r;
+  PetscMPIInt *counts, *offsets, *incoming, *from;
+  PetscInt     nroots = 0, nleaves = 0, k = 0, i;
+  PetscSFNode *remote;
+  PetscSF      sf;
+  MPI_Datatype unit;
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_size(PETSC_COMM_WORLD, &size));
+  PetscCallMPI(MPI_Comm_rank(PETSC_COMM_WORLD, &rank));
+  PetscCall(PetscMalloc4(size, &counts, size, &offsets, size, &incoming, size, &from));
+  for (r = 0; r < size; r++) {
+    PetscCall(PetscMPIIntCast(sendcounts[r], &counts[r]));
+    PetscCall(PetscMPIIntCast(nroots, &offsets[r]));
+    nroots += sendcounts[r];
+  }
+  /* Per source: how many records it sends here and where they start in its send buffer. */
+  PetscCallMPI(MPI_Alltoall(counts, 1, MPI_INT, incoming, 1, MPI_INT, PETSC_COMM_WORLD));
+  PetscCallMPI(MPI_Alltoall(offsets, 1, MPI_INT, from, 1, MPI_INT, PETSC_COMM_WORLD));
+  for (r = 0; r < size; r++) nleaves += incoming[r];
+  PetscCall(PetscMalloc1(nleaves, &remote));
+  for (r = 0; r < size; r++)
+    for (i = 0; i < incoming[r]; i++, k++) {
+      remote[k].rank  = r;
+      remote[k].index = from[r] + i;
+    }
+  PetscCall(PetscFree4(counts, offsets, incoming, from));
+  /* Roots: this process's outgoing records; leaves: its incoming ones, ordered by source. */
+  PetscCall(PetscSFCreate(PETSC_COMM_WORLD, &sf));
+  PetscCall(PetscSFSetGraph(sf, nroots, nleaves, NULL, PETSC_OWN_POINTER, remote, PETSC_OWN_POINTER));
+  PetscCall(PetscSFSetUp(sf));
+  PetscCall(PetscMalloc1(nleaves * width + 1, recv));
+  PetscCallMPI(MPI_Type_contiguous((int)width, MPI_DOUBLE, &unit));
+  PetscCallMPI(MPI_Type_commit(&unit));
+  PetscCall(PetscSFBcastBegin(sf, unit, send, *recv, MPI_REPLACE));
+  PetscCall(PetscSFBcastEnd(sf, unit, send, *recv, MPI_REPLACE));
+  PetscCallMPI(MPI_Type_free(&unit));
+  PetscCall(PetscSFDestroy(&sf));
+  *nrecv = nleaves;
+  PetscFunctionReturn(0);
+}
+
+PetscErrorCode mpmc_free(void *p) { return PetscFree(p); }

@@ -21,4 +21,16 @@ PetscErrorCode mpmc_log_event_end(PetscLogEvent e);
 /* Sets the thread count of an OpenBLAS loaded in the process (found at run time; other BLAS have no such
  * call). Returns 1 if OpenBLAS was found. */
 int mpmc_openblas_set_threads(int n);
+/* In place over PETSC_COMM_WORLD: the sum or the minimum of `buf` over all processes, bitwise the same on
+ * every process (reduced on process 0, then broadcast). Collective. */
+PetscErrorCode mpmc_sum_doubles(double *buf, PetscInt n);
+PetscErrorCode mpmc_min_doubles(double *buf, PetscInt n);
+/* Sends records of `width` doubles: `send` holds sendcounts[r] records for process r, in process order.
+ * On return `*recv` (PetscMalloc'ed; free with mpmc_free) holds the `*nrecv` records sent here, ordered
+ * by source process and, within one source, in its send order. A PetscSF whose roots are the outgoing
+ * records and whose leaves the incoming ones (record counts and offsets found by MPI_Alltoall).
+ * Collective. */
+PetscErrorCode mpmc_exchange_records(PetscInt width, const PetscInt *sendcounts, const double *send,
+                                     PetscInt *nrecv, double **recv);
+PetscErrorCode mpmc_free(void *p);
 #endif

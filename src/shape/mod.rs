@@ -150,6 +150,23 @@ impl ShapeError {
             ShapeError::Grid(_) => 0,
         }
     }
+
+    /// The error with its point index `p` replaced by `ids[p]` (a process's local index by the point's
+    /// number in the whole set).
+    pub fn renumbered(mut self, ids: &[u64]) -> Self {
+        match &mut self {
+            ShapeError::Grid(GridError::OutsideGrid { particle, .. })
+            | ShapeError::DegenerateDomain { particle, .. }
+            | ShapeError::InvertedElement { particle, .. }
+            | ShapeError::GimpWidth { particle, .. } => {
+                if let Some(&id) = ids.get(*particle) {
+                    *particle = id as usize;
+                }
+            }
+            ShapeError::Grid(_) => {}
+        }
+        self
+    }
 }
 
 /// The error for point `particle` whose `locus` at `x` left the grid.

@@ -1,0 +1,367 @@
+//! Material points owned by processes (`docs/theory.md`, "Processes"): on `P` processes the grid's cell
+//! rows are cut into `P` contiguous bands holding about the same number of points; a process owns the
+//! points in its cells and the grid nodes of its node rows (the block rows of the Jacobian it assembles).
+//! Every step, points that moved into another process's band migrate to it, and every process receives
+//! copies (ghosts) of the other processes' points whose support may reach its node rows, so that it can
+//! evaluate its rows completely. Points travel as records ([`Particles::pack`]) through a PETSc star
+//! forest (`PetscSF`, [`SessionGuard::exchange`]). Units: mm.
+
+use crate::grid::Grid;
+use crate::model::State;
+use crate::particles::Particles;
+use crate::petsc::{PetscError, SessionGuard};
+use crate::shape::ShapeTable;
+use nalgebra::Vector2;
+use std::borrow::Cow;
+use std::ops::Range;
+
+/// Node rows beyond the cell rows of a point's domain that its support may reach: 1 for the linear
+/// and CPDI interpolators, up to 2 for GIMP and the quadratic B-spline (support 1.5 cells about the
+/// point), plus one of margin. The support is checked against it every step ([`Partition::check_reach`]).
+const REACH_ROWS: isize = 3;
+
+/// Cell-row bands of the processes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Partition {
+    rank: usize,
+    /// Process `r` owns cell rows and node rows `cuts[r]..cuts[r + 1]`; the last also node row `ny`.
+    cuts: Vec<usize>,
+    y0: f64,
+    h: f64,
+    ny: usize,
+    /// Nodes per node row (`nx + 1`).
+    row_nodes: usize,
+}
+
+impl Partition {
+    /// Bands of about equal point counts for the processes of `session`, from the points of
+    /// `particles` (all points if `all_here`, else this process's share: the counts are summed).
+    pub fn balanced(
+        session: &SessionGuard,
+        grid: &Grid,
+        particles: &Particles,
+        all_here: bool,
+    ) -> Result<Self, String> {
+        let ny = grid.ny();
+        let mut counts = vec![0.0; ny];
+        let h = grid.cell_size();
+        let y0 = grid.origin().y;
+        for x in &particles.x {
+            counts[cell_row(y0, h, ny, x.y)] += 1.0;
+        }
+        if !all_here {
+            session.sum(&mut counts).map_err(|e| e.to_string())?;
+        }
+        Self::from_counts(session.rank(), session.size(), grid, &counts)
+    }
+
+    /// Bands of about equal sums of `counts` (points per cell row) for process `rank` of `size`.
+    fn from_counts(rank: usize, size: usize, grid: &Grid, counts: &[f64]) -> Result<Self, String> {
+        let ny = grid.ny();
+        if ny < size {
+            return Err(format!(
+                "{size} processes for a grid of {ny} cell rows: each process needs at least one row"
+            ));
+        }
+        let total: f64 = counts.iter().sum();
+        let mut cuts = vec![0; size + 1];
+        cuts[size] = ny;
+        let mut cumulative = 0.0;
+        let mut j = 0;
+        for r in 1..size {
+            let target = total * r as f64 / size as f64;
+            while j < ny && cumulative + counts[j] <= target {
+                cumulative += counts[j];
+                j += 1;
+            }
+            cuts[r] = j.max(cuts[r - 1] + 1).min(ny - (size - r));
+        }
+        Ok(Self {
+            rank,
+            cuts,
+            y0: grid.origin().y,
+            h: grid.cell_size(),
+            ny,
+            row_nodes: grid.nx() + 1,
+        })
+    }
+
+    /// Cell row of height `y` (mm), clamped to the grid.
+    fn cell_row(&self, y: f64) -> usize {
+        cell_row(self.y0, self.h, self.ny, y)
+    }
+
+    /// The process owning cell row `j`.
+    fn owner_of_row(&self, j: usize) -> usize {
+        self.cuts.partition_point(|&c| c <= j) - 1
+    }
+
+    /// The process owning a point at `x` (mm): the process of its cell.
+    pub fn owner(&self, x: Vector2<f64>) -> usize {
+        self.owner_of_row(self.cell_row(x.y))
+    }
+
+    /// Node rows of process `r`.
+    fn node_rows(&self, r: usize) -> Range<usize> {
+        let last = usize::from(r + 1 == self.cuts.len() - 1);
+        self.cuts[r]..self.cuts[r + 1] + last
+    }
+
+    /// The grid nodes (indices) this process owns: its node rows.
+    pub fn owned_nodes(&self) -> Range<usize> {
+        let rows = self.node_rows(self.rank);
+        rows.start * self.row_nodes..rows.end * self.row_nodes
+    }
+
+    /// The node rows point `p`'s support may reach: the cell rows of its position and domain corners,
+    /// widened by [`REACH_ROWS`].
+    fn reach(&self, particles: &Particles, p: usize) -> Range<isize> {
+        let (lo, hi) = particles.corners[p]
+            .iter()
+            .chain(std::iter::once(&particles.x[p]))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+                (lo.min(c.y), hi.max(c.y))
+            });
+        let row = |y: f64| ((y - self.y0) / self.h).floor() as isize;
+        row(lo) - REACH_ROWS + 1..row(hi) + REACH_ROWS + 1
+    }
+
+    /// Processes other than this one whose node rows meet `rows`.
+    fn ranks_meeting(&self, rows: &Range<isize>) -> impl Iterator<Item = usize> + '_ {
+        let rows = rows.clone();
+        (0..self.cuts.len() - 1).filter(move |&r| {
+            let own = self.node_rows(r);
+            r != self.rank && (own.start as isize) < rows.end && (own.end as isize) > rows.start
+        })
+    }
+
+    /// Checks that the support of each of the first `owned` points in `table` lies within the node rows
+    /// its ghosts were sent for (a domain stretched beyond [`REACH_ROWS`] rows of its corners would leave
+    /// another process without the point).
+    pub fn check_reach(
+        &self,
+        table: &ShapeTable,
+        particles: &Particles,
+        owned: usize,
+    ) -> Result<(), String> {
+        for p in 0..owned {
+            let reach = self.reach(particles, p);
+            for w in table.weights(p) {
+                let row =
+                    (w.node as usize % (self.row_nodes * (self.ny + 1)) / self.row_nodes) as isize;
+                if !reach.contains(&row) {
+                    let x = particles.x[p];
+                    return Err(format!(
+                        "the point at ({:.3}, {:.3}) mm reaches grid node row {row}, beyond the rows \
+                         {reach:?} its copies were sent for (a support wider than {REACH_ROWS} cells \
+                         beyond its domain)",
+                        x.x, x.y
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Cell row of height `y` (mm) on a grid of `ny` rows of height `h` from `y0`, clamped to the grid.
+fn cell_row(y0: f64, h: f64, ny: usize, y: f64) -> usize {
+    (((y - y0) / h).floor().max(0.0) as usize).min(ny - 1)
+}
+
+/// Keeps the points of this process from a set every process holds whole.
+pub fn keep_own(partition: &Partition, particles: &mut Particles) {
+    let keep: Vec<bool> = particles
+        .x
+        .iter()
+        .map(|&x| partition.owner(x) == partition.rank)
+        .collect();
+    particles.retain(&keep);
+}
+
+/// Records of the chosen points per destination, in process order, with their counts.
+fn send_buffer(
+    particles: &Particles,
+    size: usize,
+    mut destinations: impl FnMut(usize, &mut Vec<usize>),
+) -> (Vec<usize>, Vec<f64>) {
+    let mut per: Vec<Vec<f64>> = vec![Vec::new(); size];
+    let mut counts = vec![0; size];
+    let mut to = Vec::new();
+    for p in 0..particles.len() {
+        to.clear();
+        destinations(p, &mut to);
+        for &r in &to {
+            particles.pack(p, &mut per[r]);
+            counts[r] += 1;
+        }
+    }
+    (counts, per.concat())
+}
+
+/// Sends this process's points that moved into another process's band to it and appends the points
+/// it receives. Returns the number of points that left.
+pub fn migrate(
+    session: &SessionGuard,
+    partition: &Partition,
+    particles: &mut Particles,
+) -> Result<usize, PetscError> {
+    let width = particles.record_width();
+    let owners: Vec<usize> = particles.x.iter().map(|&x| partition.owner(x)).collect();
+    let (counts, send) = send_buffer(particles, session.size(), |p, to| {
+        if owners[p] != partition.rank {
+            to.push(owners[p]);
+        }
+    });
+    let received = session.exchange(width, &counts, &send)?;
+    if !send.is_empty() {
+        let keep: Vec<bool> = owners.iter().map(|&r| r == partition.rank).collect();
+        particles.retain(&keep);
+    }
+    for record in received.chunks_exact(width) {
+        particles.unpack(record);
+    }
+    Ok(counts.iter().sum())
+}
+
+/// Appends copies of the other processes' points whose support may reach this process's node rows
+/// (after this process's own points, which stay first). Returns the number of copies received.
+pub fn add_ghosts(
+    session: &SessionGuard,
+    partition: &Partition,
+    particles: &mut Particles,
+) -> Result<usize, PetscError> {
+    let width = particles.record_width();
+    let (counts, send) = send_buffer(particles, session.size(), |p, to| {
+        to.extend(partition.ranks_meeting(&partition.reach(particles, p)));
+    });
+    let received = session.exchange(width, &counts, &send)?;
+    for record in received.chunks_exact(width) {
+        particles.unpack(record);
+    }
+    Ok(received.len() / width)
+}
+
+/// The whole set of points on process 0, in the order of their ids (the order of the serial run), from
+/// every process's own points (`None` on the other processes). Collective.
+pub fn gather(
+    session: &SessionGuard,
+    particles: &Particles,
+) -> Result<Option<Particles>, PetscError> {
+    let width = particles.record_width();
+    let mut counts = vec![0; session.size()];
+    counts[0] = particles.len();
+    let mut send = Vec::with_capacity(particles.len() * width);
+    for p in 0..particles.len() {
+        particles.pack(p, &mut send);
+    }
+    let received = session.exchange(width, &counts, &send)?;
+    if session.rank() != 0 {
+        return Ok(None);
+    }
+    let mut records: Vec<&[f64]> = received.chunks_exact(width).collect();
+    records.sort_by_key(|r| Particles::record_id(r));
+    let mut all = particles.empty_like();
+    for r in records {
+        all.unpack(r);
+    }
+    Ok(Some(all))
+}
+
+/// The whole state for output and checkpoints: `state` itself where it holds every point; gathered on
+/// process 0 ([`gather`]) where the points are shared out (`None` on the other processes). Collective.
+pub fn whole_state<'a>(
+    session: &SessionGuard,
+    state: &'a State,
+) -> Result<Option<Cow<'a, State>>, PetscError> {
+    if !state.distributed {
+        return Ok(Some(Cow::Borrowed(state)));
+    }
+    Ok(gather(session, &state.particles)?.map(|all| Cow::Owned(state.with_points(all))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shape::ShapeKind;
+    use nalgebra::Matrix2;
+
+    fn grid() -> Grid {
+        Grid::new(Vector2::new(-2.0, -4.0), 1.0, 12, 30).expect("grid")
+    }
+
+    #[test]
+    fn bands_hold_equal_counts_and_own_every_node_once() {
+        let g = grid();
+        // Points in rows 0..20 only: 3 processes cut at rows about 7 and 13.
+        let counts: Vec<f64> = (0..30).map(|j| if j < 21 { 10.0 } else { 0.0 }).collect();
+        let parts: Vec<Partition> = (0..3)
+            .map(|r| Partition::from_counts(r, 3, &g, &counts).expect("bands"))
+            .collect();
+        assert_eq!(parts[0].cuts, vec![0, 7, 14, 30]);
+        let mut owner = vec![usize::MAX; g.num_nodes()];
+        for (r, p) in parts.iter().enumerate() {
+            for n in p.owned_nodes() {
+                assert_eq!(owner[n], usize::MAX, "node {n} owned twice");
+                owner[n] = r;
+            }
+        }
+        assert!(owner.iter().all(|&r| r != usize::MAX), "every node owned");
+        // The owner of a point is the process of its cell, also outside the grid (clamped).
+        let p = &parts[1];
+        assert_eq!(p.owner(Vector2::new(0.0, -4.0 + 6.99)), 0);
+        assert_eq!(p.owner(Vector2::new(0.0, -4.0 + 7.0)), 1);
+        assert_eq!(p.owner(Vector2::new(0.0, 100.0)), 2);
+        assert_eq!(p.owner(Vector2::new(0.0, -100.0)), 0);
+        // More processes than rows: an error, not empty bands.
+        assert!(Partition::from_counts(0, 31, &g, &counts).is_err());
+        // Empty rows never leave a band empty.
+        let few = Partition::from_counts(0, 4, &g, &[0.0; 30]).expect("bands");
+        assert!(few.cuts.windows(2).all(|w| w[0] < w[1]), "{:?}", few.cuts);
+    }
+
+    #[test]
+    fn every_support_lies_in_the_reach_its_ghosts_are_sent_for() {
+        let g = grid();
+        let part = Partition::from_counts(0, 3, &g, &[1.0; 30]).expect("bands");
+        let mut ps = Particles::new();
+        for k in 0..20 {
+            let x = Vector2::new(2.0 + 0.37 * k as f64, 3.0 + 0.61 * k as f64);
+            ps.push(
+                x,
+                0.25,
+                1e-9,
+                Vector2::new(0.25, 0.0),
+                Vector2::new(0.0, 0.25),
+                0,
+            );
+        }
+        // A sheared, stretched CPDI domain (3 cells tall).
+        let f = Matrix2::new(1.2, 0.8, 0.1, 6.0);
+        ps.f[5] = f;
+        ps.r1[5] = f * ps.r1_0[5];
+        ps.r2[5] = f * ps.r2_0[5];
+        ps.corners[5] = crate::particles::parallelogram_corners(ps.x[5], ps.r1[5], ps.r2[5]);
+        for kind in [
+            ShapeKind::Linear,
+            ShapeKind::Gimp,
+            ShapeKind::Cpdi1,
+            ShapeKind::Bspline2,
+        ] {
+            let mut table = ShapeTable::new();
+            table.compute(kind, &g, &ps).expect("table");
+            part.check_reach(&table, &ps, ps.len())
+                .unwrap_or_else(|e| panic!("{}: {e}", kind.name()));
+        }
+        // The stretched point is sent to every band its domain reaches.
+        let reach = part.reach(&ps, 5);
+        let to: Vec<usize> = part.ranks_meeting(&reach).collect();
+        let rows = |r: usize| part.node_rows(r);
+        for r in 1..3 {
+            let meets =
+                (rows(r).start as isize) < reach.end && (rows(r).end as isize) > reach.start;
+            assert_eq!(to.contains(&r), meets, "process {r}");
+        }
+        assert!(!to.contains(&0), "never to itself");
+    }
+}
