@@ -61,6 +61,7 @@ fn main() {
         "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|SetOption)",
         "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation|SetValuesBlocked)",
         "MatSeq(AIJ|BAIJ)(SetPreallocationCSR|GetArray|RestoreArray)",
+        "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray",
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix)",
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType)",

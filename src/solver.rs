@@ -15,8 +15,8 @@ use crate::model::{FemReference, InitialAcceleration, Method, Model, Setup, Stat
 use crate::particles::Particles;
 use crate::partition::{self, Partition};
 use crate::petsc::{
-    self, BlockCsr, CallbackError, IndexSet, LogEvent, Matrix, NonlinearProblem, PetscInt,
-    SessionGuard, Snes, SolveInfo, Tolerances, Vector,
+    self, BlockCsr, CallbackError, GatherAll, IndexSet, LogEvent, Matrix, NonlinearProblem,
+    PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
 };
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
@@ -415,14 +415,14 @@ struct OwnedRows {
     cols: Vec<u32>,
     /// Unknowns per node.
     nf: usize,
-    /// More than one process: the unknowns of the others are gathered for every evaluation.
-    parallel: bool,
+    /// More than one process: the gather of all unknowns for every evaluation (built once with the
+    /// vector layout).
+    gather: Option<GatherAll>,
 }
 
 impl OwnedRows {
     /// The block rows `rows` (from [`Step::own_rows`]) with their pattern.
-    fn new(session: &SessionGuard, asm: &Assembler, rows: Range<usize>, nf: usize) -> Self {
-        let size = session.size();
+    fn new(asm: &Assembler, rows: Range<usize>, nf: usize) -> Self {
         let (mut row_ptr, mut cols) = (Vec::new(), Vec::new());
         asm.block_rows_pattern(rows.clone(), &mut row_ptr, &mut cols);
         Self {
@@ -430,7 +430,7 @@ impl OwnedRows {
             row_ptr,
             cols,
             nf,
-            parallel: size > 1,
+            gather: None,
         }
     }
 
@@ -451,10 +451,9 @@ impl OwnedRows {
 
     /// All unknowns of the distributed vector `x`, in [`DofMap`] order, on every process.
     fn gather(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
-        if self.parallel {
-            x.gather_all()
-        } else {
-            x.read(|v| v.to_vec())
+        match &self.gather {
+            Some(g) => g.gather(x),
+            None => x.read(|v| v.to_vec()),
         }
     }
 
@@ -516,11 +515,14 @@ impl LinearSystem {
         rows: Range<usize>,
     ) -> Result<Self, StepError> {
         let nf = dofs.fields();
-        let owned = OwnedRows::new(session, asm, rows, nf);
+        let mut owned = OwnedRows::new(asm, rows, nf);
         let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
         session.sum(&mut nonzeros)?;
         let n = owned.scalars().len();
         let x = Vector::new(session, n, nf)?;
+        if session.size() > 1 {
+            owned.gather = Some(GatherAll::new(&x)?);
+        }
         let first = x.ownership_range()?.start;
         if first != owned.scalars().start {
             return Err(StepError::Setup(format!(

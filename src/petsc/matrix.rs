@@ -5,8 +5,10 @@
 //! - **block CSR** ([`BlockCsr`], [`Matrix::set_block_pattern`], [`Matrix::fill_block_rows`]): the exact
 //!   pattern of the process's block rows, sorted, as the MPM assembler produces it from the node-particle
 //!   incidence. On one process the AIJ structure is built directly from it (no sorting) and the values
-//!   are written in place into PETSc's CSR value array, in parallel and without a copy; other matrix
-//!   types (`-mat_type baij`, MPI AIJ) are preallocated from the same pattern and filled row by row.
+//!   are written in place into PETSc's CSR value array, in parallel and without a copy; on several
+//!   processes (MPI AIJ) the process's rows are handed over as CSR the same way and every fill is one
+//!   `MatUpdateMPIAIJWithArray` (no sorting, no search); other matrix types (`-mat_type baij`) are
+//!   preallocated from the pattern and filled row by row.
 //! - **COO** ([`Matrix::set_pattern_coo`], [`Matrix::set_values_coo`]): (row, column) pairs with repeats
 //!   summed and negative indices ignored; PETSc sorts them once. Simple for small problems (the smoke
 //!   lattice).
@@ -135,12 +137,16 @@ impl Matrix {
 
     /// Declares the exact nonzero pattern of this process's block rows (see [`BlockCsr`]) and leaves the
     /// matrix assembled with zero values. On one process with type `seqaij` the CSR structure is handed to
-    /// PETSc as it is (`MatSeqAIJSetPreallocationCSR`: no sorting, no hashing); other types are
-    /// preallocated per block row (`MatXAIJSetPreallocation`) and the pattern is inserted once, so the
-    /// nonzero structure, and with it any symbolic factorisation, stays fixed while values change.
+    /// PETSc as it is (`MatSeqAIJSetPreallocationCSR`: no sorting, no hashing), on several with
+    /// `mpiaij` likewise (`MatMPIAIJSetPreallocationCSR`); other types are preallocated per block row
+    /// (`MatXAIJSetPreallocation`) and the pattern is inserted once. The nonzero structure, and with it
+    /// any symbolic factorisation, stays fixed while values change.
     pub fn set_block_pattern(&mut self, p: &BlockCsr<'_>) -> Result<()> {
         p.check()?;
-        if self.type_name()? == "seqaij" {
+        let kind = self.type_name()?;
+        if kind == "seqaij" || kind == "mpiaij" {
+            // The scalar CSR of the block rows (rows from 0, global columns, sorted within each row).
+            let what = "Mat*AIJSetPreallocationCSR";
             let bs = p.bs;
             let rows = p.block_rows() * bs;
             let mut i: Vec<PetscInt> = Vec::with_capacity(rows + 1);
@@ -152,23 +158,33 @@ impl Matrix {
                     for &b in cols {
                         let c = b as usize * bs;
                         for k in 0..bs {
-                            j.push(to_petsc_int(c + k, "MatSeqAIJSetPreallocationCSR")?);
+                            j.push(to_petsc_int(c + k, what)?);
                         }
                     }
-                    i.push(to_petsc_int(j.len(), "MatSeqAIJSetPreallocationCSR")?);
+                    i.push(to_petsc_int(j.len(), what)?);
                 }
             }
-            // SAFETY: i has rows + 1 entries, j has i[rows]; PETSc copies both (null values = zeros).
+            // SAFETY: i has rows + 1 entries, j has i[rows]; PETSc copies both (null values = zeros)
+            // and assembles.
             return check(
                 unsafe {
-                    sys::MatSeqAIJSetPreallocationCSR(
-                        self.raw,
-                        i.as_ptr(),
-                        j.as_ptr(),
-                        std::ptr::null(),
-                    )
+                    if kind == "seqaij" {
+                        sys::MatSeqAIJSetPreallocationCSR(
+                            self.raw,
+                            i.as_ptr(),
+                            j.as_ptr(),
+                            std::ptr::null(),
+                        )
+                    } else {
+                        sys::MatMPIAIJSetPreallocationCSR(
+                            self.raw,
+                            i.as_ptr(),
+                            j.as_ptr(),
+                            std::ptr::null(),
+                        )
+                    }
                 },
-                "MatSeqAIJSetPreallocationCSR",
+                what,
             );
         }
         if self.type_name()? == "seqbaij" {
@@ -228,7 +244,8 @@ impl Matrix {
     /// Replaces all values of a matrix whose pattern was declared with [`Matrix::set_block_pattern`]:
     /// `fill` receives an array of [`BlockCsr::nonzeros`] values in the given [`BlockLayout`] and must
     /// write all of them. For `seqaij` and `seqbaij` this is PETSc's own value array (no copy); for other
-    /// types a scratch array inserted with `MatSetValuesBlocked`. Leaves the matrix assembled.
+    /// types a scratch array, handed over with one `MatUpdateMPIAIJWithArray` (`mpiaij`) or inserted with
+    /// `MatSetValuesBlocked` row by row. Leaves the matrix assembled.
     pub fn fill_block_rows(
         &mut self,
         p: &BlockCsr<'_>,
@@ -276,6 +293,14 @@ impl Matrix {
         }
         let mut values = vec![0.0; nnz];
         fill(&mut values, BlockLayout::Rows);
+        if self.type_name()? == "mpiaij" {
+            // SAFETY: the CSR of set_block_pattern (sorted columns) has nnz values in this order.
+            check(
+                unsafe { sys::MatUpdateMPIAIJWithArray(self.raw, values.as_ptr()) },
+                "MatUpdateMPIAIJWithArray",
+            )?;
+            return self.assemble();
+        }
         let bs = p.bs;
         let mut cols: Vec<PetscInt> = Vec::new();
         for a in 0..p.block_rows() {

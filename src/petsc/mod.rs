@@ -21,7 +21,7 @@ pub use options::{
     unused_options,
 };
 pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo, Tolerances};
-pub use vector::Vector;
+pub use vector::{GatherAll, Vector};
 
 use std::ffi::{CStr, CString, c_char, c_int, c_void};
 use std::sync::{Mutex, MutexGuard, OnceLock};

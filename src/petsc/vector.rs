@@ -227,33 +227,57 @@ impl Vector {
 
     /// All entries of the (possibly distributed) vector on every process, in global order.
     pub fn gather_all(&self) -> Result<Vec<f64>> {
+        GatherAll::new(self)?.gather(self)
+    }
+}
+
+/// A reusable gather of every entry of distributed vectors of one layout on every process
+/// (`VecScatterCreateToAll` once, then one scatter per [`GatherAll::gather`]).
+pub struct GatherAll {
+    scatter: sys::VecScatter,
+    all: Vector,
+}
+
+impl GatherAll {
+    /// The gather for vectors laid out like `like`.
+    pub fn new(like: &Vector) -> Result<Self> {
         let mut scatter: sys::VecScatter = std::ptr::null_mut();
         let mut all: sys::PetscVec = std::ptr::null_mut();
-        // SAFETY: creates a sequential vector of the global size and a scatter into it.
+        // SAFETY: creates a sequential vector of the global size and a scatter into it, both owned here.
         check(
-            unsafe { sys::VecScatterCreateToAll(self.raw, &mut scatter, &mut all) },
+            unsafe { sys::VecScatterCreateToAll(like.raw, &mut scatter, &mut all) },
             "VecScatterCreateToAll",
         )?;
-        let all = Vector {
-            raw: all,
-            owned: true,
-        };
+        Ok(Self {
+            scatter,
+            all: Vector {
+                raw: all,
+                owned: true,
+            },
+        })
+    }
+
+    /// Every entry of `x` (laid out as the vector this gather was made for), in global order.
+    pub fn gather(&self, x: &Vector) -> Result<Vec<f64>> {
         let forward = sys::ScatterMode_SCATTER_FORWARD;
         let insert = sys::InsertMode_INSERT_VALUES;
-        let res = (|| {
-            check(
-                unsafe { sys::VecScatterBegin(scatter, self.raw, all.raw, insert, forward) },
-                "VecScatterBegin",
-            )?;
-            check(
-                unsafe { sys::VecScatterEnd(scatter, self.raw, all.raw, insert, forward) },
-                "VecScatterEnd",
-            )?;
-            all.read(|s| s.to_vec())
-        })();
-        // SAFETY: destroys the scatter created above.
-        unsafe { sys::VecScatterDestroy(&mut scatter) };
-        res
+        // SAFETY: the scatter maps vectors of x's layout into `all`.
+        check(
+            unsafe { sys::VecScatterBegin(self.scatter, x.raw, self.all.raw, insert, forward) },
+            "VecScatterBegin",
+        )?;
+        check(
+            unsafe { sys::VecScatterEnd(self.scatter, x.raw, self.all.raw, insert, forward) },
+            "VecScatterEnd",
+        )?;
+        self.all.read(|s| s.to_vec())
+    }
+}
+
+impl Drop for GatherAll {
+    fn drop(&mut self) {
+        // SAFETY: created in `new`, destroyed once.
+        unsafe { sys::VecScatterDestroy(&mut self.scatter) };
     }
 }
 
