@@ -447,36 +447,27 @@ impl RunOutput {
     ) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
-        Ok(Self::mirror(dir, title, config_text, model, initial).writing())
+        Ok(Self {
+            initial_position: initial.particles.x.clone(),
+            writes: true,
+            ..Self::mirror(dir, title, config_text, model.grid.cell_size())
+        })
     }
 
     /// The records of a run whose files another process writes (the other processes of a distributed
-    /// run): steps are recorded, nothing is written.
-    pub fn mirror(
-        dir: &Path,
-        title: &str,
-        config_text: &str,
-        model: &Model,
-        initial: &State,
-    ) -> Self {
+    /// run, on a grid of `cell_size` mm): steps are recorded, nothing is written.
+    pub fn mirror(dir: &Path, title: &str, config_text: &str, cell_size: f64) -> Self {
         Self {
             dir: dir.to_owned(),
             title: title.to_owned(),
             config_text: config_text.to_owned(),
             rows: Vec::new(),
             snapshots: Vec::new(),
-            initial_position: initial.particles.x.clone(),
-            cell_size: model.grid.cell_size(),
+            initial_position: Vec::new(),
+            cell_size,
             writes: false,
             crack: None,
             cracks: Vec::new(),
-        }
-    }
-
-    fn writing(self) -> Self {
-        Self {
-            writes: true,
-            ..self
         }
     }
 
@@ -573,7 +564,8 @@ impl RunOutput {
                 let _ = write!(s, ",{theta:.9e}");
             }
             let _ = write!(s, ",{}", r.contact_solves);
-            let dissipated = r.external_work - r.kinetic_energy - r.stored_energy;
+            let dissipated =
+                r.external_work + r.initial_energy - r.kinetic_energy - r.stored_energy;
             let _ = writeln!(
                 s,
                 ",{:.9e},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{:.4e},{}",

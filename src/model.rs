@@ -264,6 +264,9 @@ pub struct State {
     pub calm_steps: usize,
     /// Work of reactions and body forces so far (N mm per mm thickness).
     pub external_work: f64,
+    /// Kinetic energy of the points at t = 0 (N mm per mm thickness; bodies start stress-free): with
+    /// the external work, the energy the run has been given (`dissipated = W + E_0 - K - Psi`).
+    pub initial_energy: f64,
     /// Accumulated prescribed displacement per constraint set (mm), in report order.
     pub accumulated: Vec<[f64; 2]>,
     /// Last reactions per constraint set (N per mm thickness; the trapezoidal work increment).
@@ -292,6 +295,9 @@ impl State {
     /// (boxes, rigid bodies, loads) and a first time step `dt` (s).
     pub fn new(particles: Particles, rigid: Vec<Particles>, nsets: usize, dt: f64) -> Self {
         let nrigid = rigid.len();
+        let initial_energy = (0..particles.len())
+            .map(|p| 0.5 * particles.mass[p] * particles.v[p].norm_squared())
+            .sum();
         Self {
             particles,
             rigid,
@@ -300,6 +306,7 @@ impl State {
             dt,
             calm_steps: 0,
             external_work: 0.0,
+            initial_energy,
             accumulated: vec![[0.0; 2]; nsets],
             last_reactions: vec![[0.0; 2]; nsets],
             rotations: vec![0.0; nrigid],
@@ -336,6 +343,7 @@ impl State {
             dt: self.dt,
             calm_steps: self.calm_steps,
             external_work: self.external_work,
+            initial_energy: self.initial_energy,
             accumulated: self.accumulated.clone(),
             last_reactions: self.last_reactions.clone(),
             rotations: self.rotations.clone(),
@@ -354,6 +362,7 @@ impl State {
         self.dt = c.dt;
         self.calm_steps = c.calm_steps;
         self.external_work = c.external_work;
+        self.initial_energy = c.initial_energy;
         self.accumulated = c.accumulated;
         self.last_reactions = c.last_reactions;
         self.rotations = c.rotations;
@@ -380,6 +389,9 @@ pub struct Counters {
     pub calm_steps: usize,
     /// Work of reactions and body forces so far (N mm per mm thickness).
     pub external_work: f64,
+    /// Kinetic energy at t = 0 (N mm per mm thickness; 0 in checkpoints that predate it).
+    #[serde(default)]
+    pub initial_energy: f64,
     /// Accumulated prescribed displacement per constraint set (mm).
     pub accumulated: Vec<[f64; 2]>,
     /// Last reactions per constraint set (N per mm thickness).

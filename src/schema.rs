@@ -70,7 +70,8 @@ pub mod history {
     pub const STORED_ENERGY: &str = "stored_energy";
     /// See [`KINETIC_ENERGY`].
     pub const EXTERNAL_WORK: &str = "external_work";
-    /// See [`KINETIC_ENERGY`].
+    /// The energy balance `W + E_0 - K - Psi` (external work, kinetic energy at t = 0, kinetic and stored
+    /// energy): what damage, erosion and the time integration took out (N mm per mm thickness).
     pub const DISSIPATED_ENERGY: &str = "dissipated_energy";
     /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve of the converged
     /// attempt, and the total of the step with its failed attempts.

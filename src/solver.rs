@@ -154,6 +154,9 @@ pub struct StepReport {
     /// See [`StepReport::migrated`].
     #[serde(default)]
     pub ghosts: usize,
+    /// Kinetic energy of the points at t = 0 (N mm per mm thickness): `dissipated = W + E_0 - K - Psi`.
+    #[serde(default)]
+    pub initial_energy: f64,
 }
 
 /// The per-step scratch of the time step, reused from step to step: shape-function tables, grid fields,
@@ -1593,6 +1596,7 @@ impl Step<'_> {
             kinetic_energy: kinetic,
             stored_energy: stored,
             external_work: self.st.external_work,
+            initial_energy: self.st.initial_energy,
             wall_setup: setup_time,
             wall_solve: solve_time,
             wall_assembly: assembly_time,

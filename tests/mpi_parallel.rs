@@ -253,6 +253,16 @@ fn points_crossing_between_processes_keep_their_state() {
         "the block must hit the wall: kinetic energy {} down to {least} only",
         kinetic[0]
     );
+    // Before the impact (step 14) the block flies free: the balance W + E_0 - K - Psi, with the kinetic
+    // energy E_0 it started with, dissipates nothing.
+    let flying = serial["dissipated_energy"][..12]
+        .iter()
+        .fold(0.0f64, |m, d| m.max(d.abs()));
+    assert!(
+        flying <= 1e-9 * kinetic[0],
+        "free flight dissipated {flying} of {}",
+        kinetic[0]
+    );
     let last = format!("fields_{steps:06}.h5");
     for ranks in [2, 3] {
         let dir = base.join(format!("ranks{ranks}"));
