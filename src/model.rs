@@ -343,7 +343,7 @@ impl State {
             dt: self.dt,
             calm_steps: self.calm_steps,
             external_work: self.external_work,
-            initial_energy: self.initial_energy,
+            initial_energy: Some(self.initial_energy),
             accumulated: self.accumulated.clone(),
             last_reactions: self.last_reactions.clone(),
             rotations: self.rotations.clone(),
@@ -362,7 +362,9 @@ impl State {
         self.dt = c.dt;
         self.calm_steps = c.calm_steps;
         self.external_work = c.external_work;
-        self.initial_energy = c.initial_energy;
+        if let Some(e) = c.initial_energy {
+            self.initial_energy = e;
+        }
         self.accumulated = c.accumulated;
         self.last_reactions = c.last_reactions;
         self.rotations = c.rotations;
@@ -389,9 +391,10 @@ pub struct Counters {
     pub calm_steps: usize,
     /// Work of reactions and body forces so far (N mm per mm thickness).
     pub external_work: f64,
-    /// Kinetic energy at t = 0 (N mm per mm thickness; 0 in checkpoints that predate it).
+    /// Kinetic energy at t = 0 (N mm per mm thickness; `None` in checkpoints that predate it, which keep
+    /// the value the configuration gives).
     #[serde(default)]
-    pub initial_energy: f64,
+    pub initial_energy: Option<f64>,
     /// Accumulated prescribed displacement per constraint set (mm).
     pub accumulated: Vec<[f64; 2]>,
     /// Last reactions per constraint set (N per mm thickness).

@@ -715,7 +715,11 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
         }
     };
     let nsets = boxes.len() + rigid.len() + loads.len();
-    let state = State::new(particles, rigid_points, nsets, time.dt);
+    let mut state = State::new(particles, rigid_points, nsets, time.dt);
+    if time.quasi_static {
+        // Without inertia the points' velocities carry no energy (they are zeroed after the first step).
+        state.initial_energy = 0.0;
+    }
     let model = Model {
         grid,
         materials,

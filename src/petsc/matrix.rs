@@ -266,7 +266,9 @@ impl Matrix {
             )),
             _ => None,
         };
-        if let Some((get, restore, layout)) = direct {
+        let mpiaij = self.type_name()? == "mpiaij";
+        if direct.is_some() || mpiaij {
+            // PETSc reads or writes as many values as its structure holds: it must be the pattern's.
             let mut info = std::mem::MaybeUninit::<sys::MatInfo>::uninit();
             // SAFETY: out-parameter filled by PETSc.
             check(
@@ -284,6 +286,8 @@ impl Matrix {
                     ),
                 });
             }
+        }
+        if let Some((get, restore, layout)) = direct {
             let mut a: *mut f64 = std::ptr::null_mut();
             // SAFETY: the array has nnz entries in the order of `layout` for the block pattern
             // (set_block_pattern built the structure from it); it is restored below.
@@ -293,7 +297,7 @@ impl Matrix {
         }
         let mut values = vec![0.0; nnz];
         fill(&mut values, BlockLayout::Rows);
-        if self.type_name()? == "mpiaij" {
+        if mpiaij {
             // SAFETY: the CSR of set_block_pattern (sorted columns) has nnz values in this order.
             check(
                 unsafe { sys::MatUpdateMPIAIJWithArray(self.raw, values.as_ptr()) },
