@@ -861,16 +861,9 @@ pub fn parallelogram_corners(
 mod tests {
     use super::*;
 
-    #[test]
-    fn every_state_column_survives_a_round_trip() {
-        let mut p = Particles::new();
-        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
-        for k in 0..3 {
-            p.push(Vector2::new(k as f64, 1.0), 0.25, 1e-9, r1, r2, 0);
-        }
-        p.resize_history(3, 0.0);
-        // Distinct values in every column.
-        let mut value = 0.0;
+    /// Sets every state column of `p` to distinct values `start + 1, start + 2, ..`.
+    fn distinct_state(p: &mut Particles, start: f64) {
+        let mut value = start;
         for (name, width) in p.state_columns() {
             let data: Vec<f64> = (0..width * p.len())
                 .map(|_| {
@@ -880,6 +873,17 @@ mod tests {
                 .collect();
             p.set_column(name, &data).unwrap();
         }
+    }
+
+    #[test]
+    fn every_state_column_survives_a_round_trip() {
+        let mut p = Particles::new();
+        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
+        for k in 0..3 {
+            p.push(Vector2::new(k as f64, 1.0), 0.25, 1e-9, r1, r2, 0);
+        }
+        p.resize_history(3, 0.0);
+        distinct_state(&mut p, 0.0);
         let mut q = p.clone();
         for (name, _) in p.state_columns() {
             let data = p.column(name).unwrap();
@@ -916,16 +920,7 @@ mod tests {
             );
         }
         p.resize_history(5, 0.0);
-        let mut value = 0.5;
-        for (name, width) in p.state_columns() {
-            let data: Vec<f64> = (0..width * p.len())
-                .map(|_| {
-                    value += 1.0;
-                    value
-                })
-                .collect();
-            p.set_column(name, &data).unwrap();
-        }
+        distinct_state(&mut p, 0.5);
         p.r1_0[2] = Vector2::new(0.3, -0.1);
         let mut records = Vec::new();
         for k in [3, 1, 0, 2] {
