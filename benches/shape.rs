@@ -12,7 +12,7 @@ use nalgebra::{Matrix2, Vector2};
 use std::hint::black_box;
 
 use mpm_concrete::grid::Grid;
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding, parallelogram_corners};
+use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{
     DEFAULT_RELATIVE_MASS_TOLERANCE, GridState, StepSolution, grid_to_particles, particles_to_grid,
@@ -45,12 +45,7 @@ fn ct_plate() -> (Grid, Particles) {
 fn deform(particles: &mut Particles, f: Matrix2<f64>, centre: Vector2<f64>) {
     for p in 0..particles.len() {
         particles.x[p] = centre + f * (particles.x[p] - centre);
-        particles.f[p] = f;
-        particles.r1[p] = f * particles.r1_0[p];
-        particles.r2[p] = f * particles.r2_0[p];
-        particles.corners[p] =
-            parallelogram_corners(particles.x[p], particles.r1[p], particles.r2[p]);
-        particles.vol[p] = f.determinant() * particles.vol0[p];
+        particles.set_deformation(p, f);
     }
 }
 

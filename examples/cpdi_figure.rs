@@ -10,30 +10,26 @@ use nalgebra::{Matrix2, Vector2};
 use plotters::prelude::*;
 
 use mpm_concrete::grid::Grid;
-use mpm_concrete::particles::{Particles, parallelogram_corners};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 
 fn main() -> Result<(), Box<dyn Error>> {
     let out = std::env::args()
         .nth(1)
         .unwrap_or_else(|| "docs/img/shape-cpdi.png".into());
-    let grid = Grid::new(Vector2::zeros(), 1.0, 5, 5)?;
+    let grid = Grid::new(Vector2::zeros(), 1.0, [5, 5])?;
 
-    // One point, domain deformed by F: r_i = F r_i^0, corners x_p -+ r1 -+ r2.
+    // One point, domain deformed by F: r_p = F r_p^0, corners x_p -+ r1 -+ r2.
     let f = Matrix2::new(1.3, 0.5, 0.2, 1.1);
     let mut particles = Particles::new();
     particles.push(
         Vector2::new(2.45, 2.4),
         1.0,
         2.4e-9,
-        Vector2::new(0.5, 0.0),
-        Vector2::new(0.0, 0.5),
+        Matrix2::identity() * 0.5,
         0,
     );
-    particles.f[0] = f;
-    particles.r1[0] = f * particles.r1_0[0];
-    particles.r2[0] = f * particles.r2_0[0];
-    particles.corners[0] = parallelogram_corners(particles.x[0], particles.r1[0], particles.r2[0]);
+    particles.set_deformation(0, f);
 
     let mut table = ShapeTable::new();
     table.compute(ShapeKind::Cpdi1, &grid, &particles)?;
@@ -72,7 +68,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         chart.draw_series(LineSeries::new([(0.0, c), (5.0, c)], line))?;
     }
 
-    let corners = particles.corners[0];
+    let corners = particles.corners(0);
     let pts: Vec<(f64, f64)> = corners.iter().map(|c| (c.x, c.y)).collect();
     chart.draw_series([Polygon::new(pts.clone(), BLUE.mix(0.15).filled())])?;
     chart.draw_series([PathElement::new(

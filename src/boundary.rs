@@ -209,7 +209,7 @@ mod tests {
 
     #[test]
     fn load_shares_are_the_consistent_nodal_forces() {
-        let grid = Grid::new(Vector2::new(-2.0, -2.0), 1.0, 14, 8).unwrap();
+        let grid = Grid::new(Vector2::new(-2.0, -2.0), 1.0, [14, 8]).unwrap();
         let load = |from: [f64; 2], to: [f64; 2]| NodalLoad {
             name: "tip".into(),
             from: Vector2::from(from),

@@ -34,6 +34,8 @@ pub mod rundir;
 pub mod scenario;
 pub mod schema;
 pub mod shape;
+pub mod solids;
 pub mod solver;
 pub mod solver_defaults;
+pub mod space;
 pub mod transfer;

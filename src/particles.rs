@@ -20,7 +20,9 @@
 //! the interiors of the excludes. With region edges on grid lines (the CT plate and notch) no seeded point lies
 //! on a boundary, so the rule only matters for unusual geometry.
 
-use nalgebra::{Matrix2, Matrix3, Vector2};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector2};
+
+use crate::grid::cell_node_offset;
 use serde::Deserialize;
 use thiserror::Error;
 
@@ -119,7 +121,7 @@ pub enum ParticleError {
 }
 
 impl Region {
-    fn validate(&self) -> Result<(), String> {
+    pub(crate) fn validate(&self) -> Result<(), String> {
         let finite = |p: &[f64; 2]| p[0].is_finite() && p[1].is_finite();
         match self {
             Region::Rect { min, max } => {
@@ -276,42 +278,92 @@ impl Geometry {
     }
 }
 
-/// Values of a point record ([`Particles::pack`]) before its history.
-const RECORD_FIXED: usize = 45;
+/// A body to seed in `D` dimensions: [`Geometry`] in the plane, [`crate::solids::Solids`] in space.
+pub trait Body<const D: usize> {
+    /// Checks every region; a body without include regions is an error.
+    fn validate(&self) -> Result<(), ParticleError>;
+    /// Whether `x` (mm) is material.
+    fn contains(&self, x: &SVector<f64, D>) -> bool;
+    /// Bounding box of the include regions (mm); `None` without include regions.
+    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)>;
+}
 
-/// Material points, structure of arrays: entry `p` of every column belongs to point `p`.
+impl Body<2> for Geometry {
+    fn validate(&self) -> Result<(), ParticleError> {
+        Geometry::validate(self)
+    }
+
+    fn contains(&self, x: &Vector2<f64>) -> bool {
+        Geometry::contains(self, *x)
+    }
+
+    fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        Geometry::bounding_box(self)
+    }
+}
+
+/// Sign vector `s_c` in `{-1, 1}^D` of corner `c` of a CPDI domain: corner `c` is `x_p + r s_c`
+/// ([`crate::grid::CellWeights`] order: counter-clockwise in 2D, lattice order in 3D).
+#[inline]
+pub fn corner_signs<const D: usize>(c: usize) -> SVector<f64, D> {
+    let off = cell_node_offset::<D>(c);
+    SVector::from_fn(|d, _| 2.0 * off[d] as f64 - 1.0)
+}
+
+/// Corner `c` of the parallelogram (parallelepiped) domain `x_p + r xi`, `xi` in `[-1, 1]^D`, whose columns
+/// `r_d` are the half-edge vectors (mm): `x_p + r s_c` ([`corner_signs`]).
+#[inline]
+pub fn domain_corner<const D: usize>(
+    x: &SVector<f64, D>,
+    r: &SMatrix<f64, D, D>,
+    c: usize,
+) -> SVector<f64, D> {
+    x + r * corner_signs::<D>(c)
+}
+
+/// Writes the `2^D` corners `x_p + r_p s_c` of the parallelogram (parallelepiped) domain into `out` (mm).
+#[inline]
+pub fn fill_domain_corners<const D: usize>(
+    x: &SVector<f64, D>,
+    r: &SMatrix<f64, D, D>,
+    out: &mut [SVector<f64, D>],
+) {
+    for (c, o) in out.iter_mut().enumerate() {
+        *o = domain_corner(x, r, c);
+    }
+}
+
+/// Material points, structure of arrays: entry `p` of every column belongs to point `p`; `Particles` alone
+/// is the 2D (plane strain) set, `Particles<3>` the 3D one.
 ///
-/// Invariant: every per-point column has [`Particles::len`] entries and `history` has
-/// `len() * history_stride()` entries. Columns are public so that solver stages can borrow them
-/// disjointly; change their lengths only through [`Particles::seed`], [`Particles::append`],
+/// Invariant: every per-point column has [`Particles::len`] entries (`corners` `2^D` per point) and
+/// `history` has `len() * history_stride()` entries. Columns are public so that solver stages can borrow
+/// them disjointly; change their lengths only through [`Particles::seed`], [`Particles::append`],
 /// [`Particles::unpack`], [`Particles::retain`] and [`Particles::resize_history`].
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Particles {
+pub struct Particles<const D: usize = 2> {
     /// Position `x_p` (mm).
-    pub x: Vec<Vector2<f64>>,
-    /// Initial volume `V_p^0` per unit thickness (mm^3 for 1 mm of thickness).
+    pub x: Vec<SVector<f64, D>>,
+    /// Initial volume `V_p^0` (mm^3; in 2D per 1 mm of thickness).
     pub vol0: Vec<f64>,
-    /// Current volume `v_p = det(F_p) V_p^0` (mm^3 per mm of thickness).
+    /// Current volume `v_p = det(F_p) V_p^0` (mm^3; in 2D per mm of thickness).
     pub vol: Vec<f64>,
-    /// Mass `m_p` (t per mm of thickness).
+    /// Mass `m_p` (t; in 2D per mm of thickness).
     pub mass: Vec<f64>,
     /// Velocity `v_p` (mm/s).
-    pub v: Vec<Vector2<f64>>,
+    pub v: Vec<SVector<f64, D>>,
     /// Acceleration `a_p` (mm/s^2).
-    pub a: Vec<Vector2<f64>>,
-    /// In-plane deformation gradient `F_p` (`F_33 = 1`) [-].
-    pub f: Vec<Matrix2<f64>>,
-    /// CPDI1 half-edge vector `r1 = F_p r1^0` (mm).
-    pub r1: Vec<Vector2<f64>>,
-    /// CPDI1 half-edge vector `r2 = F_p r2^0` (mm).
-    pub r2: Vec<Vector2<f64>>,
-    /// Initial half-edge vector `r1^0` (mm).
-    pub r1_0: Vec<Vector2<f64>>,
-    /// Initial half-edge vector `r2^0` (mm).
-    pub r2_0: Vec<Vector2<f64>>,
-    /// CPDI2 corners `x_1..x_4`, counter-clockwise from `x_p - r1 - r2` (mm). Tracked by the grid motion for
-    /// CPDI2; for the other interpolators G2P keeps them at `x_p -+ r1 -+ r2` (for output).
-    pub corners: Vec<[Vector2<f64>; 4]>,
+    pub a: Vec<SVector<f64, D>>,
+    /// Deformation gradient `F_p` [-] (in 2D the in-plane block, `F_33 = 1`).
+    pub f: Vec<SMatrix<f64, D, D>>,
+    /// CPDI1 half-edge vectors `r_d = F_p r_d^0` as the columns of `r_p = F_p r_p^0` (mm).
+    pub r: Vec<SMatrix<f64, D, D>>,
+    /// Initial half-edge vectors `r_d^0`, columns of `r_p^0` (mm).
+    pub r0: Vec<SMatrix<f64, D, D>>,
+    /// CPDI2 corners, `2^D` per point ([`Particles::corners`]; corner `c` starts at `x_p + r_p s_c`,
+    /// [`corner_signs`]) (mm). Tracked by the grid motion for CPDI2; for the other interpolators G2P keeps
+    /// them at `x_p + r_p s_c` (for output).
+    pub corners: Vec<SVector<f64, D>>,
     /// Body tag (e.g. concrete vs. rigid loading plate).
     pub body: Vec<u16>,
     /// Material history, `history_stride` values per point, point `p` at `p * stride..(p + 1) * stride`.
@@ -321,12 +373,12 @@ pub struct Particles {
     /// Scalar damage (output) [-].
     pub damage: Vec<f64>,
     /// Energy dissipated by the point's microplanes under tensile and under compressive normal strain
-    /// since the start (N mm per mm of thickness).
+    /// since the start (N mm; in 2D per mm of thickness).
     pub dissipated: Vec<[f64; 2]>,
     /// Damage gained in steps where the point's local equivalent strain stayed below gamma_0: damage
     /// carried in by the nonlocal field only [-].
     pub nonlocal_damage: Vec<f64>,
-    /// Cauchy stress `sigma_p` (MPa), 3x3 with `sigma_13 = sigma_23 = 0` (plane strain, `sigma_33` for output).
+    /// Cauchy stress `sigma_p` (MPa), 3x3 (in 2D `sigma_13 = sigma_23 = 0`, `sigma_33` from plane strain).
     pub stress: Vec<Matrix3<f64>>,
     /// The point's number in the whole set as built from the configuration (its place in output and
     /// checkpoint files); kept when points move between processes.
@@ -334,7 +386,18 @@ pub struct Particles {
     history_stride: usize,
 }
 
-impl Particles {
+/// Names of the half-edge state columns `r1, r2[, r3]`.
+const HALF_EDGES: [&str; 3] = ["r1", "r2", "r3"];
+
+impl<const D: usize> Particles<D> {
+    /// CPDI corners per point, `2^D`.
+    pub const CORNERS: usize = 1 << D;
+
+    /// Values of a point record ([`Particles::pack`]) before its history: position, velocity and
+    /// acceleration, `r`, `r^0` and `F`, the corners, volumes and mass, body, eta_bar, damage, two
+    /// dissipations, nonlocal damage, id and the 3 x 3 stress (45 in 2D).
+    const RECORD_FIXED: usize = 3 * D + 3 * D * D + D * (1 << D) + 3 + 7 + 9;
+
     /// An empty set (history stride 0).
     pub fn new() -> Self {
         Self::default()
@@ -350,60 +413,70 @@ impl Particles {
         self.x.is_empty()
     }
 
-    /// Mean distance between neighbouring points in the reference configuration, `sqrt(mean V_p^0)` (mm;
-    /// `V_p^0` per mm of thickness is an area); 0 without points.
+    /// The `2^D` CPDI corners of point `p` (mm).
+    #[inline]
+    pub fn corners(&self, p: usize) -> &[SVector<f64, D>] {
+        &self.corners[p * Self::CORNERS..(p + 1) * Self::CORNERS]
+    }
+
+    /// The `2^D` CPDI corners of point `p`, mutable (mm).
+    #[inline]
+    pub fn corners_mut(&mut self, p: usize) -> &mut [SVector<f64, D>] {
+        &mut self.corners[p * Self::CORNERS..(p + 1) * Self::CORNERS]
+    }
+
+    /// Mean distance between neighbouring points in the reference configuration, `(mean V_p^0)^(1/D)` (mm;
+    /// in 2D `V_p^0` per mm of thickness is an area); 0 without points.
     pub fn point_spacing(&self) -> f64 {
         if self.vol0.is_empty() {
             return 0.0;
         }
-        (self.vol0.iter().sum::<f64>() / self.vol0.len() as f64).sqrt()
+        (self.vol0.iter().sum::<f64>() / self.vol0.len() as f64).powf(1.0 / D as f64)
     }
 
     /// The evolving per-point state, in a fixed order: what a checkpoint holds to continue a run (mass,
     /// initial volume, body tag and initial half-edges come from the configuration). Values per point:
-    /// vectors 2, `F` 4 and `sigma` 9 (column-major), CPDI corners 8, the material history
+    /// vectors `D`, `F` `D^2` and `sigma` 9 (column-major), CPDI corners `D 2^D`, the material history
     /// [`Particles::history_stride`].
-    pub fn state_columns(&self) -> [(&'static str, usize); 14] {
-        [
-            ("x", 2),
-            ("v", 2),
-            ("a", 2),
-            ("r1", 2),
-            ("r2", 2),
+    pub fn state_columns(&self) -> Vec<(&'static str, usize)> {
+        let mut columns = vec![("x", D), ("v", D), ("a", D)];
+        columns.extend(HALF_EDGES[..D].iter().map(|&name| (name, D)));
+        columns.extend([
             ("vol", 1),
-            ("f", 4),
+            ("f", D * D),
             ("stress", 9),
-            ("corners", 8),
+            ("corners", D * Self::CORNERS),
             ("history", self.history_stride),
             ("eta_bar", 1),
             ("damage", 1),
             ("dissipated", 2),
             ("nonlocal_damage", 1),
-        ]
+        ]);
+        columns
     }
 
     /// The values of state column `name` ([`Particles::state_columns`]), point after point; `None` for
     /// an unknown name.
     pub fn column(&self, name: &str) -> Option<Vec<f64>> {
-        let vectors = |v: &[Vector2<f64>]| v.iter().flat_map(|x| [x.x, x.y]).collect();
+        let vectors = |v: &[SVector<f64, D>]| v.iter().flat_map(|x| x.iter().copied()).collect();
+        let matrices =
+            |m: &[SMatrix<f64, D, D>]| m.iter().flat_map(|m| m.iter().copied()).collect();
+        if let Some(d) = HALF_EDGES[..D].iter().position(|&n| n == name) {
+            return Some(
+                self.r
+                    .iter()
+                    .flat_map(|r| r.column(d).iter().copied().collect::<Vec<_>>())
+                    .collect(),
+            );
+        }
         Some(match name {
             "x" => vectors(&self.x),
             "v" => vectors(&self.v),
             "a" => vectors(&self.a),
-            "r1" => vectors(&self.r1),
-            "r2" => vectors(&self.r2),
             "vol" => self.vol.clone(),
-            "f" => self.f.iter().flat_map(|m| m.as_slice().to_vec()).collect(),
-            "stress" => self
-                .stress
-                .iter()
-                .flat_map(|m| m.as_slice().to_vec())
-                .collect(),
-            "corners" => self
-                .corners
-                .iter()
-                .flat_map(|c| c.iter().flat_map(|x| [x.x, x.y]))
-                .collect(),
+            "f" => matrices(&self.f),
+            "stress" => self.stress.iter().flat_map(|m| m.iter().copied()).collect(),
+            "corners" => vectors(&self.corners),
             "history" => self.history.clone(),
             "eta_bar" => self.eta_bar.clone(),
             "damage" => self.damage.clone(),
@@ -413,8 +486,8 @@ impl Particles {
         })
     }
 
-    /// Sets state column `name` from `data` (point after point, as [`Particles::column`] gives it). The
-    /// length must be the column's width times the number of points; an error names the column otherwise.
+    /// Replaces state column `name` with `data` (as [`Particles::column`] gives it); an error names the
+    /// column and the expected length.
     pub fn set_column(&mut self, name: &str, data: &[f64]) -> Result<(), String> {
         let width = self
             .state_columns()
@@ -430,22 +503,24 @@ impl Particles {
                 width * self.len()
             ));
         }
-        let vectors = |d: &[f64]| -> Vec<Vector2<f64>> {
-            d.chunks_exact(2)
-                .map(|c| Vector2::new(c[0], c[1]))
-                .collect()
+        let vectors = |d: &[f64]| -> Vec<SVector<f64, D>> {
+            d.chunks_exact(D).map(SVector::from_column_slice).collect()
         };
+        if let Some(d) = HALF_EDGES[..D].iter().position(|&n| n == name) {
+            for (r, c) in self.r.iter_mut().zip(data.chunks_exact(D)) {
+                r.set_column(d, &SVector::<f64, D>::from_column_slice(c));
+            }
+            return Ok(());
+        }
         match name {
             "x" => self.x = vectors(data),
             "v" => self.v = vectors(data),
             "a" => self.a = vectors(data),
-            "r1" => self.r1 = vectors(data),
-            "r2" => self.r2 = vectors(data),
             "vol" => self.vol = data.to_vec(),
             "f" => {
                 self.f = data
-                    .chunks_exact(4)
-                    .map(Matrix2::from_column_slice)
+                    .chunks_exact(D * D)
+                    .map(SMatrix::from_column_slice)
                     .collect()
             }
             "stress" => {
@@ -454,15 +529,7 @@ impl Particles {
                     .map(Matrix3::from_column_slice)
                     .collect()
             }
-            "corners" => {
-                self.corners = data
-                    .chunks_exact(8)
-                    .map(|c| {
-                        let v = vectors(c);
-                        [v[0], v[1], v[2], v[3]]
-                    })
-                    .collect()
-            }
+            "corners" => self.corners = vectors(data),
             "history" => self.history = data.to_vec(),
             "eta_bar" => self.eta_bar = data.to_vec(),
             "damage" => self.damage = data.to_vec(),
@@ -488,36 +555,44 @@ impl Particles {
         &mut self.history[p * self.history_stride..(p + 1) * self.history_stride]
     }
 
-    /// Sets the history stride and fills the whole column with `fill` (the material's initial state).
+    /// Sets the history stride and fills every point's history with `fill` (e.g. `gamma_0`).
     pub fn resize_history(&mut self, stride: usize, fill: f64) {
         self.history_stride = stride;
         self.history.clear();
         self.history.resize(self.len() * stride, fill);
     }
 
-    /// Adds one point at rest (`v = a = 0`, `F = I`, zero history and outputs) at `x` (mm) with volume `V_p^0`
-    /// (mm^3 per mm), mass `m_p` (t per mm) and a parallelogram domain of half-edges `r1^0`, `r2^0` (mm).
+    /// Gives point `p` the deformation gradient `f`: `F_p = f`, `r_p = f r_p^0`, the corners at the
+    /// deformed domain and `v_p = det(f) V_p^0`.
+    pub fn set_deformation(&mut self, p: usize, f: SMatrix<f64, D, D>) {
+        self.f[p] = f;
+        self.r[p] = f * self.r0[p];
+        self.vol[p] = crate::space::det(&f) * self.vol0[p];
+        let (x, r) = (self.x[p], self.r[p]);
+        fill_domain_corners(&x, &r, self.corners_mut(p));
+    }
+
+    /// Appends one point at `x` (mm), at rest and undeformed, with volume `vol0` (mm^3), mass `mass` (t),
+    /// half-edge vectors `r0` (mm, as columns) and body tag `body`; its history is zero.
     pub fn push(
         &mut self,
-        x: Vector2<f64>,
+        x: SVector<f64, D>,
         vol0: f64,
         mass: f64,
-        r1: Vector2<f64>,
-        r2: Vector2<f64>,
+        r0: SMatrix<f64, D, D>,
         body: u16,
     ) {
         self.x.push(x);
         self.vol0.push(vol0);
         self.vol.push(vol0);
         self.mass.push(mass);
-        self.v.push(Vector2::zeros());
-        self.a.push(Vector2::zeros());
-        self.f.push(Matrix2::identity());
-        self.r1.push(r1);
-        self.r2.push(r2);
-        self.r1_0.push(r1);
-        self.r2_0.push(r2);
-        self.corners.push(parallelogram_corners(x, r1, r2));
+        self.v.push(SVector::zeros());
+        self.a.push(SVector::zeros());
+        self.f.push(SMatrix::identity());
+        self.r.push(r0);
+        self.r0.push(r0);
+        self.corners
+            .extend((0..Self::CORNERS).map(|c| domain_corner(&x, &r0, c)));
         self.body.push(body);
         self.history
             .extend(std::iter::repeat_n(0.0, self.history_stride));
@@ -529,35 +604,28 @@ impl Particles {
         self.id.push(self.id.len() as u64);
     }
 
-    /// Seeds `n x n` points per cell over the material of `geometry` (see the module docs for positions,
-    /// volumes, domains and the boundary rule). The points are ordered cell by cell (cells row by row,
-    /// points within a cell row by row), which keeps the P2G scatter local. History stride 0; set it with
-    /// [`Particles::resize_history`].
-    pub fn seed(geometry: &Geometry, seeding: &Seeding) -> Result<Self, ParticleError> {
+    /// Seeds `n^D` points per cell of the lattice of multiples of `h` (module docs) into the material of
+    /// `geometry`: points at `(i + (a + 1/2)/n) h` per direction, volume `(h/n)^D`, half-edges `h/(2n)`
+    /// along the axes. Errors for an invalid geometry or seeding, and when no point is material.
+    pub fn seed<B: Body<D>>(geometry: &B, seeding: &Seeding) -> Result<Self, ParticleError> {
         let Seeding {
             h,
             points_per_cell: n,
             density,
             body,
         } = *seeding;
-        let (i0, j0, ni, nj) = cell_lattice(geometry, seeding)?;
+        let (first, counts) = cell_lattice(geometry, seeding)?;
         let nf = n as f64;
-        let vol0 = h * h / (nf * nf);
-        let half = Vector2::new(h / (2.0 * nf), h / (2.0 * nf));
-        let (r1, r2) = (Vector2::new(half.x, 0.0), Vector2::new(0.0, half.y));
-        let mut particles = Particles::new();
-        for j in 0..nj {
-            for i in 0..ni {
-                for b in 0..n {
-                    for a in 0..n {
-                        let x = Vector2::new(
-                            (i0 + i as f64 + (a as f64 + 0.5) / nf) * h,
-                            (j0 + j as f64 + (b as f64 + 0.5) / nf) * h,
-                        );
-                        if geometry.contains(x) {
-                            particles.push(x, vol0, density * vol0, r1, r2, body);
-                        }
-                    }
+        let vol0 = (h / nf).powi(D as i32);
+        let r0 = SMatrix::<f64, D, D>::identity() * (h / (2.0 * nf));
+        let mut particles = Self::new();
+        for cell in lattice::<D>(counts) {
+            for sub in lattice::<D>([n; D]) {
+                let x = SVector::from_fn(|d, _| {
+                    (first[d] + cell[d] as f64 + (sub[d] as f64 + 0.5) / nf) * h
+                });
+                if geometry.contains(&x) {
+                    particles.push(x, vol0, density * vol0, r0, body);
                 }
             }
         }
@@ -567,18 +635,17 @@ impl Particles {
         Ok(particles)
     }
 
-    /// Seeds the Gauss points of the cells of an FEM mesh: every grid cell (of size `h`, aligned with the
-    /// origin) whose centre lies in the material gets `n x n` Gauss-Legendre points (`n = points_per_cell`
-    /// in 1..=3) with volume `w_a w_b h^2 / 4` (the Gauss weights on [-1, 1]). Same ordering and domains
-    /// (`r_i` = half the point's share of the cell) as [`Particles::seed`].
-    pub fn seed_gauss(geometry: &Geometry, seeding: &Seeding) -> Result<Self, ParticleError> {
+    /// FEM mode seeding: the `n^D` Gauss points (`n` = 1, 2 or 3) of every lattice cell whose centre is
+    /// material, with the Gauss weights times the cell's volume as `V_p^0` (so that sums over points
+    /// integrate polynomials of degree `2n - 1` per direction exactly). Half-edges `h/(2n)`.
+    pub fn seed_gauss<B: Body<D>>(geometry: &B, seeding: &Seeding) -> Result<Self, ParticleError> {
         let Seeding {
             h,
             points_per_cell: n,
             density,
             body,
         } = *seeding;
-        let (i0, j0, ni, nj) = cell_lattice(geometry, seeding)?;
+        let (first, counts) = cell_lattice(geometry, seeding)?;
         let g = 1.0 / 3.0_f64.sqrt();
         let q = 0.6_f64.sqrt();
         let rule: &[(f64, f64)] = match n {
@@ -591,25 +658,17 @@ impl Particles {
                 });
             }
         };
-        let nf = n as f64;
-        let (r1, r2) = (
-            Vector2::new(h / (2.0 * nf), 0.0),
-            Vector2::new(0.0, h / (2.0 * nf)),
-        );
-        let mut particles = Particles::new();
-        for j in 0..nj {
-            for i in 0..ni {
-                let centre = Vector2::new((i0 + i as f64 + 0.5) * h, (j0 + j as f64 + 0.5) * h);
-                if !geometry.contains(centre) {
-                    continue;
-                }
-                for &(eb, wb) in rule {
-                    for &(ea, wa) in rule {
-                        let x = centre + 0.5 * h * Vector2::new(ea, eb);
-                        let vol = wa * wb * h * h / 4.0;
-                        particles.push(x, vol, density * vol, r1, r2, body);
-                    }
-                }
+        let r0 = SMatrix::<f64, D, D>::identity() * (h / (2.0 * n as f64));
+        let mut particles = Self::new();
+        for cell in lattice::<D>(counts) {
+            let centre = SVector::from_fn(|d, _| (first[d] + cell[d] as f64 + 0.5) * h);
+            if !geometry.contains(&centre) {
+                continue;
+            }
+            for sub in lattice::<D>([n; D]) {
+                let x = centre + SVector::from_fn(|d, _| 0.5 * h * rule[sub[d]].0);
+                let vol = (0..D).map(|d| rule[sub[d]].1 * 0.5 * h).product::<f64>();
+                particles.push(x, vol, density * vol, r0, body);
             }
         }
         if particles.is_empty() {
@@ -618,9 +677,9 @@ impl Particles {
         Ok(particles)
     }
 
-    /// Appends all points of `other` (e.g. a rigid loading plate seeded with another body tag). Both sets
-    /// must have the same history stride.
-    pub fn append(&mut self, other: &Particles) -> Result<(), ParticleError> {
+    /// Appends the points of `other` (e.g. a loading plate to the concrete). Both sets must have the same
+    /// history stride unless one of them is empty. The appended points' ids continue after this set's.
+    pub fn append(&mut self, other: &Self) -> Result<(), ParticleError> {
         if !other.is_empty() && !self.is_empty() && other.history_stride != self.history_stride {
             return Err(ParticleError::HistoryStrideMismatch {
                 this: self.history_stride,
@@ -637,10 +696,8 @@ impl Particles {
         self.v.extend_from_slice(&other.v);
         self.a.extend_from_slice(&other.a);
         self.f.extend_from_slice(&other.f);
-        self.r1.extend_from_slice(&other.r1);
-        self.r2.extend_from_slice(&other.r2);
-        self.r1_0.extend_from_slice(&other.r1_0);
-        self.r2_0.extend_from_slice(&other.r2_0);
+        self.r.extend_from_slice(&other.r);
+        self.r0.extend_from_slice(&other.r0);
         self.corners.extend_from_slice(&other.corners);
         self.body.extend_from_slice(&other.body);
         self.history.extend_from_slice(&other.history);
@@ -655,30 +712,23 @@ impl Particles {
         Ok(())
     }
 
-    /// Values per point in a record ([`Particles::pack`]): every column, the history and the id.
+    /// Values of one point record ([`Particles::pack`]).
     pub fn record_width(&self) -> usize {
-        RECORD_FIXED + self.history_stride
+        Self::RECORD_FIXED + self.history_stride
     }
 
-    /// Appends point `p`'s record (every column, constant and evolving, and its id; integers as exact
-    /// doubles) to `out`: what moves a point to another process.
+    /// Appends the whole of point `p` to `out` as one record of [`Particles::record_width`] values, for
+    /// moving the point to another process ([`Particles::unpack`] reads it back).
     pub fn pack(&self, p: usize, out: &mut Vec<f64>) {
-        let v2 = |out: &mut Vec<f64>, v: &Vector2<f64>| out.extend_from_slice(&[v.x, v.y]);
-        v2(out, &self.x[p]);
+        out.extend_from_slice(self.x[p].as_slice());
         out.extend_from_slice(&[self.vol0[p], self.vol[p], self.mass[p]]);
-        for v in [
-            &self.v[p],
-            &self.a[p],
-            &self.r1[p],
-            &self.r2[p],
-            &self.r1_0[p],
-            &self.r2_0[p],
-        ] {
-            v2(out, v);
-        }
+        out.extend_from_slice(self.v[p].as_slice());
+        out.extend_from_slice(self.a[p].as_slice());
+        out.extend_from_slice(self.r[p].as_slice());
+        out.extend_from_slice(self.r0[p].as_slice());
         out.extend_from_slice(self.f[p].as_slice());
-        for c in &self.corners[p] {
-            v2(out, c);
+        for c in self.corners(p) {
+            out.extend_from_slice(c.as_slice());
         }
         out.extend_from_slice(&[
             f64::from(self.body[p]),
@@ -693,79 +743,77 @@ impl Particles {
         out.extend_from_slice(self.history(p));
     }
 
-    /// The id of the point in `record` ([`Particles::pack`]).
-    pub fn record_id(record: &[f64]) -> u64 {
-        record[35] as u64
+    /// Position of the id in a point record.
+    const RECORD_ID: usize = Self::RECORD_FIXED - 10;
+
+    /// The id ([`Particles::id`]) of a point record of this set's layout.
+    pub fn record_id(&self, record: &[f64]) -> u64 {
+        record[Self::RECORD_ID] as u64
     }
 
-    /// Appends the point of `record` ([`Particles::pack`] of a set with the same history stride).
-    ///
-    /// # Panics
-    /// If `record` does not have [`Particles::record_width`] values.
+    /// Appends the point of a record written by [`Particles::pack`] of a set with the same history stride.
     pub fn unpack(&mut self, record: &[f64]) {
         assert_eq!(record.len(), self.record_width(), "a point record's length");
-        let v2 = |k: usize| Vector2::new(record[k], record[k + 1]);
-        self.x.push(v2(0));
-        self.vol0.push(record[2]);
-        self.vol.push(record[3]);
-        self.mass.push(record[4]);
-        self.v.push(v2(5));
-        self.a.push(v2(7));
-        self.r1.push(v2(9));
-        self.r2.push(v2(11));
-        self.r1_0.push(v2(13));
-        self.r2_0.push(v2(15));
-        self.f.push(Matrix2::from_column_slice(&record[17..21]));
-        self.corners.push([v2(21), v2(23), v2(25), v2(27)]);
-        self.body.push(record[29] as u16);
-        self.eta_bar.push(record[30]);
-        self.damage.push(record[31]);
-        self.dissipated.push([record[32], record[33]]);
-        self.nonlocal_damage.push(record[34]);
-        self.id.push(record[35] as u64);
-        self.stress
-            .push(Matrix3::from_column_slice(&record[36..RECORD_FIXED]));
-        self.history.extend_from_slice(&record[RECORD_FIXED..]);
+        let mut at = 0;
+        let mut take = |n: usize| {
+            at += n;
+            &record[at - n..at]
+        };
+        self.x.push(SVector::from_column_slice(take(D)));
+        let [vol0, vol, mass] = take(3).try_into().expect("three values");
+        self.vol0.push(vol0);
+        self.vol.push(vol);
+        self.mass.push(mass);
+        self.v.push(SVector::from_column_slice(take(D)));
+        self.a.push(SVector::from_column_slice(take(D)));
+        self.r.push(SMatrix::from_column_slice(take(D * D)));
+        self.r0.push(SMatrix::from_column_slice(take(D * D)));
+        self.f.push(SMatrix::from_column_slice(take(D * D)));
+        for _ in 0..Self::CORNERS {
+            self.corners.push(SVector::from_column_slice(take(D)));
+        }
+        let rest = take(7);
+        self.body.push(rest[0] as u16);
+        self.eta_bar.push(rest[1]);
+        self.damage.push(rest[2]);
+        self.dissipated.push([rest[3], rest[4]]);
+        self.nonlocal_damage.push(rest[5]);
+        self.id.push(rest[6] as u64);
+        self.stress.push(Matrix3::from_column_slice(take(9)));
+        self.history
+            .extend_from_slice(&record[Self::RECORD_FIXED..]);
     }
 
-    /// Keeps the points `p` with `keep[p]`, in their order.
-    ///
-    /// # Panics
-    /// If `keep` does not have one flag per point.
+    /// Keeps the points `p` with `keep[p]`, in order.
     pub fn retain(&mut self, keep: &[bool]) {
         assert_eq!(keep.len(), self.len(), "one flag per point");
-        fn filter<T>(v: &mut Vec<T>, keep: &[bool]) {
-            let mut k = keep.iter();
-            v.retain(|_| *k.next().expect("one flag per point"));
+        fn filter<T>(v: &mut Vec<T>, keep: &[bool], stride: usize) {
+            let mut k = 0;
+            v.retain(|_| {
+                k += 1;
+                keep[(k - 1) / stride]
+            });
         }
-        filter(&mut self.x, keep);
-        filter(&mut self.vol0, keep);
-        filter(&mut self.vol, keep);
-        filter(&mut self.mass, keep);
-        filter(&mut self.v, keep);
-        filter(&mut self.a, keep);
-        filter(&mut self.f, keep);
-        filter(&mut self.r1, keep);
-        filter(&mut self.r2, keep);
-        filter(&mut self.r1_0, keep);
-        filter(&mut self.r2_0, keep);
-        filter(&mut self.corners, keep);
-        filter(&mut self.body, keep);
-        filter(&mut self.eta_bar, keep);
-        filter(&mut self.damage, keep);
-        filter(&mut self.dissipated, keep);
-        filter(&mut self.nonlocal_damage, keep);
-        filter(&mut self.stress, keep);
-        filter(&mut self.id, keep);
-        let hs = self.history_stride;
-        let mut w = 0;
-        for (p, &k) in keep.iter().enumerate() {
-            if k {
-                self.history.copy_within(p * hs..(p + 1) * hs, w * hs);
-                w += 1;
-            }
+        filter(&mut self.x, keep, 1);
+        filter(&mut self.vol0, keep, 1);
+        filter(&mut self.vol, keep, 1);
+        filter(&mut self.mass, keep, 1);
+        filter(&mut self.v, keep, 1);
+        filter(&mut self.a, keep, 1);
+        filter(&mut self.f, keep, 1);
+        filter(&mut self.r, keep, 1);
+        filter(&mut self.r0, keep, 1);
+        filter(&mut self.corners, keep, Self::CORNERS);
+        filter(&mut self.body, keep, 1);
+        filter(&mut self.eta_bar, keep, 1);
+        filter(&mut self.damage, keep, 1);
+        filter(&mut self.dissipated, keep, 1);
+        filter(&mut self.nonlocal_damage, keep, 1);
+        filter(&mut self.stress, keep, 1);
+        filter(&mut self.id, keep, 1);
+        if self.history_stride > 0 {
+            filter(&mut self.history, keep, self.history_stride);
         }
-        self.history.truncate(w * hs);
     }
 
     /// Keeps the first `n` points.
@@ -777,11 +825,9 @@ impl Particles {
         self.v.truncate(n);
         self.a.truncate(n);
         self.f.truncate(n);
-        self.r1.truncate(n);
-        self.r2.truncate(n);
-        self.r1_0.truncate(n);
-        self.r2_0.truncate(n);
-        self.corners.truncate(n);
+        self.r.truncate(n);
+        self.r0.truncate(n);
+        self.corners.truncate(n * Self::CORNERS);
         self.body.truncate(n);
         self.eta_bar.truncate(n);
         self.damage.truncate(n);
@@ -792,7 +838,7 @@ impl Particles {
         self.history.truncate(n * self.history_stride);
     }
 
-    /// An empty set with the history stride of `self` (to unpack records into).
+    /// An empty set with this one's history stride (to unpack records into).
     pub fn empty_like(&self) -> Self {
         Self {
             history_stride: self.history_stride,
@@ -800,23 +846,34 @@ impl Particles {
         }
     }
 
-    /// Bounding box `(min, max)` (mm) of all positions and CPDI corners; `None` for an empty set. Feed it to
-    /// [`crate::grid::Grid::covering`].
-    pub fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+    /// Bounding box of the positions and CPDI corners (mm); `None` without points.
+    pub fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
         self.x
             .iter()
-            .chain(self.corners.iter().flatten())
+            .chain(self.corners.iter())
             .map(|&x| (x, x))
             .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
     }
 }
 
-/// Validates the seeding parameters and returns the lattice of cells (aligned with the origin) covering
-/// the geometry's bounding box: the index of its first cell in x and y and the number of cells.
-fn cell_lattice(
-    geometry: &Geometry,
+/// The lattice positions `0..counts[d]` per direction, direction 0 fastest.
+pub fn lattice<const D: usize>(counts: [usize; D]) -> impl Iterator<Item = [usize; D]> {
+    let total: usize = counts.iter().product();
+    (0..total).map(move |mut k| {
+        std::array::from_fn(|d| {
+            let i = k % counts[d];
+            k /= counts[d];
+            i
+        })
+    })
+}
+
+/// The cells of the lattice of multiples of `h` that cover the body's bounding box: the first cell (in cell
+/// units) and the cell count per direction. Checks the body and the seeding parameters.
+fn cell_lattice<const D: usize, B: Body<D>>(
+    geometry: &B,
     seeding: &Seeding,
-) -> Result<(f64, f64, usize, usize), ParticleError> {
+) -> Result<([f64; D], [usize; D]), ParticleError> {
     geometry.validate()?;
     let Seeding {
         h,
@@ -837,29 +894,21 @@ fn cell_lattice(
     let (lo, hi) = geometry
         .bounding_box()
         .ok_or(ParticleError::EmptyGeometry)?;
-    let (i0, j0) = ((lo.x / h).floor(), (lo.y / h).floor());
-    let (ni, nj) = ((hi.x / h).ceil() - i0, (hi.y / h).ceil() - j0);
-    let candidates = ni * nj * (n * n) as f64;
+    let first: [f64; D] = std::array::from_fn(|d| (lo[d] / h).floor());
+    let counts: [f64; D] = std::array::from_fn(|d| (hi[d] / h).ceil() - first[d]);
+    let candidates = counts.iter().product::<f64>() * (n as f64).powi(D as i32);
     if candidates.is_nan() || candidates > u32::MAX as f64 {
         return bad(format!(
             "{candidates} candidate points: cell size too small for the geometry"
         ));
     }
-    Ok((i0, j0, ni as usize, nj as usize))
-}
-
-/// Corners `x_p - r1 - r2, x_p + r1 - r2, x_p + r1 + r2, x_p - r1 + r2` of a parallelogram domain (mm).
-pub fn parallelogram_corners(
-    x: Vector2<f64>,
-    r1: Vector2<f64>,
-    r2: Vector2<f64>,
-) -> [Vector2<f64>; 4] {
-    [x - r1 - r2, x + r1 - r2, x + r1 + r2, x - r1 + r2]
+    Ok((first, counts.map(|c| c as usize)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Matrix2;
 
     /// Sets every state column of `p` to distinct values `start + 1, start + 2, ..`.
     fn distinct_state(p: &mut Particles, start: f64) {
@@ -880,7 +929,13 @@ mod tests {
         let mut p = Particles::new();
         let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
         for k in 0..3 {
-            p.push(Vector2::new(k as f64, 1.0), 0.25, 1e-9, r1, r2, 0);
+            p.push(
+                Vector2::new(k as f64, 1.0),
+                0.25,
+                1e-9,
+                Matrix2::from_columns(&[r1, r2]),
+                0,
+            );
         }
         p.resize_history(3, 0.0);
         distinct_state(&mut p, 0.0);
@@ -914,14 +969,13 @@ mod tests {
                 Vector2::new(k as f64, 1.0),
                 0.25 + k as f64,
                 1e-9 * (k + 1) as f64,
-                r1,
-                r2,
+                Matrix2::from_columns(&[r1, r2]),
                 k,
             );
         }
         p.resize_history(5, 0.0);
         distinct_state(&mut p, 0.5);
-        p.r1_0[2] = Vector2::new(0.3, -0.1);
+        p.r0[2].set_column(0, &Vector2::new(0.3, -0.1));
         let mut records = Vec::new();
         for k in [3, 1, 0, 2] {
             p.pack(k, &mut records);
@@ -934,7 +988,7 @@ mod tests {
         assert_eq!(q.id, vec![3, 1, 0, 2]);
         let mut back = p.empty_like();
         let mut sorted: Vec<&[f64]> = records.chunks_exact(p.record_width()).collect();
-        sorted.sort_by_key(|r| Particles::record_id(r));
+        sorted.sort_by_key(|r| p.record_id(r));
         for r in sorted {
             back.unpack(r);
         }
@@ -989,10 +1043,9 @@ mod tests {
         );
         assert_eq!(p.x[0], Vector2::new(0.25, 0.25));
         assert_eq!(p.x[3], Vector2::new(0.75, 0.75));
-        assert_eq!(p.r1[0], Vector2::new(0.25, 0.0));
-        assert_eq!(p.r2[0], Vector2::new(0.0, 0.25));
+        assert_eq!(p.r[0], Matrix2::identity() * 0.25);
         assert_eq!(
-            p.corners[0],
+            p.corners(0),
             [
                 Vector2::new(0.0, 0.0),
                 Vector2::new(0.5, 0.0),

@@ -116,7 +116,8 @@ impl Partition {
     /// The node rows point `p`'s support may reach: the cell rows of its position and domain corners,
     /// widened by [`REACH_ROWS`].
     fn reach(&self, particles: &Particles, p: usize) -> Range<isize> {
-        let (lo, hi) = particles.corners[p]
+        let (lo, hi) = particles
+            .corners(p)
             .iter()
             .chain(std::iter::once(&particles.x[p]))
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
@@ -260,7 +261,7 @@ pub fn gather(
         return Ok(None);
     }
     let mut records: Vec<&[f64]> = received.chunks_exact(width).collect();
-    records.sort_by_key(|r| Particles::record_id(r));
+    records.sort_by_key(|r| particles.record_id(r));
     let mut all = particles.empty_like();
     for r in records {
         all.unpack(r);
@@ -287,7 +288,7 @@ mod tests {
     use nalgebra::Matrix2;
 
     fn grid() -> Grid {
-        Grid::new(Vector2::new(-2.0, -4.0), 1.0, 12, 30).expect("grid")
+        Grid::new(Vector2::new(-2.0, -4.0), 1.0, [12, 30]).expect("grid")
     }
 
     #[test]
@@ -327,21 +328,11 @@ mod tests {
         let mut ps = Particles::new();
         for k in 0..20 {
             let x = Vector2::new(2.0 + 0.37 * k as f64, 3.0 + 0.61 * k as f64);
-            ps.push(
-                x,
-                0.25,
-                1e-9,
-                Vector2::new(0.25, 0.0),
-                Vector2::new(0.0, 0.25),
-                0,
-            );
+            ps.push(x, 0.25, 1e-9, Matrix2::identity() * 0.25, 0);
         }
         // A sheared, stretched CPDI domain (3 cells tall).
         let f = Matrix2::new(1.2, 0.8, 0.1, 6.0);
-        ps.f[5] = f;
-        ps.r1[5] = f * ps.r1_0[5];
-        ps.r2[5] = f * ps.r2_0[5];
-        ps.corners[5] = crate::particles::parallelogram_corners(ps.x[5], ps.r1[5], ps.r2[5]);
+        ps.set_deformation(5, f);
         for kind in [
             ShapeKind::Linear,
             ShapeKind::Gimp,

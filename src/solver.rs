@@ -1479,22 +1479,22 @@ impl Step<'_> {
                     p,
                     ps.x[p],
                     ps.f[p],
-                    ps.r1[p],
-                    ps.r2[p],
+                    ps.r[p],
                     ps.vol[p],
-                    ps.corners[p],
+                    ps.corners(p).to_vec(),
                 )
             })
             .collect();
         let g2p = transfer::grid_to_particles(&self.ws.table, &s.grid, &sol, ps);
         agreed(session, self.st.distributed, g2p.map_err(StepError::from))?;
-        for (p, x, f, r1, r2, vol, corners) in frozen {
+        for (p, x, f, r, vol, corners) in frozen {
             let shift = ps.x[p] - x;
             ps.f[p] = f;
-            ps.r1[p] = r1;
-            ps.r2[p] = r2;
+            ps.r[p] = r;
             ps.vol[p] = vol;
-            ps.corners[p] = corners.map(|c| c + shift);
+            for (c, c0) in ps.corners_mut(p).iter_mut().zip(corners) {
+                *c = c0 + shift;
+            }
         }
         if s.fem.is_some() {
             let (mut v, a) = (self.ws.grid_state.velocity.clone(), acc_nodes.clone());
@@ -1528,9 +1528,7 @@ impl Step<'_> {
             let r = contact::rotation(dtheta[k]) - nalgebra::Matrix2::identity();
             let moved = |x: &mut Vector2<f64>| *x += dx + r * (*x - pin);
             rb.x.iter_mut().for_each(moved);
-            rb.corners
-                .iter_mut()
-                .for_each(|cs| cs.iter_mut().for_each(moved));
+            rb.corners.iter_mut().for_each(moved);
             self.st.rotations[k] += dtheta[k];
             self.st.rotation_rates[k] = dtheta[k] / dt;
             if let Some(d) = &devices[k] {
@@ -1855,7 +1853,7 @@ impl Step<'_> {
             let n = contact::rotation(self.st.rotations[k]) * c.normal;
             let t = Vector2::new(-n.y, n.x);
             let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for x in self.st.rigid[k].corners.iter().flatten() {
+            for x in &self.st.rigid[k].corners {
                 for (j, v) in [n.dot(x), t.dot(x)].into_iter().enumerate() {
                     lo[j] = lo[j].min(v);
                     hi[j] = hi[j].max(v);
@@ -1898,7 +1896,8 @@ impl Step<'_> {
                 if n.dot(&p.x[q]) < cf - depth {
                     continue;
                 }
-                let near = p.corners[q]
+                let near = p
+                    .corners(q)
                     .iter()
                     .map(|c| n.dot(c))
                     .fold(f64::INFINITY, f64::min);
@@ -2047,7 +2046,7 @@ impl Step<'_> {
                     continue;
                 }
                 let n = pairs[k].normal;
-                let along = p.corners[q].iter().map(|c| n.dot(c));
+                let along = p.corners(q).iter().map(|c| n.dot(c));
                 if w.node as usize == pairs[k].node_a {
                     far_a[k] = along.fold(far_a[k], f64::max);
                 } else {
@@ -2247,11 +2246,11 @@ mod tests {
     #[test]
     fn pushed_forward_gradients_reproduce_the_deformed_configuration() {
         // FEM mode: with nodes at x_I = F X_I, sum_I x_I (x) grad_{X_n} S_Ip = I.
-        let grid = Grid::new(Vector2::zeros(), 1.0, 4, 4).unwrap();
+        let grid = Grid::new(Vector2::zeros(), 1.0, [4, 4]).unwrap();
         let mut p = Particles::new();
         let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
         for x in [Vector2::new(1.3, 2.2), Vector2::new(0.4, 0.7)] {
-            p.push(x, 0.25, 0.25, r1, r2, 0);
+            p.push(x, 0.25, 0.25, nalgebra::Matrix2::from_columns(&[r1, r2]), 0);
         }
         let mut reference = ShapeTable::new();
         reference.compute(ShapeKind::Linear, &grid, &p).unwrap();

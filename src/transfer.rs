@@ -12,13 +12,15 @@
 
 use std::ops::{Add, Mul};
 
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{SMatrix, SVector};
+use num_traits::Zero;
 use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::grid::{Grid, GridError, Locus};
-use crate::particles::{Particles, parallelogram_corners};
+use crate::particles::{Particles, fill_domain_corners};
 use crate::shape::{ShapeKind, ShapeTable, Weight};
+use crate::space::det;
 
 /// Errors of the transfers (all detected before anything is modified).
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -59,24 +61,24 @@ fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Tr
 /// `sum_I S_Ip f_I`: interpolates a nodal field (scalar or vector) to point `p` from its `weights`;
 /// `field(I)` returns `f_I`.
 #[inline]
-pub fn interpolate<T>(weights: &[Weight], field: impl Fn(usize) -> T) -> T
+pub fn interpolate<T, const D: usize>(weights: &[Weight<D>], field: impl Fn(usize) -> T) -> T
 where
-    T: Default + Add<Output = T> + Mul<f64, Output = T>,
+    T: Zero + Add<Output = T> + Mul<f64, Output = T>,
 {
-    weights.iter().fold(T::default(), |acc, w| {
-        acc + field(w.node as usize) * w.value
-    })
+    weights
+        .iter()
+        .fold(T::zero(), |acc, w| acc + field(w.node as usize) * w.value)
 }
 
 /// Deformation-gradient increment of a point, `dF = I + sum_I du_I (x) grad_{X_n} S_Ip` [-], from its
 /// start-of-step `weights` and the nodal displacement increments `du(I)` (mm). Then `F = dF F_n`,
 /// `grad_x S = grad_{X_n} S . dF^{-1}` and `v_p = det(F) V_p^0`.
 #[inline]
-pub fn deformation_increment(
-    weights: &[Weight],
-    du: impl Fn(usize) -> Vector2<f64>,
-) -> Matrix2<f64> {
-    weights.iter().fold(Matrix2::identity(), |df, w| {
+pub fn deformation_increment<const D: usize>(
+    weights: &[Weight<D>],
+    du: impl Fn(usize) -> SVector<f64, D>,
+) -> SMatrix<f64, D, D> {
+    weights.iter().fold(SMatrix::identity(), |df, w| {
         df + du(w.node as usize) * w.grad.transpose()
     })
 }
@@ -114,18 +116,18 @@ impl Scatter {
     }
 
     /// `out_I = sum_p sum_{I in supp(p)} contribution(p, w_Ip)` for the `num_nodes` grid nodes, `W` values per
-    /// node; `out` is resized to `num_nodes` and overwritten.
+    /// node, node after node; `out` is resized to `num_nodes W` values and overwritten.
     ///
     /// # Panics
     /// If `table` holds a node index `>= num_nodes` (a table computed on another grid).
-    pub fn scatter<const W: usize, F>(
+    pub fn scatter<const W: usize, const D: usize, F>(
         &mut self,
-        table: &ShapeTable,
+        table: &ShapeTable<D>,
         num_nodes: usize,
-        out: &mut Vec<[f64; W]>,
+        out: &mut Vec<f64>,
         contribution: F,
     ) where
-        F: Fn(usize, &Weight) -> [f64; W] + Sync,
+        F: Fn(usize, &Weight<D>) -> [f64; W] + Sync,
     {
         let n = table.len();
         self.chunks
@@ -156,20 +158,21 @@ impl Scatter {
             }
         });
         out.clear();
-        out.resize(num_nodes, [0.0; W]);
+        out.resize(num_nodes * W, 0.0);
         let chunks = &self.chunks;
-        out.par_chunks_mut(NODE_BLOCK)
+        out.par_chunks_mut(NODE_BLOCK * W)
             .enumerate()
             .for_each(|(b, block)| {
                 let first = b * NODE_BLOCK;
-                let last = first + block.len() - 1;
+                let last = first + block.len() / W - 1;
                 for buf in chunks
                     .iter()
                     .filter(|c| c.lo <= c.hi && c.lo <= last && c.hi >= first)
                 {
                     for node in buf.lo.max(first)..=buf.hi.min(last) {
                         let at = (node - buf.lo) * W;
-                        for (o, d) in block[node - first].iter_mut().zip(&buf.data[at..at + W]) {
+                        let to = (node - first) * W;
+                        for (o, d) in block[to..to + W].iter_mut().zip(&buf.data[at..at + W]) {
                             *o += d;
                         }
                     }
@@ -180,20 +183,21 @@ impl Scatter {
 
 /// Nodal state of one step after P2G; reuse it across steps (no allocation in the steady state).
 #[derive(Debug, Clone, Default)]
-pub struct GridState {
-    /// Lumped nodal mass `m_I` (t per mm of thickness).
+pub struct GridState<const D: usize = 2> {
+    /// Lumped nodal mass `m_I` (t; in 2D per mm of thickness).
     pub mass: Vec<f64>,
     /// Nodal velocity `v_I` (mm/s); zero at inactive nodes.
-    pub velocity: Vec<Vector2<f64>>,
+    pub velocity: Vec<SVector<f64, D>>,
     /// Nodal acceleration `a_I` (mm/s^2); zero at inactive nodes.
-    pub acceleration: Vec<Vector2<f64>>,
+    pub acceleration: Vec<SVector<f64, D>>,
     /// Whether node `I` carries unknowns (`m_I > tol * max_J m_J`).
     pub active: Vec<bool>,
-    sums: Vec<[f64; 5]>,
+    /// `[m, m v, m a]` per node, `1 + 2 D` values.
+    sums: Vec<f64>,
     scatter: Scatter,
 }
 
-impl GridState {
+impl<const D: usize> GridState<D> {
     /// An empty state (arrays grow on the first P2G).
     pub fn new() -> Self {
         Self::default()
@@ -223,12 +227,12 @@ pub const DEFAULT_RELATIVE_MASS_TOLERANCE: f64 = 1e-10;
 ///
 /// Mass and momentum are conserved to round-off: `sum_I m_I = sum_p m_p` and, over active nodes,
 /// `sum_I m_I v_I = sum_p m_p v_p` (partition of unity).
-pub fn particles_to_grid(
-    table: &ShapeTable,
-    particles: &Particles,
-    grid: &Grid,
+pub fn particles_to_grid<const D: usize>(
+    table: &ShapeTable<D>,
+    particles: &Particles<D>,
+    grid: &Grid<D>,
     relative_tolerance: f64,
-    state: &mut GridState,
+    state: &mut GridState<D>,
 ) -> Result<(), TransferError> {
     particles_to_grid_shared(
         table,
@@ -243,69 +247,96 @@ pub fn particles_to_grid(
 
 /// P2G as [`particles_to_grid`] for a process holding part of the points: only the first `counted`
 /// points contribute (the others are copies of other processes' points), and the nodal sums
-/// `[m, m v_x, m v_y, m a_x, m a_y]` per node pass through `reduce` (the sum over the processes) before
+/// `[m, m v, m a]` per node (`1 + 2 D` values) pass through `reduce` (the sum over the processes) before
 /// the activity test and the divisions, so that every process gets the same grid state.
-pub fn particles_to_grid_shared(
-    table: &ShapeTable,
-    particles: &Particles,
+pub fn particles_to_grid_shared<const D: usize>(
+    table: &ShapeTable<D>,
+    particles: &Particles<D>,
     counted: usize,
-    grid: &Grid,
+    grid: &Grid<D>,
     relative_tolerance: f64,
-    state: &mut GridState,
+    state: &mut GridState<D>,
     reduce: impl FnOnce(&mut [f64]) -> Result<(), String>,
 ) -> Result<(), TransferError> {
     if table.kind().is_none() {
         return Err(TransferError::NoShapeTable);
     }
     check_len("the shape table", particles.len(), table.len())?;
-    let (m, v, a) = (&particles.mass, &particles.v, &particles.a);
     // All node copies of the table's velocity fields.
     let nodes = grid.num_nodes() * table.fields();
-    state
-        .scatter
-        .scatter(table, nodes, &mut state.sums, |p, w| {
-            if p >= counted {
-                return [0.0; 5];
-            }
-            let mp = w.value * m[p];
-            [mp, mp * v[p].x, mp * v[p].y, mp * a[p].x, mp * a[p].y]
-        });
-    reduce(state.sums.as_flattened_mut()).map_err(TransferError::Reduce)?;
-    let max_mass = state.sums.iter().fold(0.0_f64, |mx, s| mx.max(s[0]));
+    match D {
+        2 => nodal_sums::<D, 5>(table, particles, counted, nodes, state),
+        3 => nodal_sums::<D, 7>(table, particles, counted, nodes, state),
+        _ => unreachable!("grids are 2D or 3D"),
+    }
+    reduce(&mut state.sums).map_err(TransferError::Reduce)?;
+    let width = 1 + 2 * D;
+    let max_mass = state
+        .sums
+        .chunks_exact(width)
+        .fold(0.0_f64, |mx, s| mx.max(s[0]));
     let threshold = relative_tolerance * max_mass;
     state.mass.resize(nodes, 0.0);
-    state.velocity.resize(nodes, Vector2::zeros());
-    state.acceleration.resize(nodes, Vector2::zeros());
+    state.velocity.resize(nodes, SVector::zeros());
+    state.acceleration.resize(nodes, SVector::zeros());
     state.active.resize(nodes, false);
     (
         &mut state.mass,
         &mut state.velocity,
         &mut state.acceleration,
         &mut state.active,
-        &state.sums,
+        state.sums.par_chunks_exact(width),
     )
         .into_par_iter()
         .for_each(|(mass, vel, acc, active, s)| {
             *mass = s[0];
             *active = s[0] > threshold && s[0] > 0.0;
             if *active {
-                *vel = Vector2::new(s[1], s[2]) / s[0];
-                *acc = Vector2::new(s[3], s[4]) / s[0];
+                *vel = SVector::from_column_slice(&s[1..1 + D]) / s[0];
+                *acc = SVector::from_column_slice(&s[1 + D..]) / s[0];
             } else {
-                *vel = Vector2::zeros();
-                *acc = Vector2::zeros();
+                *vel = SVector::zeros();
+                *acc = SVector::zeros();
             }
         });
     Ok(())
 }
 
+/// `[m, m v, m a]_I = sum_p S_Ip m_p [1, v_p, a_p]` over the first `counted` points into `state.sums`,
+/// `W = 1 + 2 D` values per node.
+fn nodal_sums<const D: usize, const W: usize>(
+    table: &ShapeTable<D>,
+    particles: &Particles<D>,
+    counted: usize,
+    nodes: usize,
+    state: &mut GridState<D>,
+) {
+    debug_assert_eq!(W, 1 + 2 * D);
+    let (m, v, a) = (&particles.mass, &particles.v, &particles.a);
+    state
+        .scatter
+        .scatter(table, nodes, &mut state.sums, |p, w| {
+            let mut s = [0.0; W];
+            if p >= counted {
+                return s;
+            }
+            let mp = w.value * m[p];
+            s[0] = mp;
+            for d in 0..D {
+                s[1 + d] = mp * v[p][d];
+                s[1 + D + d] = mp * a[p][d];
+            }
+            s
+        });
+}
+
 /// Converged nodal solution of a step: what G2P needs.
 #[derive(Debug, Clone, Copy)]
-pub struct StepSolution<'a> {
+pub struct StepSolution<'a, const D: usize = 2> {
     /// Nodal displacement increment `du_I` (mm), one per grid node (zero at inactive nodes).
-    pub du: &'a [Vector2<f64>],
+    pub du: &'a [SVector<f64, D>],
     /// New nodal acceleration `a_I^{n+1}` (mm/s^2), one per grid node.
-    pub acceleration: &'a [Vector2<f64>],
+    pub acceleration: &'a [SVector<f64, D>],
     /// Newmark `gamma` [-].
     pub gamma: f64,
     /// Time step `dt` (s).
@@ -319,16 +350,16 @@ pub struct StepSolution<'a> {
 /// v_p^{n+1} = v_p + dt ((1 - gamma) a_p + gamma a_p^{n+1})
 /// x_p^{n+1} = x_p + sum_I S_Ip du_I
 /// F_p^{n+1} = dF F_p,   dF = I + sum_I du_I (x) grad_{X_n} S_Ip,   v_p = det(F_p^{n+1}) V_p^0
-/// CPDI1 (and for output all but CPDI2):  r_i = F_p^{n+1} r_i^0,  corners x_p -+ r1 -+ r2
+/// CPDI1 (and for output all but CPDI2):  r_p = F_p^{n+1} r_p^0,  corners x_p + r_p s_c
 /// CPDI2:  x_c^{n+1} = x_c + sum_I N_I(x_c) du_I   (grid hat functions at the tracked corners)
 /// ```
 ///
 /// Material history, stress and `eta_bar_p` are the caller's. Nothing is modified if an error is returned.
-pub fn grid_to_particles(
-    table: &ShapeTable,
-    grid: &Grid,
-    solution: &StepSolution<'_>,
-    particles: &mut Particles,
+pub fn grid_to_particles<const D: usize>(
+    table: &ShapeTable<D>,
+    grid: &Grid<D>,
+    solution: &StepSolution<'_, D>,
+    particles: &mut Particles<D>,
 ) -> Result<(), TransferError> {
     let kind = table.kind().ok_or(TransferError::NoShapeTable)?;
     check_len("the shape table", particles.len(), table.len())?;
@@ -341,7 +372,7 @@ pub fn grid_to_particles(
     if track_corners {
         let outside = particles
             .corners
-            .par_iter()
+            .par_chunks(Particles::<D>::CORNERS)
             .enumerate()
             .find_first(|(_, cs)| cs.iter().any(|&xc| grid.cell_of(xc).is_none()));
         if let Some((particle, cs)) = outside {
@@ -349,14 +380,7 @@ pub fn grid_to_particles(
                 .iter()
                 .position(|&xc| grid.cell_of(xc).is_none())
                 .unwrap_or(0);
-            let xc = cs[c];
-            return Err(GridError::OutsideGrid {
-                particle,
-                locus: Locus::Corner(c as u8),
-                x: xc.x,
-                y: xc.y,
-            }
-            .into());
+            return Err(GridError::outside(particle, Locus::Corner(c as u8), &cs[c]).into());
         }
     }
     let StepSolution {
@@ -371,47 +395,44 @@ pub fn grid_to_particles(
         &mut ps.v,
         &mut ps.a,
         &mut ps.f,
-        &mut ps.r1,
-        &mut ps.r2,
-        &mut ps.corners,
+        &mut ps.r,
+        ps.corners.par_chunks_mut(Particles::<D>::CORNERS),
         &mut ps.vol,
-        &ps.r1_0,
-        &ps.r2_0,
+        &ps.r0,
         &ps.vol0,
     )
         .into_par_iter()
         .enumerate()
-        .for_each(
-            |(p, (x, v, a, f, r1, r2, corners, vol, r1_0, r2_0, vol0))| {
-                let ws = table.weights(p);
-                let a_new = interpolate(ws, |i| acceleration[i]);
-                *v += ((1.0 - gamma) * *a + gamma * a_new) * dt;
-                *a = a_new;
-                *x += interpolate(ws, |i| du[i]);
-                *f = deformation_increment(ws, |i| du[i]) * *f;
-                *vol = f.determinant() * vol0;
-                *r1 = *f * r1_0;
-                *r2 = *f * r2_0;
-                if track_corners {
-                    for xc in corners.iter_mut() {
-                        // Inside the grid: checked above.
-                        if let Some(cell) = grid.cell_weights(*xc) {
-                            *xc += (0..4)
-                                .map(|k| du[cell.nodes[k] as usize] * cell.values[k])
-                                .sum::<Vector2<f64>>();
-                        }
+        .for_each(|(p, (x, v, a, f, r, corners, vol, r0, vol0))| {
+            let ws = table.weights(p);
+            let a_new = interpolate(ws, |i| acceleration[i]);
+            *v += ((1.0 - gamma) * *a + gamma * a_new) * dt;
+            *a = a_new;
+            *x += interpolate(ws, |i| du[i]);
+            *f = deformation_increment(ws, |i| du[i]) * *f;
+            *vol = det(f) * vol0;
+            *r = *f * r0;
+            if track_corners {
+                for xc in corners.iter_mut() {
+                    // Inside the grid: checked above.
+                    if let Some((cell, fc)) = grid.locate(*xc) {
+                        let nodes = grid.cell_nodes(cell);
+                        let values = Grid::<D>::cell_values(&fc);
+                        *xc += (0..Grid::<D>::CELL_NODES)
+                            .map(|k| du[nodes[k] as usize] * values[k])
+                            .sum::<SVector<f64, D>>();
                     }
-                } else {
-                    *corners = parallelogram_corners(*x, *r1, *r2);
                 }
-            },
-        );
+            } else {
+                fill_domain_corners(x, r, corners);
+            }
+        });
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::Rotation2;
+    use nalgebra::{Matrix2, Rotation2, Vector2};
     use rand::rngs::StdRng;
     use rand::{RngExt, SeedableRng};
 
@@ -603,11 +624,11 @@ mod tests {
                     ps.f[p]
                 );
                 assert!((ps.vol[p] / ps.vol0[p] - 1.0).abs() < 1e-13);
-                assert!((ps.r1[p] - rot * ps.r1_0[p]).norm() < 1e-14);
+                assert!((ps.r[p] - rot * ps.r0[p]).norm() < 1e-14);
                 for c in 0..4 {
-                    let expected = rot * (ps0.corners[p][c] - x0) + x0 + d;
+                    let expected = rot * (ps0.corners(p)[c] - x0) + x0 + d;
                     assert!(
-                        (ps.corners[p][c] - expected).norm() < 1e-13,
+                        (ps.corners(p)[c] - expected).norm() < 1e-13,
                         "{kind:?} point {p} corner {c}"
                     );
                 }
@@ -676,7 +697,7 @@ mod tests {
                     "{kind:?} point {p}"
                 );
                 assert!(
-                    (ps.corners[p][2] - (ps0.corners[p][2] + d * 200.0)).norm() < 1e-11,
+                    (ps.corners(p)[2] - (ps0.corners(p)[2] + d * 200.0)).norm() < 1e-11,
                     "{kind:?}"
                 );
             }
@@ -722,7 +743,7 @@ mod tests {
             Err(TransferError::SizeMismatch { what: "du", .. })
         ));
         let mut moved = ps.clone();
-        moved.corners[7][2] = Vector2::new(1e3, 0.0);
+        moved.corners_mut(7)[2] = Vector2::new(1e3, 0.0);
         let before = moved.clone();
         let err = grid_to_particles(&table, &grid, &solution, &mut moved).unwrap_err();
         assert!(matches!(

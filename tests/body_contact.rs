@@ -72,7 +72,7 @@ fn body(sim: &Simulation, tag: u16, right: bool) -> (f64, f64, f64) {
     for i in (0..p.len()).filter(|&i| p.body[i] == tag) {
         momentum += p.mass[i] * p.v[i].x;
         mass += p.mass[i];
-        for c in &p.corners[i] {
+        for c in p.corners(i) {
             edge = if right { edge.max(c.x) } else { edge.min(c.x) };
         }
     }

@@ -244,7 +244,7 @@ fn steel_inserts_push_the_notch_faces_without_overlap_or_pull() {
                 continue;
             }
             let k = column(p.x[i].x);
-            for c in &p.corners[i] {
+            for c in p.corners(i) {
                 match p.body[i] {
                     1 => {
                         let e = bottom.entry(k).or_insert(f64::INFINITY);

@@ -6,7 +6,7 @@ use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding, parallelogram_corners};
+use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{self, GridState};
@@ -57,12 +57,7 @@ fn fd_check(
     // Pre-deformed start-of-step state: F_n != I (sheared and stretched domains).
     let fn_ = Matrix2::new(1.0 + 0.02, 0.03, -0.01, 1.0 - 0.015);
     for p in 0..particles.len() {
-        particles.f[p] = fn_;
-        particles.r1[p] = fn_ * particles.r1_0[p];
-        particles.r2[p] = fn_ * particles.r2_0[p];
-        particles.corners[p] =
-            parallelogram_corners(particles.x[p], particles.r1[p], particles.r2[p]);
-        particles.vol[p] = fn_.determinant() * particles.vol0[p];
+        particles.set_deformation(p, fn_);
         particles.v[p] = Vector2::new(100.0 * noise(p), 50.0 * noise(p + 7));
         particles.a[p] = Vector2::new(1e6 * noise(p + 3), -1e6 * noise(p + 5));
     }

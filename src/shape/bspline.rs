@@ -4,10 +4,10 @@
 //! phi(d) = 3/4 - d^2             |d| <= 1/2
 //!        = (3/2 - |d|)^2 / 2     1/2 < |d| < 3/2
 //!        = 0                     otherwise
-//! S_Ip = phi(d_x) phi(d_y),   grad S_Ip = (phi'(d_x) phi(d_y), phi(d_x) phi'(d_y)) / h
+//! S_Ip = prod_d phi(d_d),   (grad S_Ip)_d = phi'(d_d) prod_{e != d} phi(d_e) / h
 //! ```
 //!
-//! C1-continuous, no cell-crossing noise; the support spans 3 x 3 nodes, so the body needs at least one empty
+//! C1-continuous, no cell-crossing noise; the support spans `3^D` nodes, so the body needs at least one empty
 //! cell of grid margin around it (uniform splines, no boundary-modified knots).
 
 use super::{Interpolator, ShapeError, Weight, tensor_product_weights};
@@ -31,15 +31,15 @@ fn quadratic(d: f64) -> (f64, f64) {
     }
 }
 
-impl Interpolator for Bspline2 {
-    const MAX_SUPPORT: usize = 9;
+impl<const D: usize> Interpolator<D> for Bspline2 {
+    const MAX_SUPPORT: usize = 3_usize.pow(D as u32);
 
     fn weights(
         &self,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         p: usize,
-        out: &mut [Weight],
+        out: &mut [Weight<D>],
     ) -> Result<usize, ShapeError> {
         tensor_product_weights(grid, p, particles.x[p], |d, _| quadratic(d), out)
     }

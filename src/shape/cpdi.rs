@@ -1,87 +1,116 @@
 //! Convected particle domain interpolation: `S_Ip = (1/V_p) int_{Omega_p} N_I dx` with `N_I` replaced by its
-//! bilinear interpolation from the domain corners, so that only `N_I` at the four corners `x_c` is needed:
+//! multilinear interpolation from the `2^D` domain corners, so that only `N_I` at the corners `x_c` is
+//! needed:
 //!
 //! ```text
 //! S_Ip = sum_c wf_c N_I(x_c),        grad S_Ip = sum_c wg_c N_I(x_c)
 //! ```
 //!
-//! CPDI1 (Sadeghirad, Brannon, Burghardt 2011, IJNME 86:1435), parallelogram `x_p -+ r1 -+ r2` with
-//! `r_i = F_p r_i^0`, corners `x1 = x_p - r1 - r2, x2 = x_p + r1 - r2, x3 = x_p + r1 + r2, x4 = x_p - r1 + r2`,
-//! `V_p = 4 r1 x r2`:
+//! CPDI1 (Sadeghirad, Brannon, Burghardt 2011, IJNME 86:1435): the parallelogram (3D: parallelepiped)
+//! `x_p + r_p xi`, `xi` in `[-1, 1]^D`, whose columns are the half-edge vectors `r_d = F_p r_d^0`; corner `c`
+//! is `x_c = x_p + r_p s_c` with the sign vector `s_c` in `{-1, 1}^D`
+//! ([`corner_signs`](crate::particles::corner_signs)), `V_p = 2^D det r_p` and
 //!
 //! ```text
-//! wf_c = 1/4,   wg_1 = w1 / V_p,  wg_2 = w2 / V_p,  wg_3 = -w1 / V_p,  wg_4 = -w2 / V_p
-//! w1 = (r1y - r2y, r2x - r1x),   w2 = (r1y + r2y, -r1x - r2x)
+//! wf_c = 1 / 2^D,   wg_c = r_p^-T s_c / 2^D
 //! ```
 //!
-//! CPDI2 / CPDI-Q4 (Sadeghirad, Brannon, Guilkey 2013, IJNME 95:928), tracked corners `x_1..x_4`
-//! (counter-clockwise), `V_p = (1/2) sum_c (x_c y_{c+1} - x_{c+1} y_c) = (1/2) (x3 - x1) x (x4 - x2)`:
+//! In 2D with `r_p = [r1 r2]` and the corners `x_p - r1 - r2, x_p + r1 - r2, x_p + r1 + r2, x_p - r1 + r2`
+//! this is `wg_1 = w1 / V_p`, `wg_2 = w2 / V_p`, `wg_3 = -w1 / V_p`, `wg_4 = -w2 / V_p` with
+//! `w1 = (r1y - r2y, r2x - r1x)`, `w2 = (r1y + r2y, -r1x - r2x)`.
+//!
+//! CPDI2 (Sadeghirad, Brannon, Guilkey 2013, IJNME 95:928; CPDI-Q4 in 2D, hexahedra in 3D): the domain is
+//! the isoparametric image `x(xi) = sum_c M_c(xi) x_c` of `[-1, 1]^D` under the multilinear functions `M_c`
+//! of the tracked corners, `J = dx/dxi`, and
 //!
 //! ```text
-//! c1 = (x2-x1)(y4-y1) - (y2-y1)(x4-x1),   c2 = (x2-x1)(y3-y2) - (y2-y1)(x3-x2)
-//! c3 = (x3-x4)(y4-y1) - (y3-y4)(x4-x1),   c4 = (x3-x4)(y3-y2) - (y3-y4)(x3-x2)
-//! wf = 1/(36 V_p) [4c1+2c2+2c3+c4, 2c1+4c2+c3+2c4, c1+2c2+2c3+4c4, 2c1+c2+4c3+2c4]
-//! wg_1 = 1/(2 V_p) (y2-y4, x4-x2),  wg_2 = 1/(2 V_p) (y3-y1, x1-x3),  wg_3 = -wg_1,  wg_4 = -wg_2
+//! V_p = int det J dxi,   wf_c = (1/V_p) int M_c det J dxi,   wg_c = (1/V_p) int cof(J) grad_xi M_c dxi
 //! ```
 //!
-//! On a parallelogram `wf_c = 1/4` and CPDI2 equals CPDI1. `sum_I S_Ip x_I = sum_c wf_c x_c` is the area
-//! centroid of the quadrilateral. Support: the union of the cells owning the corners, each node once
-//! (at most 16 nodes), in ascending node order when the corners lie within 3 x 3 cells.
+//! evaluated exactly by the `2^D`-point Gauss rule (the integrands are at most cubic per direction). In 2D
+//! this is the closed form of the paper, e.g. `wg_1 = (y2 - y4, x4 - x2) / (2 V_p)`. On a parallelogram
+//! `wf_c = 1/4` and CPDI2 equals CPDI1. `sum_I S_Ip x_I = sum_c wf_c x_c` is the centroid of the domain.
+//! Support: the union of the cells owning the corners, each node once (at most `4^D` nodes), in ascending
+//! node order when the corners lie within `3^D` cells.
 
-use nalgebra::Vector2;
+use nalgebra::{SMatrix, SVector};
 
 use super::{Interpolator, ShapeError, Weight, add_merged, outside};
-use crate::grid::{Grid, Locus};
-use crate::particles::{Particles, parallelogram_corners};
+use crate::grid::{Grid, Locus, MAX_CELL_NODES, cell_node_offset};
+use crate::particles::{Particles, corner_signs, domain_corner};
+use crate::space::{cofactor, det};
 
-/// CPDI1 interpolator (parallelogram domain from `x_p`, `r1`, `r2`).
+/// CPDI1 interpolator (parallelogram or parallelepiped domain from `x_p` and `r_p`).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Cpdi1;
 
-/// CPDI2 / CPDI-Q4 interpolator (quadrilateral domain from the tracked `corners`).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Cpdi2;
+/// CPDI2 interpolator (quadrilateral or hexahedral domain from the tracked corners), with the corner
+/// functions `M_c` and their gradients at the `2^D` Gauss points tabulated once.
+#[derive(Debug, Clone, Copy)]
+pub struct Cpdi2<const D: usize> {
+    /// `M_c(xi_q)`, `[q][c]`.
+    m: [[f64; MAX_CELL_NODES]; MAX_CELL_NODES],
+    /// `grad_xi M_c(xi_q)`, `[q][c]`.
+    dm: [[SVector<f64, D>; MAX_CELL_NODES]; MAX_CELL_NODES],
+}
+
+impl<const D: usize> Default for Cpdi2<D> {
+    fn default() -> Self {
+        let nc = Grid::<D>::CELL_NODES;
+        let g = 1.0 / 3.0_f64.sqrt();
+        let mut m = [[0.0; MAX_CELL_NODES]; MAX_CELL_NODES];
+        let mut dm = [[SVector::zeros(); MAX_CELL_NODES]; MAX_CELL_NODES];
+        for q in 0..nc {
+            let xi = corner_signs::<D>(q) * g;
+            for c in 0..nc {
+                let s = corner_signs::<D>(c);
+                let factor = |d: usize| 0.5 * (1.0 + s[d] * xi[d]);
+                m[q][c] = (0..D).map(factor).product();
+                dm[q][c] = SVector::from_fn(|d, _| {
+                    (0..D)
+                        .map(|e| if e == d { 0.5 * s[d] } else { factor(e) })
+                        .product()
+                });
+            }
+        }
+        Self { m, dm }
+    }
+}
 
 /// Merges `sum_c wf_c N_I(x_c)` and `sum_c wg_c N_I(x_c)` over the corners into `out`, one entry per node with
 /// `N_I(x_c) != 0` for some corner.
 ///
-/// Fast path: when the corners' cells span at most 3 x 3 cells, the sums are accumulated in a dense 4 x 4 node
-/// window and emitted in ascending node order; larger domains fall back to a linear-search merge.
-fn corner_weights(
-    grid: &Grid,
+/// Fast path: when the corners' cells span at most `3^D` cells, the sums are accumulated in a dense `4^D`
+/// node window and emitted in ascending node order; larger domains fall back to a linear-search merge.
+fn corner_weights<const D: usize>(
+    grid: &Grid<D>,
     p: usize,
-    corners: &[Vector2<f64>; 4],
-    wf: [f64; 4],
-    wg: [Vector2<f64>; 4],
-    out: &mut [Weight],
+    corners: &[SVector<f64, D>],
+    wf: &[f64],
+    wg: &[SVector<f64, D>],
+    out: &mut [Weight<D>],
 ) -> Result<usize, ShapeError> {
-    let mut cells = [(0, 0); 4];
-    let mut hats = [[0.0; 4]; 4];
+    let nc = Grid::<D>::CELL_NODES;
+    let mut cells = [[0; D]; MAX_CELL_NODES];
+    let mut hats = [[0.0; MAX_CELL_NODES]; MAX_CELL_NODES];
     for (c, &xc) in corners.iter().enumerate() {
         let (cell, f) = grid
             .locate(xc)
             .ok_or_else(|| outside(p, Locus::Corner(c as u8), xc))?;
         cells[c] = cell;
-        hats[c] = [
-            (1.0 - f.x) * (1.0 - f.y),
-            f.x * (1.0 - f.y),
-            f.x * f.y,
-            (1.0 - f.x) * f.y,
-        ];
+        hats[c] = Grid::<D>::cell_values(&f);
     }
-    let (i0, j0) = cells
+    let cells = &cells[..nc];
+    let low: [usize; D] =
+        std::array::from_fn(|d| cells.iter().map(|cell| cell[d]).min().unwrap_or(0));
+    if cells
         .iter()
-        .fold((usize::MAX, usize::MAX), |(i0, j0), &(i, j)| {
-            (i0.min(i), j0.min(j))
-        });
-    if cells.iter().any(|&(i, j)| i - i0 > 2 || j - j0 > 2) {
+        .any(|cell| (0..D).any(|d| cell[d] - low[d] > 2))
+    {
         let mut count = 0;
-        for (c, &(i, j)) in cells.iter().enumerate() {
-            let (n0, n3) = (
-                grid.node_index(i, j) as u32,
-                grid.node_index(i, j + 1) as u32,
-            );
-            for (node, n) in [n0, n0 + 1, n3 + 1, n3].into_iter().zip(hats[c]) {
+        for (c, cell) in cells.iter().enumerate() {
+            let nodes = grid.cell_nodes(*cell);
+            for (&node, &n) in nodes[..nc].iter().zip(&hats[c][..nc]) {
                 if n != 0.0 {
                     add_merged(out, &mut count, node, wf[c] * n, wg[c] * n);
                 }
@@ -89,20 +118,25 @@ fn corner_weights(
         }
         return Ok(count);
     }
-    // Window slot `a + 4 b` is node `(i0 + a, j0 + b)`.
-    let mut value = [0.0; 16];
-    let mut grad = [Vector2::zeros(); 16];
-    let mut used = 0_u16;
-    for (c, &(i, j)) in cells.iter().enumerate() {
-        let base = (i - i0) + 4 * (j - j0);
-        for (slot, n) in [base, base + 1, base + 5, base + 4]
-            .into_iter()
-            .zip(hats[c])
-        {
+    // Window slot `sum_d a_d 4^d` is node `low + a`; `out` (4^D entries) is the window, written on first
+    // touch (no clearing), then compacted in ascending slot order (a slot is never below its new place).
+    let mut used = 0_u64;
+    for (c, cell) in cells.iter().enumerate() {
+        for (k, &n) in hats[c][..nc].iter().enumerate() {
             if n != 0.0 {
-                value[slot] += wf[c] * n;
-                grad[slot] += wg[c] * n;
-                used |= 1 << slot;
+                let off = cell_node_offset::<D>(k);
+                let slot = (0..D)
+                    .rev()
+                    .fold(0, |acc, d| 4 * acc + cell[d] - low[d] + off[d]);
+                let (value, grad) = (wf[c] * n, wg[c] * n);
+                if used & (1 << slot) == 0 {
+                    out[slot].value = value;
+                    out[slot].grad = grad;
+                    used |= 1 << slot;
+                } else {
+                    out[slot].value += value;
+                    out[slot].grad += grad;
+                }
             }
         }
     }
@@ -110,18 +144,18 @@ fn corner_weights(
     while used != 0 {
         let slot = used.trailing_zeros() as usize;
         used &= used - 1;
-        let node = grid.node_index(i0 + slot % 4, j0 + slot / 4) as u32;
+        let node = grid.node_at(std::array::from_fn(|d| low[d] + (slot >> (2 * d)) % 4));
         out[count] = Weight {
-            node,
-            value: value[slot],
-            grad: grad[slot],
+            node: node as u32,
+            value: out[slot].value,
+            grad: out[slot].grad,
         };
         count += 1;
     }
     Ok(count)
 }
 
-/// Errors unless the signed domain area is positive and finite.
+/// Errors unless the signed domain area (volume) is positive and finite.
 fn check_area(p: usize, area: f64) -> Result<(), ShapeError> {
     if area > 0.0 && area.is_finite() {
         Ok(())
@@ -130,55 +164,65 @@ fn check_area(p: usize, area: f64) -> Result<(), ShapeError> {
     }
 }
 
-impl Interpolator for Cpdi1 {
-    const MAX_SUPPORT: usize = 16;
+impl<const D: usize> Interpolator<D> for Cpdi1 {
+    const MAX_SUPPORT: usize = 4_usize.pow(D as u32);
 
     fn weights(
         &self,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         p: usize,
-        out: &mut [Weight],
+        out: &mut [Weight<D>],
     ) -> Result<usize, ShapeError> {
-        let (r1, r2) = (particles.r1[p], particles.r2[p]);
-        let vol = 4.0 * (r1.x * r2.y - r1.y * r2.x);
-        check_area(p, vol)?;
-        let w1 = Vector2::new(r1.y - r2.y, r2.x - r1.x) / vol;
-        let w2 = Vector2::new(r1.y + r2.y, -r1.x - r2.x) / vol;
-        let corners = parallelogram_corners(particles.x[p], r1, r2);
-        corner_weights(grid, p, &corners, [0.25; 4], [w1, w2, -w1, -w2], out)
+        let r = &particles.r[p];
+        let nc = Grid::<D>::CELL_NODES;
+        let det_r = det(r);
+        check_area(p, nc as f64 * det_r)?;
+        let r_inv_t = cofactor(r) / (det_r * nc as f64);
+        let mut corners = [SVector::<f64, D>::zeros(); MAX_CELL_NODES];
+        let mut wg = [SVector::<f64, D>::zeros(); MAX_CELL_NODES];
+        for c in 0..nc {
+            corners[c] = domain_corner(&particles.x[p], r, c);
+            wg[c] = r_inv_t * corner_signs::<D>(c);
+        }
+        let wf = [1.0 / nc as f64; MAX_CELL_NODES];
+        corner_weights(grid, p, &corners[..nc], &wf[..nc], &wg[..nc], out)
     }
 }
 
-impl Interpolator for Cpdi2 {
-    const MAX_SUPPORT: usize = 16;
+impl<const D: usize> Interpolator<D> for Cpdi2<D> {
+    const MAX_SUPPORT: usize = 4_usize.pow(D as u32);
 
     fn weights(
         &self,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         p: usize,
-        out: &mut [Weight],
+        out: &mut [Weight<D>],
     ) -> Result<usize, ShapeError> {
-        let corners = &particles.corners[p];
-        let [x1, x2, x3, x4] = *corners;
-        // Shoelace area written with the diagonals, free of cancellation far from the origin.
-        let vol = 0.5 * (x3 - x1).perp(&(x4 - x2));
+        let corners = particles.corners(p);
+        let nc = corners.len();
+        let mut vol = 0.0;
+        let mut wf = [0.0; MAX_CELL_NODES];
+        let mut wg = [SVector::<f64, D>::zeros(); MAX_CELL_NODES];
+        for (m, dm) in self.m.iter().zip(&self.dm).take(nc) {
+            // J from corner differences: free of cancellation far from the origin.
+            let mut jac = SMatrix::<f64, D, D>::zeros();
+            for c in 1..nc {
+                jac += (corners[c] - corners[0]) * dm[c].transpose();
+            }
+            let (det_j, cof) = (det(&jac), cofactor(&jac));
+            vol += det_j;
+            for c in 0..nc {
+                wf[c] += m[c] * det_j;
+                wg[c] += cof * dm[c];
+            }
+        }
         check_area(p, vol)?;
-        let c1 = (x2 - x1).perp(&(x4 - x1));
-        let c2 = (x2 - x1).perp(&(x3 - x2));
-        let c3 = (x3 - x4).perp(&(x4 - x1));
-        let c4 = (x3 - x4).perp(&(x3 - x2));
-        let s = 1.0 / (36.0 * vol);
-        let wf = [
-            s * (4.0 * c1 + 2.0 * c2 + 2.0 * c3 + c4),
-            s * (2.0 * c1 + 4.0 * c2 + c3 + 2.0 * c4),
-            s * (c1 + 2.0 * c2 + 2.0 * c3 + 4.0 * c4),
-            s * (2.0 * c1 + c2 + 4.0 * c3 + 2.0 * c4),
-        ];
-        let g = 0.5 / vol;
-        let wg1 = Vector2::new(x2.y - x4.y, x4.x - x2.x) * g;
-        let wg2 = Vector2::new(x3.y - x1.y, x1.x - x3.x) * g;
-        corner_weights(grid, p, corners, wf, [wg1, wg2, -wg1, -wg2], out)
+        for c in 0..nc {
+            wf[c] /= vol;
+            wg[c] /= vol;
+        }
+        corner_weights(grid, p, corners, &wf[..nc], &wg[..nc], out)
     }
 }

@@ -7,19 +7,19 @@
 //!        = 1 - |d|                          l <= |d| <= 1 - l
 //!        = (1 + l - |d|)^2 / (4 l)          1 - l < |d| < 1 + l
 //!        = 0                                otherwise
-//! S_Ip = phi_x(d_x) phi_y(d_y),   grad S_Ip = (phi_x'(d_x) phi_y(d_y), phi_x(d_x) phi_y'(d_y)) / h
+//! S_Ip = prod_d phi_d(d_d),   (grad S_Ip)_d = phi_d'(d_d) prod_{e != d} phi_e(d_e) / h
 //! ```
 //!
-//! The domain is not updated with `F_p` ("undeformed" GIMP), and `l <= 1/2` keeps the support within 3 x 3
-//! nodes.
+//! The domain is not updated with `F_p` ("undeformed" GIMP), and `l <= 1/2` keeps the support within
+//! `3^D` nodes.
 
-use nalgebra::Vector2;
+use nalgebra::SVector;
 
 use super::{Interpolator, ShapeError, Weight, tensor_product_weights};
 use crate::grid::Grid;
 use crate::particles::Particles;
 
-/// uGIMP interpolator with the particle square `2 |r1^0| x 2 |r2^0|`.
+/// uGIMP interpolator with the particle square (cube) of sides `2 |r_d^0|`.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Gimp;
 
@@ -38,18 +38,19 @@ fn gimp_1d(d: f64, l: f64) -> (f64, f64) {
     }
 }
 
-impl Interpolator for Gimp {
-    const MAX_SUPPORT: usize = 9;
+impl<const D: usize> Interpolator<D> for Gimp {
+    const MAX_SUPPORT: usize = 3_usize.pow(D as u32);
 
     fn weights(
         &self,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         p: usize,
-        out: &mut [Weight],
+        out: &mut [Weight<D>],
     ) -> Result<usize, ShapeError> {
         let h = grid.cell_size();
-        let half = Vector2::new(particles.r1_0[p].norm(), particles.r2_0[p].norm());
+        let r0 = &particles.r0[p];
+        let half = SVector::<f64, D>::from_fn(|d, _| r0.column(d).norm());
         if let Some(&half_width) = half.iter().find(|&&l| !(l > 0.0 && l <= 0.5 * h)) {
             return Err(ShapeError::GimpWidth {
                 particle: p,

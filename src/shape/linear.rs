@@ -1,34 +1,36 @@
-//! Standard MPM: `S_Ip = N_I(x_p)`, `grad S_Ip = grad N_I(x_p)` (bilinear hat functions of the owning cell).
+//! Standard MPM: `S_Ip = N_I(x_p)`, `grad S_Ip = grad N_I(x_p)` (multilinear hat functions of the owning
+//! cell).
 
 use super::{Interpolator, ShapeError, Weight, outside};
 use crate::grid::{Grid, Locus};
 use crate::particles::Particles;
 
-/// Linear (bilinear) interpolation at the material point; suffers cell-crossing noise.
+/// Linear (bilinear, trilinear) interpolation at the material point; suffers cell-crossing noise.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Linear;
 
-impl Interpolator for Linear {
-    const MAX_SUPPORT: usize = 4;
+impl<const D: usize> Interpolator<D> for Linear {
+    const MAX_SUPPORT: usize = 1 << D;
 
     fn weights(
         &self,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         p: usize,
-        out: &mut [Weight],
+        out: &mut [Weight<D>],
     ) -> Result<usize, ShapeError> {
         let x = particles.x[p];
         let cell = grid
             .cell_weights(x)
             .ok_or_else(|| outside(p, Locus::Centre, x))?;
-        for (k, w) in out.iter_mut().take(4).enumerate() {
+        let n = Grid::<D>::CELL_NODES;
+        for (k, w) in out.iter_mut().take(n).enumerate() {
             *w = Weight {
                 node: cell.nodes[k],
                 value: cell.values[k],
                 grad: cell.grads[k],
             };
         }
-        Ok(4)
+        Ok(n)
     }
 }

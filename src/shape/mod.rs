@@ -4,13 +4,16 @@
 //! Five interpolators share the [`Interpolator`] interface, all built on the bilinear hat functions `N_I` of
 //! the [`Grid`] (see `docs/shape-functions.md` for formulas, choices and a figure):
 //!
-//! | [`ShapeKind`]  | config       | support (max nodes) | domain used |
+//! | [`ShapeKind`]  | config       | support 2D (3D) | domain used |
 //! |----------------|--------------|---------------------|-------------|
-//! | `Linear`       | `"linear"`   | 4  | point `x_p` |
-//! | `Gimp`         | `"gimp"`     | 9  | undeformed square `2 r1^0 x 2 r2^0` (`l_p = h / n`) around `x_p` |
-//! | `Cpdi1`        | `"cpdi1"`    | 16 | parallelogram `x_p -+ r1 -+ r2`, `r_i = F_p r_i^0` |
-//! | `Cpdi2`        | `"cpdi2"`    | 16 | quadrilateral with tracked corners |
-//! | `Bspline2`     | `"bspline2"` | 9  | point `x_p`, quadratic B-spline |
+//! | `Linear`       | `"linear"`   | 4 (8)   | point `x_p` |
+//! | `Gimp`         | `"gimp"`     | 9 (27)  | undeformed square (cube) of side `2 r_d^0` (`l_p = h / n`) around `x_p` |
+//! | `Cpdi1`        | `"cpdi1"`    | 16 (64) | parallelogram (parallelepiped) `x_p + r_p xi`, `r_p = F_p r_p^0` |
+//! | `Cpdi2`        | `"cpdi2"`    | 16 (64) | quadrilateral (hexahedron) with tracked corners |
+//! | `Bspline2`     | `"bspline2"` | 9 (27)  | point `x_p`, quadratic B-spline |
+//!
+//! Everything here is generic over the space dimension `D` (2 or 3); `ShapeTable` and `Weight` alone are
+//! the 2D ones.
 //!
 //! Every interpolator satisfies `sum_I S_Ip = 1`, `sum_I grad S_Ip = 0`, `sum_I S_Ip x_I = x_p` and
 //! `sum_I x_I (x) grad S_Ip = I` (for CPDI2 `x_p` is the centroid of the quadrilateral); the tests check
@@ -27,13 +30,14 @@ mod cpdi;
 mod gimp;
 mod linear;
 
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 use serde::Deserialize;
 use thiserror::Error;
 
 use crate::grid::{Grid, GridError, Locus};
 use crate::particles::Particles;
+use crate::space::{cofactor, det};
 
 pub use bspline::Bspline2;
 pub use cpdi::{Cpdi1, Cpdi2};
@@ -77,27 +81,37 @@ impl ShapeKind {
         }
     }
 
-    /// Maximum number of support nodes of one point (the table stride).
-    pub fn max_support(self) -> usize {
+    /// Maximum number of support nodes of one point in `D` dimensions (the table stride).
+    pub fn max_support<const D: usize>(self) -> usize {
         match self {
-            ShapeKind::Linear => Linear::MAX_SUPPORT,
-            ShapeKind::Gimp => Gimp::MAX_SUPPORT,
-            ShapeKind::Cpdi1 => Cpdi1::MAX_SUPPORT,
-            ShapeKind::Cpdi2 => Cpdi2::MAX_SUPPORT,
-            ShapeKind::Bspline2 => Bspline2::MAX_SUPPORT,
+            ShapeKind::Linear => <Linear as Interpolator<D>>::MAX_SUPPORT,
+            ShapeKind::Gimp => <Gimp as Interpolator<D>>::MAX_SUPPORT,
+            ShapeKind::Cpdi1 => <Cpdi1 as Interpolator<D>>::MAX_SUPPORT,
+            ShapeKind::Cpdi2 => <Cpdi2<D> as Interpolator<D>>::MAX_SUPPORT,
+            ShapeKind::Bspline2 => <Bspline2 as Interpolator<D>>::MAX_SUPPORT,
         }
     }
 }
 
 /// One support node of a material point: `S_Ip` [-] and `grad_{X_n} S_Ip` [1/mm].
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Weight {
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weight<const D: usize = 2> {
     /// Global grid node index `I`.
     pub node: u32,
     /// `S_Ip` [-].
     pub value: f64,
     /// `grad_{X_n} S_Ip` [1/mm], with respect to the start-of-step positions.
-    pub grad: Vector2<f64>,
+    pub grad: SVector<f64, D>,
+}
+
+impl<const D: usize> Default for Weight<D> {
+    fn default() -> Self {
+        Self {
+            node: 0,
+            value: 0.0,
+            grad: SVector::zeros(),
+        }
+    }
 }
 
 /// Errors of the shape-function evaluation; all carry the material point index and are recoverable (report
@@ -107,14 +121,15 @@ pub enum ShapeError {
     /// A point, a CPDI corner or a GIMP/B-spline support left the grid.
     #[error(transparent)]
     Grid(#[from] GridError),
-    /// A CPDI domain with zero or negative area (inverted), so `grad S` is undefined.
+    /// A CPDI domain with zero or negative area (volume in 3D, inverted), so `grad S` is undefined.
     #[error(
-        "material point {particle}: degenerate or inverted CPDI domain, signed area {area:e} mm^2"
+        "material point {particle}: degenerate or inverted CPDI domain, signed area (volume in 3D) {area:e} \
+         mm^2 (mm^3)"
     )]
     DegenerateDomain {
         /// Material point index.
         particle: usize,
-        /// Signed area of the domain (mm^2).
+        /// Signed area (3D: volume) of the domain (mm^2, mm^3).
         area: f64,
     },
     /// FEM mode: an element inverted at a Gauss point.
@@ -170,17 +185,16 @@ impl ShapeError {
 }
 
 /// The error for point `particle` whose `locus` at `x` left the grid.
-pub(crate) fn outside(particle: usize, locus: Locus, x: Vector2<f64>) -> ShapeError {
-    ShapeError::Grid(GridError::OutsideGrid {
-        particle,
-        locus,
-        x: x.x,
-        y: x.y,
-    })
+pub(crate) fn outside<const D: usize>(
+    particle: usize,
+    locus: Locus,
+    x: SVector<f64, D>,
+) -> ShapeError {
+    ShapeError::Grid(GridError::outside(particle, locus, &x))
 }
 
-/// An interpolator: writes the compact weight list of one material point.
-pub trait Interpolator: Sync {
+/// An interpolator in `D` dimensions: writes the compact weight list of one material point.
+pub trait Interpolator<const D: usize>: Sync {
     /// Maximum number of support nodes of one point.
     const MAX_SUPPORT: usize;
 
@@ -188,21 +202,21 @@ pub trait Interpolator: Sync {
     /// and returns `n`.
     fn weights(
         &self,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         p: usize,
-        out: &mut [Weight],
+        out: &mut [Weight<D>],
     ) -> Result<usize, ShapeError>;
 }
 
 /// Adds `(value, grad)` to the entry of `node` in `out[..*count]`, appending it if absent.
 #[inline]
-pub(crate) fn add_merged(
-    out: &mut [Weight],
+pub(crate) fn add_merged<const D: usize>(
+    out: &mut [Weight<D>],
     count: &mut usize,
     node: u32,
     value: f64,
-    grad: Vector2<f64>,
+    grad: SVector<f64, D>,
 ) {
     if let Some(w) = out[..*count].iter_mut().find(|w| w.node == node) {
         w.value += value;
@@ -213,51 +227,56 @@ pub(crate) fn add_merged(
     }
 }
 
-/// Weights of a tensor-product kernel `S_Ip = phi_x(s_x - i) phi_y(s_y - j)` on the 3 x 3 nodes around the node
+/// Weights of a tensor-product kernel `S_Ip = prod_d phi_d(s_d - i_d)` on the `3^D` nodes around the node
 /// nearest to `x_p` (`s = (x_p - x_0) / h` in cell units, `kernel(d, k) = (phi_k(d), phi_k'(d))` for direction
-/// `k`, support `|d| < 3/2`). Nodes whose value and gradient are exactly zero are dropped; a contributing node
-/// outside the grid is an error.
-pub(crate) fn tensor_product_weights(
-    grid: &Grid,
+/// `k`, support `|d| < 3/2`), direction 0 fastest. Nodes whose value and gradient are exactly zero are
+/// dropped; a contributing node outside the grid is an error.
+pub(crate) fn tensor_product_weights<const D: usize>(
+    grid: &Grid<D>,
     p: usize,
-    x: Vector2<f64>,
+    x: SVector<f64, D>,
     kernel: impl Fn(f64, usize) -> (f64, f64),
-    out: &mut [Weight],
+    out: &mut [Weight<D>],
 ) -> Result<usize, ShapeError> {
     if grid.cell_of(x).is_none() {
         return Err(outside(p, Locus::Centre, x));
     }
     let s = grid.lattice_coords(x);
     let inv_h = 1.0 / grid.cell_size();
-    let nearest = s.map(|c| c.round() as i64);
-    let mut phi = [[(0.0, 0.0); 3]; 2];
-    for (k, phi_k) in phi.iter_mut().enumerate() {
-        for (a, slot) in phi_k.iter_mut().enumerate() {
-            *slot = kernel(s[k] - (nearest[k] + a as i64 - 1) as f64, k);
-        }
-    }
-    let limit = [grid.nx() as i64, grid.ny() as i64];
+    let nearest: [i64; D] = std::array::from_fn(|k| s[k].round() as i64);
+    let phi: [[(f64, f64); 3]; D] = std::array::from_fn(|k| {
+        std::array::from_fn(|a| kernel(s[k] - (nearest[k] + a as i64 - 1) as f64, k))
+    });
+    let cells = grid.cells();
     let mut count = 0;
-    for (b, &(py, dpy)) in phi[1].iter().enumerate() {
-        if py == 0.0 && dpy == 0.0 {
-            continue;
-        }
-        let j = nearest[1] + b as i64 - 1;
-        for (a, &(px, dpx)) in phi[0].iter().enumerate() {
-            if px == 0.0 && dpx == 0.0 {
-                continue;
+    'nodes: for combo in 0..3_usize.pow(D as u32) {
+        let mut node = [0_usize; D];
+        let mut rest = combo;
+        for k in 0..D {
+            let a = rest % 3;
+            rest /= 3;
+            let (v, dv) = phi[k][a];
+            if v == 0.0 && dv == 0.0 {
+                continue 'nodes;
             }
-            let i = nearest[0] + a as i64 - 1;
-            if i < 0 || j < 0 || i > limit[0] || j > limit[1] {
+            let i = nearest[k] + a as i64 - 1;
+            if i < 0 || i > cells[k] as i64 {
                 return Err(outside(p, Locus::Centre, x));
             }
-            out[count] = Weight {
-                node: grid.node_index(i as usize, j as usize) as u32,
-                value: px * py,
-                grad: Vector2::new(dpx * py, px * dpy) * inv_h,
-            };
-            count += 1;
+            node[k] = i as usize;
         }
+        let factor = |k: usize| phi[k][(combo / 3_usize.pow(k as u32)) % 3];
+        out[count] = Weight {
+            node: grid.node_at(node) as u32,
+            value: (0..D).map(|k| factor(k).0).product(),
+            grad: SVector::from_fn(|d, _| {
+                (0..D)
+                    .map(|k| if k == d { factor(k).1 } else { factor(k).0 })
+                    .product::<f64>()
+                    * inv_h
+            }),
+        };
+        count += 1;
     }
     Ok(count)
 }
@@ -268,17 +287,29 @@ const CHUNK: usize = 512;
 /// The shape functions of all material points for one step: a fixed stride of
 /// [`ShapeKind::max_support`] entries per point and a per-point count. Reuse one table across steps: after
 /// the first step [`ShapeTable::compute`] does not allocate.
-#[derive(Debug, Clone, Default)]
-pub struct ShapeTable {
+#[derive(Debug, Clone)]
+pub struct ShapeTable<const D: usize = 2> {
     kind: Option<ShapeKind>,
     stride: usize,
-    weights: Vec<Weight>,
+    weights: Vec<Weight<D>>,
     counts: Vec<u8>,
     /// Velocity fields the node ids run over (set by `offset_fields`; 0, before any table, counts as 1).
     fields: usize,
 }
 
-impl ShapeTable {
+impl<const D: usize> Default for ShapeTable<D> {
+    fn default() -> Self {
+        Self {
+            kind: None,
+            stride: 0,
+            weights: Vec::new(),
+            counts: Vec::new(),
+            fields: 0,
+        }
+    }
+}
+
+impl<const D: usize> ShapeTable<D> {
     /// An empty table.
     pub fn new() -> Self {
         Self::default()
@@ -312,13 +343,13 @@ impl ShapeTable {
 
     /// The support of point `p`: each node once, with `S_Ip` and `grad_{X_n} S_Ip`.
     #[inline]
-    pub fn weights(&self, p: usize) -> &[Weight] {
+    pub fn weights(&self, p: usize) -> &[Weight<D>] {
         let start = p * self.stride;
         &self.weights[start..start + self.counts[p] as usize]
     }
 
     /// Iterator over `(p, weights(p))` for all points.
-    pub fn iter(&self) -> impl Iterator<Item = (usize, &[Weight])> {
+    pub fn iter(&self) -> impl Iterator<Item = (usize, &[Weight<D>])> {
         (0..self.len()).map(|p| (p, self.weights(p)))
     }
 
@@ -328,14 +359,14 @@ impl ShapeTable {
     pub fn compute(
         &mut self,
         kind: ShapeKind,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
     ) -> Result<(), ShapeError> {
         let result = match kind {
             ShapeKind::Linear => self.fill(&Linear, grid, particles),
             ShapeKind::Gimp => self.fill(&Gimp, grid, particles),
             ShapeKind::Cpdi1 => self.fill(&Cpdi1, grid, particles),
-            ShapeKind::Cpdi2 => self.fill(&Cpdi2, grid, particles),
+            ShapeKind::Cpdi2 => self.fill(&Cpdi2::<D>::default(), grid, particles),
             ShapeKind::Bspline2 => self.fill(&Bspline2, grid, particles),
         };
         self.fields = 1;
@@ -354,16 +385,13 @@ impl ShapeTable {
     /// (`f` holds `F_p`, one per point). An error names the first point with `det F_p <= 0`.
     pub fn push_forward(
         &mut self,
-        reference: &ShapeTable,
-        f: &[Matrix2<f64>],
+        reference: &ShapeTable<D>,
+        f: &[SMatrix<f64, D, D>],
     ) -> Result<(), ShapeError> {
-        if let Some(particle) = f
-            .iter()
-            .position(|f| f.determinant().is_nan() || f.determinant() <= 0.0)
-        {
+        if let Some(particle) = f.iter().position(|f| det(f).is_nan() || det(f) <= 0.0) {
             return Err(ShapeError::InvertedElement {
                 particle,
-                det: f[particle].determinant(),
+                det: det(&f[particle]),
             });
         }
         self.kind = reference.kind;
@@ -378,10 +406,7 @@ impl ShapeTable {
             .zip(reference.weights.par_chunks(stride))
             .zip(f.par_iter())
             .for_each(|((out, w0), f)| {
-                let f_inv_t = f
-                    .try_inverse()
-                    .unwrap_or_else(Matrix2::identity)
-                    .transpose();
+                let f_inv_t = cofactor(f) / det(f);
                 for (o, w) in out.iter_mut().zip(w0) {
                     *o = Weight {
                         grad: f_inv_t * w.grad,
@@ -419,11 +444,11 @@ impl ShapeTable {
             });
     }
 
-    fn fill<I: Interpolator>(
+    fn fill<I: Interpolator<D>>(
         &mut self,
         interp: &I,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
     ) -> Result<(), ShapeError> {
         let n = particles.len();
         let stride = I::MAX_SUPPORT;

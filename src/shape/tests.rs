@@ -1,19 +1,19 @@
 //! Invariants of every interpolator: partition of unity, zero gradient sum, exact reproduction of linear
 //! fields and their gradients, for random, edge, node, deformed and near-margin configurations.
 
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
 use super::*;
-use crate::particles::{Geometry, Region, Seeding, parallelogram_corners};
+use crate::particles::{Geometry, Region, Seeding};
 
 const H: f64 = 0.5;
 const N: usize = 2;
 
 /// 24 x 20 cells of h = 0.5 mm with the origin off zero.
 fn grid() -> Grid {
-    Grid::new(Vector2::new(-3.0, 1.0), H, 24, 20).unwrap()
+    Grid::new(Vector2::new(-3.0, 1.0), H, [24, 20]).unwrap()
 }
 
 /// Undeformed half-edges for 2 x 2 points per cell.
@@ -26,13 +26,10 @@ fn points(xs: &[Vector2<f64>], f: Matrix2<f64>) -> Particles {
     let (r1_0, r2_0) = r0();
     let mut ps = Particles::new();
     for &x in xs {
-        ps.push(x, H * H / 4.0, 1.0, r1_0, r2_0, 0);
+        ps.push(x, H * H / 4.0, 1.0, Matrix2::from_columns(&[r1_0, r2_0]), 0);
     }
     for p in 0..ps.len() {
-        ps.f[p] = f;
-        ps.r1[p] = f * r1_0;
-        ps.r2[p] = f * r2_0;
-        ps.corners[p] = parallelogram_corners(ps.x[p], ps.r1[p], ps.r2[p]);
+        ps.set_deformation(p, f);
     }
     ps
 }
@@ -77,7 +74,12 @@ fn deformations() -> [Matrix2<f64>; 5] {
 }
 
 /// Checks the invariants at every point; `centre[p]` is the point the linear field must reproduce.
-fn check_invariants(kind: ShapeKind, g: &Grid, ps: &Particles, centre: &[Vector2<f64>]) {
+fn check_invariants<const D: usize>(
+    kind: ShapeKind,
+    g: &Grid<D>,
+    ps: &Particles<D>,
+    centre: &[SVector<f64, D>],
+) {
     let mut table = ShapeTable::new();
     table
         .compute(kind, g, ps)
@@ -85,18 +87,18 @@ fn check_invariants(kind: ShapeKind, g: &Grid, ps: &Particles, centre: &[Vector2
     assert_eq!(table.len(), ps.len());
     assert_eq!(table.kind(), Some(kind));
     for (p, ws) in table.iter() {
-        assert!(!ws.is_empty() && ws.len() <= kind.max_support());
+        assert!(!ws.is_empty() && ws.len() <= kind.max_support::<D>());
         let mut nodes: Vec<u32> = ws.iter().map(|w| w.node).collect();
         nodes.sort_unstable();
         nodes.dedup();
         assert_eq!(nodes.len(), ws.len(), "{kind:?} point {p}: duplicate nodes");
         let sum: f64 = ws.iter().map(|w| w.value).sum();
-        let grad_sum: Vector2<f64> = ws.iter().map(|w| w.grad).sum();
-        let x: Vector2<f64> = ws
+        let grad_sum: SVector<f64, D> = ws.iter().map(|w| w.grad).sum();
+        let x: SVector<f64, D> = ws
             .iter()
             .map(|w| w.value * g.node_position(w.node as usize))
             .sum();
-        let grad_x: Matrix2<f64> = ws
+        let grad_x: SMatrix<f64, D, D> = ws
             .iter()
             .map(|w| g.node_position(w.node as usize) * w.grad.transpose())
             .sum();
@@ -114,7 +116,7 @@ fn check_invariants(kind: ShapeKind, g: &Grid, ps: &Particles, centre: &[Vector2
             centre[p]
         );
         assert!(
-            (grad_x - Matrix2::identity()).norm() < 1e-12,
+            (grad_x - SMatrix::<f64, D, D>::identity()).norm() < 1e-12,
             "{kind:?} point {p}: grad x = {grad_x}"
         );
         assert!(ws.iter().all(|w| w.value >= -1e-15));
@@ -155,7 +157,7 @@ fn shape_invariants_in_stretched_and_sheared_domains() {
 }
 
 /// Area centroid of a simple polygon (mm).
-fn centroid(c: &[Vector2<f64>; 4]) -> Vector2<f64> {
+fn centroid(c: &[Vector2<f64>]) -> Vector2<f64> {
     let (mut a, mut m) = (0.0, Vector2::zeros());
     for k in 0..4 {
         let cross = c[k].perp(&c[(k + 1) % 4]);
@@ -170,14 +172,11 @@ fn shape_cpdi2_general_quadrilaterals_reproduce_the_centroid() {
     let mut rng = StdRng::seed_from_u64(4);
     let xs = random_positions(&mut rng, 300);
     let mut ps = points(&xs, Matrix2::identity());
-    for corners in ps.corners.iter_mut() {
-        // Perturb each corner by up to 0.3 of the half-edge: convex, counter-clockwise, not a parallelogram.
-        for c in corners.iter_mut() {
-            *c +=
-                Vector2::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)) * (H / 4.0);
-        }
+    // Perturb each corner by up to 0.3 of the half-edge: convex, counter-clockwise, not a parallelogram.
+    for c in ps.corners.iter_mut() {
+        *c += Vector2::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)) * (H / 4.0);
     }
-    let centres: Vec<_> = ps.corners.iter().map(centroid).collect();
+    let centres: Vec<_> = ps.corners.chunks(4).map(centroid).collect();
     check_invariants(ShapeKind::Cpdi2, &grid(), &ps, &centres);
 }
 
@@ -240,6 +239,7 @@ fn shape_invariants_next_to_the_grid_border_and_out_of_grid_errors() {
                 locus,
                 x,
                 y,
+                z: None,
             }) => {
                 assert_eq!(particle, 2, "{kind:?}");
                 if locus == Locus::Centre {
@@ -290,7 +290,7 @@ fn shape_degenerate_domains_and_gimp_width_are_errors() {
         }
     }
     let mut ps = points(&[x], Matrix2::identity());
-    ps.r1_0[0] = Vector2::new(0.6 * H, 0.0);
+    ps.r0[0].set_column(0, &Vector2::new(0.6 * H, 0.0));
     let err = table.compute(ShapeKind::Gimp, &g, &ps).unwrap_err();
     assert!(
         matches!(err, ShapeError::GimpWidth { particle: 0, .. }),
@@ -343,7 +343,7 @@ fn shape_table_is_reused_without_reallocation() {
     let (pw, pc) = (table.weights.as_ptr(), table.counts.as_ptr());
     for kind in ShapeKind::ALL {
         table.compute(kind, &grid(), &ps).unwrap();
-        assert_eq!(table.stride(), kind.max_support());
+        assert_eq!(table.stride(), kind.max_support::<2>());
         assert_eq!(
             (table.weights.as_ptr(), table.counts.as_ptr()),
             (pw, pc),
@@ -363,4 +363,179 @@ fn shape_kind_config_names() {
         assert_eq!(c.kind, kind);
     }
     assert!(toml::from_str::<Config>("kind = \"CPDI\"").is_err());
+}
+
+// ---- 3D ----
+
+/// 14 x 12 x 10 cells of h = 0.5 mm with the origin off zero.
+fn grid3() -> Grid<3> {
+    Grid::new(Vector3::new(-1.0, 0.5, 2.0), H, [14, 12, 10]).unwrap()
+}
+
+/// 3D points at `xs` (2 x 2 x 2 per cell) whose domains are deformed by `f`.
+fn points3(xs: &[Vector3<f64>], f: Matrix3<f64>) -> Particles<3> {
+    let mut ps = Particles::<3>::new();
+    for &x in xs {
+        ps.push(
+            x,
+            (H / 2.0).powi(3),
+            1.0,
+            Matrix3::identity() * (H / 4.0),
+            0,
+        );
+    }
+    for p in 0..ps.len() {
+        ps.set_deformation(p, f);
+    }
+    ps
+}
+
+/// Random points 3 cells inside the 3D grid, and points on its nodes, edges and faces.
+fn positions3(rng: &mut StdRng, n: usize) -> Vec<Vector3<f64>> {
+    let g = grid3();
+    let (lo, hi) = (
+        g.origin() + Vector3::repeat(3.0 * H),
+        g.upper() - Vector3::repeat(3.0 * H),
+    );
+    let mut xs: Vec<Vector3<f64>> = (0..n)
+        .map(|_| Vector3::from_fn(|d, _| rng.random_range(lo[d]..hi[d])))
+        .collect();
+    for ijk in [[4, 4, 4], [5, 7, 6], [9, 5, 4]] {
+        let node = g.node_position(g.node_at(ijk));
+        xs.push(node);
+        for d in 0..3 {
+            let mut along = Vector3::zeros();
+            along[d] = rng.random_range(0.0..H);
+            xs.push(node + along);
+            xs.push(node + Vector3::repeat(rng.random_range(0.0..H)) - along);
+        }
+    }
+    xs
+}
+
+/// None, a stretch to a domain 3 cells long (the merge's fallback path), a shear and a general `F`.
+fn deformations3() -> [Matrix3<f64>; 4] {
+    [
+        Matrix3::identity(),
+        Matrix3::new(6.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        Matrix3::new(1.0, 1.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        Matrix3::new(1.3, 0.2, -0.1, 0.1, 0.8, 0.3, -0.2, 0.1, 1.1),
+    ]
+}
+
+#[test]
+fn shape_3d_invariants_in_undeformed_and_deformed_domains() {
+    let mut rng = StdRng::seed_from_u64(31);
+    let xs = positions3(&mut rng, 150);
+    for f in deformations3() {
+        let ps = points3(&xs, f);
+        for kind in ShapeKind::ALL {
+            check_invariants(kind, &grid3(), &ps, &xs);
+        }
+    }
+}
+
+/// Volume centroid of the trilinear hexahedron with `corners` (lattice order), by the 3-point Gauss rule
+/// (exact: the integrands are at most cubic per direction).
+fn hexahedron_centroid(corners: &[Vector3<f64>]) -> Vector3<f64> {
+    let q = 0.6_f64.sqrt();
+    let rule = [(-q, 5.0 / 9.0), (0.0, 8.0 / 9.0), (q, 5.0 / 9.0)];
+    let (mut vol, mut moment) = (0.0, Vector3::zeros());
+    for &(a, wa) in &rule {
+        for &(b, wb) in &rule {
+            for &(c, wc) in &rule {
+                let xi = [a, b, c];
+                let mut x = Vector3::zeros();
+                let mut jac = Matrix3::zeros();
+                for (k, xc) in corners.iter().enumerate() {
+                    let s: [f64; 3] =
+                        std::array::from_fn(|d| if (k >> d) & 1 == 1 { 1.0 } else { -1.0 });
+                    let f: [f64; 3] = std::array::from_fn(|d| 0.5 * (1.0 + s[d] * xi[d]));
+                    x += xc * f[0] * f[1] * f[2];
+                    let dm = Vector3::new(
+                        0.5 * s[0] * f[1] * f[2],
+                        0.5 * s[1] * f[0] * f[2],
+                        0.5 * s[2] * f[0] * f[1],
+                    );
+                    jac += xc * dm.transpose();
+                }
+                let w = wa * wb * wc * jac.determinant();
+                vol += w;
+                moment += x * w;
+            }
+        }
+    }
+    moment / vol
+}
+
+#[test]
+fn shape_3d_cpdi2_general_hexahedra_reproduce_the_centroid_and_equal_cpdi1_on_parallelepipeds() {
+    let mut rng = StdRng::seed_from_u64(32);
+    let xs = positions3(&mut rng, 120);
+    let mut ps = points3(&xs, deformations3()[3]);
+    // CPDI2 on parallelepipeds is CPDI1.
+    let (mut t1, mut t2) = (ShapeTable::new(), ShapeTable::new());
+    t1.compute(ShapeKind::Cpdi1, &grid3(), &ps).unwrap();
+    t2.compute(ShapeKind::Cpdi2, &grid3(), &ps).unwrap();
+    for p in 0..ps.len() {
+        let (w1, w2) = (t1.weights(p), t2.weights(p));
+        assert_eq!(w1.len(), w2.len());
+        for (a, b) in w1.iter().zip(w2) {
+            assert_eq!(a.node, b.node);
+            assert!((a.value - b.value).abs() < 1e-13);
+            assert!((a.grad - b.grad).norm() < 1e-11);
+        }
+    }
+    // Perturbed corners: general hexahedra with curved faces.
+    for c in ps.corners.iter_mut() {
+        *c += Vector3::from_fn(|_, _| rng.random_range(-0.25..0.25)) * (H / 4.0);
+    }
+    let centres: Vec<_> = ps.corners.chunks(8).map(hexahedron_centroid).collect();
+    check_invariants(ShapeKind::Cpdi2, &grid3(), &ps, &centres);
+    // An inverted hexahedron is an error naming the point.
+    let mut bad = points3(&xs[..3], Matrix3::identity());
+    bad.corners_mut(1).swap(0, 7);
+    bad.corners_mut(1).swap(1, 6);
+    bad.corners_mut(1).swap(2, 5);
+    bad.corners_mut(1).swap(3, 4);
+    let err = t2.compute(ShapeKind::Cpdi2, &grid3(), &bad).unwrap_err();
+    assert!(
+        matches!(err, ShapeError::DegenerateDomain { particle: 1, .. }),
+        "{err}"
+    );
+}
+
+#[test]
+fn shape_3d_seeded_supports_and_out_of_grid_errors() {
+    let g = grid3();
+    let xs: Vec<Vector3<f64>> = crate::particles::lattice([4, 3, 2])
+        .map(|c| g.origin() + Vector3::from_fn(|d, _| (3.0 + c[d] as f64 + 0.25) * H))
+        .collect();
+    let ps = points3(&xs, Matrix3::identity());
+    let mut table = ShapeTable::new();
+    for (kind, expected) in [
+        (ShapeKind::Linear, 8),
+        (ShapeKind::Gimp, 8),
+        (ShapeKind::Cpdi1, 8),
+        (ShapeKind::Cpdi2, 8),
+        (ShapeKind::Bspline2, 27),
+    ] {
+        table.compute(kind, &g, &ps).unwrap();
+        assert_eq!(table.stride(), kind.max_support::<3>());
+        assert!(table.iter().all(|(_, ws)| ws.len() == expected), "{kind:?}");
+    }
+    let out = points3(
+        &[g.upper() - Vector3::new(1.0, 1.0, 0.1 * H)],
+        Matrix3::identity(),
+    );
+    for kind in [ShapeKind::Cpdi1, ShapeKind::Bspline2] {
+        let err = table.compute(kind, &g, &out).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                ShapeError::Grid(GridError::OutsideGrid { z: Some(_), .. })
+            ),
+            "{kind:?}: {err}"
+        );
+    }
 }

@@ -1,0 +1,62 @@
+//! Small dense algebra that does not depend on the space dimension `D` (2 or 3): determinants and
+//! cofactor matrices without inversion, and the lift of an in-plane deformation gradient to 3 x 3.
+
+use nalgebra::{Matrix3, SMatrix};
+
+/// The cofactor matrix `cof A = det(A) A^-T` of a 2 x 2 or 3 x 3 matrix, defined also for singular `A`.
+#[inline]
+pub fn cofactor<const D: usize>(a: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D> {
+    match D {
+        2 => SMatrix::from_fn(|i, j| {
+            let sign = if (i + j) % 2 == 0 { 1.0 } else { -1.0 };
+            sign * a[(1 - i, 1 - j)]
+        }),
+        3 => SMatrix::from_fn(|i, j| {
+            let (i1, i2, j1, j2) = ((i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3);
+            a[(i1, j1)] * a[(i2, j2)] - a[(i1, j2)] * a[(i2, j1)]
+        }),
+        _ => panic!("cofactor: dimension {D} is not 2 or 3"),
+    }
+}
+
+/// `det A` of a 2 x 2 or 3 x 3 matrix (Laplace expansion along the first column).
+#[inline]
+pub fn det<const D: usize>(a: &SMatrix<f64, D, D>) -> f64 {
+    a.column(0).dot(&cofactor(a).column(0))
+}
+
+/// The 3 x 3 deformation gradient of a `D`-dimensional one: itself in 3D; in 2D (plane strain) the
+/// in-plane block with `F_33 = 1` and `F_13 = F_23 = F_31 = F_32 = 0`.
+#[inline]
+pub fn lift3<const D: usize>(f: &SMatrix<f64, D, D>) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| {
+        if i < D && j < D {
+            f[(i, j)]
+        } else if i == j {
+            1.0
+        } else {
+            0.0
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix2, Matrix3};
+
+    #[test]
+    fn cofactor_is_det_times_inverse_transpose() {
+        let a2 = Matrix2::new(1.6, 0.4, -0.3, 0.8);
+        let a3 = Matrix3::new(1.2, 0.3, -0.1, 0.2, 0.9, 0.4, -0.5, 0.1, 1.4);
+        assert!((det(&a2) - a2.determinant()).abs() < 1e-15);
+        assert!((det(&a3) - a3.determinant()).abs() < 1e-14);
+        let inv_t2 = a2.try_inverse().unwrap().transpose() * a2.determinant();
+        let inv_t3 = a3.try_inverse().unwrap().transpose() * a3.determinant();
+        assert!((cofactor(&a2) - inv_t2).norm() < 1e-14);
+        assert!((cofactor(&a3) - inv_t3).norm() < 1e-14);
+        assert_eq!(lift3(&a2)[(2, 2)], 1.0);
+        assert_eq!(lift3(&a2)[(0, 1)], 0.4);
+        assert_eq!(lift3(&a3), a3);
+    }
+}
