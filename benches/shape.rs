@@ -5,15 +5,18 @@
 //! homogeneous deformation `F = [[1.002, 0.001], [0.0005, 0.998]]` about the plate centre (corners off the
 //! grid lines: 9 support nodes, the typical state during a run).
 //!
+//! The same for a 3D plate of about as many points (`shape_3d_*`, `transfer_3d_*`).
+//!
 //! Run: `cargo bench --bench shape`.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use std::hint::black_box;
 
 use mpm_concrete::grid::Grid;
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
+use mpm_concrete::solids::{Solid, Solids};
 use mpm_concrete::transfer::{
     DEFAULT_RELATIVE_MASS_TOLERANCE, GridState, StepSolution, grid_to_particles, particles_to_grid,
 };
@@ -107,5 +110,82 @@ fn bench_shape(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_shape);
+/// The 3D plate 40 x 40 x 12 mm, h = 1 mm, 2 x 2 x 2 points per cell (153,600 points, about the CT's
+/// 2D count), as seeded and after a homogeneous deformation about its centre.
+fn bench_shape_3d(c: &mut Criterion) {
+    let plate = Solids {
+        include: vec![Solid::Box {
+            min: [0.0, 0.0, 0.0],
+            max: [40.0, 40.0, 12.0],
+        }],
+        exclude: vec![],
+    };
+    let seeding = Seeding {
+        h: 1.0,
+        points_per_cell: 2,
+        density: 2.4e-9,
+        body: 0,
+    };
+    let seeded = Particles::<3>::seed(&plate, &seeding).expect("plate seeds");
+    let grid =
+        Grid::covering(Vector3::zeros(), Vector3::new(40.0, 40.0, 12.0), 1.0, 3).expect("grid");
+    let f = Matrix3::new(
+        1.002, 0.001, 0.0004, 0.0005, 0.998, -0.0003, 0.0002, 0.0006, 1.001,
+    );
+    let centre = Vector3::new(20.0, 20.0, 6.0);
+    let mut deformed = seeded.clone();
+    for p in 0..deformed.len() {
+        deformed.x[p] = centre + f * (deformed.x[p] - centre);
+        deformed.set_deformation(p, f);
+    }
+    let n = seeded.len();
+    let mut group = c.benchmark_group(format!("shape_3d_{n}"));
+    let mut table = ShapeTable::new();
+    for kind in ShapeKind::ALL {
+        for (state, particles) in [("seeded", &seeded), ("deformed", &deformed)] {
+            group.bench_function(BenchmarkId::new(kind.name(), state), |b| {
+                b.iter(|| {
+                    table
+                        .compute(black_box(kind), &grid, black_box(particles))
+                        .expect("in grid")
+                })
+            });
+        }
+    }
+    group.finish();
+    let mut group = c.benchmark_group(format!("transfer_3d_{n}"));
+    let mut state = GridState::new();
+    for kind in [ShapeKind::Linear, ShapeKind::Cpdi1] {
+        table.compute(kind, &grid, &deformed).expect("in grid");
+        group.bench_function(BenchmarkId::new("p2g", kind.name()), |b| {
+            b.iter(|| {
+                particles_to_grid(
+                    &table,
+                    black_box(&deformed),
+                    &grid,
+                    DEFAULT_RELATIVE_MASS_TOLERANCE,
+                    &mut state,
+                )
+                .expect("sizes match")
+            })
+        });
+        let zero = vec![Vector3::zeros(); grid.num_nodes()];
+        let solution = StepSolution {
+            du: &zero,
+            acceleration: &zero,
+            gamma: 0.5,
+            dt: 1e-6,
+        };
+        let mut particles = deformed.clone();
+        group.bench_function(BenchmarkId::new("g2p", kind.name()), |b| {
+            b.iter(|| {
+                grid_to_particles(&table, &grid, black_box(&solution), &mut particles)
+                    .expect("sizes match")
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_shape, bench_shape_3d);
 criterion_main!(benches);

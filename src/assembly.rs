@@ -3,7 +3,7 @@
 //!
 //! Unknowns per active node `I`: `du_I` (mm) and, for gradient-enhanced runs, `eta_bar_I` (-). With the
 //! start-of-step gradients `g_I = grad_{X_n} S_Ip`, `G_I = F_n^T g_I` (the gradient w.r.t. the initial
-//! configuration), `F = (I + sum_J du_J (x) g_J) F_n` (plane strain, F33 = 1) and the first Piola stress
+//! configuration), `F = (I + sum_J du_J (x) g_J) F_n` (in 2D plane strain, F33 = 1) and the first Piola stress
 //! `P(F, eta_bar_p)` of the constitutive law:
 //!
 //! ```text
@@ -28,13 +28,18 @@
 //! incidence is built once per step), so rows are filled in parallel without races or atomics and
 //! results do not depend on the number of threads. The block sparsity pattern (the union of the supports
 //! of the particles around each node) is built once per step and reused by every Newton iteration.
+//!
+//! Everything is generic over the space dimension `D` (2 or 3: `D` displacement unknowns per node, plus
+//! `eta_bar`); the constitutive law always sees the 3 x 3 `F` ([`lift3`] in 2D) and the assembly takes the
+//! `D x D` blocks of its stress and tangent.
 
 use crate::dofs::{DofMap, FieldLayout};
 use crate::material::{Constitutive, Material, MaterialError, Response};
 use crate::particles::Particles;
 use crate::petsc::{BlockCsr, BlockLayout};
 use crate::shape::ShapeTable;
-use nalgebra::{Matrix2, Matrix3, Vector2};
+use crate::space::{det, lift3};
+use nalgebra::{Matrix3, SMatrix, SVector};
 use rayon::prelude::*;
 
 /// Newmark parameters of the dynamic step; `None` in [`StepInput::newmark`] means quasi-static.
@@ -50,7 +55,12 @@ pub struct Newmark {
 
 impl Newmark {
     /// `a^{n+1} = du/(beta dt^2) - v/(beta dt) - (1/(2 beta) - 1) a` (mm/s^2).
-    pub fn acceleration(&self, du: Vector2<f64>, v: Vector2<f64>, a: Vector2<f64>) -> Vector2<f64> {
+    pub fn acceleration<const D: usize>(
+        &self,
+        du: SVector<f64, D>,
+        v: SVector<f64, D>,
+        a: SVector<f64, D>,
+    ) -> SVector<f64, D> {
         let (b, dt) = (self.beta, self.dt);
         du / (b * dt * dt) - v / (b * dt) - (0.5 / b - 1.0) * a
     }
@@ -62,11 +72,11 @@ impl Newmark {
 }
 
 /// What the residual and Jacobian of a step read (all fixed during the Newton iterations).
-pub struct StepInput<'a> {
+pub struct StepInput<'a, const D: usize = 2> {
     /// Start-of-step shape functions of the deformable particles.
-    pub table: &'a ShapeTable,
+    pub table: &'a ShapeTable<D>,
     /// Committed particle state at `t_n`.
-    pub particles: &'a Particles,
+    pub particles: &'a Particles<D>,
     /// Constitutive law per body tag (`particles.body[p]` indexes this slice).
     pub materials: &'a [Material],
     /// Unknown numbering and constraints.
@@ -74,15 +84,15 @@ pub struct StepInput<'a> {
     /// Nodal mass `m_I` (t), velocity `v_I` (mm/s), acceleration `a_I` (mm/s^2) from P2G, per grid node.
     pub mass: &'a [f64],
     /// Nodal velocity (mm/s).
-    pub velocity: &'a [Vector2<f64>],
+    pub velocity: &'a [SVector<f64, D>],
     /// Nodal acceleration (mm/s^2).
-    pub acceleration: &'a [Vector2<f64>],
+    pub acceleration: &'a [SVector<f64, D>],
     /// Newmark parameters, or `None` for a quasi-static step.
     pub newmark: Option<Newmark>,
     /// Body force per unit mass `b` (mm/s^2), e.g. gravity times the load factor.
-    pub body_force: Vector2<f64>,
-    /// External nodal forces (N per mm thickness), one per grid node, or empty for none.
-    pub nodal_force: &'a [Vector2<f64>],
+    pub body_force: SVector<f64, D>,
+    /// External nodal forces (N; in 2D per mm thickness), one per grid node, or empty for none.
+    pub nodal_force: &'a [SVector<f64, D>],
     /// Scale of constrained rows and of the Helmholtz rows (MPa), about the stiffness of the body.
     pub row_scale: f64,
     /// Per node copy, the copy of another velocity field it is paired with in contact between bodies
@@ -123,20 +133,20 @@ const NO_COLUMN: u16 = u16::MAX;
 
 /// Cached constitutive evaluation of one particle at the current iterate.
 #[derive(Debug, Clone, Copy)]
-struct PointEval {
-    /// First Piola stress (MPa).
+struct PointEval<const D: usize> {
+    /// First Piola stress (MPa), 3 x 3.
     p: Matrix3<f64>,
-    /// In-plane `A_iJkL = dP_iJ/dF_kL`, index `(2i+J)*4 + 2k+L`.
-    a: [f64; 16],
-    /// In-plane `dP/d eta_bar` (MPa).
-    dp_deb: Matrix2<f64>,
-    /// In-plane `d eta/dF F_n^T` (for the Helmholtz-displacement coupling).
-    deta_dx: Matrix2<f64>,
+    /// The `D`-dimensional part of `A_iJkL = dP_iJ/dF_kL` (MPa): `a[i][k][(J, L)]`.
+    a: [[SMatrix<f64, D, D>; D]; D],
+    /// `D x D` block of `dP/d eta_bar` (MPa).
+    dp_deb: SMatrix<f64, D, D>,
+    /// `D x D` block of `d eta/dF F_n^T` (for the Helmholtz-displacement coupling).
+    deta_dx: SMatrix<f64, D, D>,
     /// Local equivalent strain eta_p.
     eta: f64,
     /// Interpolated eta_bar_p and its gradient w.r.t. X_n.
     eta_bar: f64,
-    grad_eta_bar: Vector2<f64>,
+    grad_eta_bar: SVector<f64, D>,
     /// Stored energy density (MPa) and damage of the iterate.
     energy: f64,
     damage: f64,
@@ -152,16 +162,16 @@ struct PointEval {
     eroded: bool,
 }
 
-impl Default for PointEval {
+impl<const D: usize> Default for PointEval<D> {
     fn default() -> Self {
         Self {
             p: Matrix3::zeros(),
-            a: [0.0; 16],
-            dp_deb: Matrix2::zeros(),
-            deta_dx: Matrix2::zeros(),
+            a: [[SMatrix::zeros(); D]; D],
+            dp_deb: SMatrix::zeros(),
+            deta_dx: SMatrix::zeros(),
             eta: 0.0,
             eta_bar: 0.0,
-            grad_eta_bar: Vector2::zeros(),
+            grad_eta_bar: SVector::zeros(),
             energy: 0.0,
             damage: 0.0,
             det: 1.0,
@@ -176,8 +186,7 @@ impl Default for PointEval {
 
 /// Per-step workspace of the assembly: incidence, pattern, cached particle evaluations, trial history.
 /// Buffers are reused from step to step; nothing is allocated per Newton iteration.
-#[derive(Default)]
-pub struct Assembler {
+pub struct Assembler<const D: usize = 2> {
     layout: FieldLayout,
     /// Node -> (particle, slot in its weight list), CSR over grid nodes.
     inc_offsets: Vec<usize>,
@@ -189,11 +198,11 @@ pub struct Assembler {
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
     /// `G = F_n^T g` per table slot.
-    g0: Vec<Vector2<f64>>,
+    g0: Vec<SVector<f64, D>>,
     /// Nodal unknowns of the current iterate, per grid node.
-    du: Vec<Vector2<f64>>,
+    du: Vec<SVector<f64, D>>,
     eb: Vec<f64>,
-    evals: Vec<PointEval>,
+    evals: Vec<PointEval<D>>,
     trial_history: Vec<f64>,
     /// The iterate the cache was computed at.
     key: Vec<f64>,
@@ -205,7 +214,29 @@ pub struct Assembler {
     owned_points: Vec<bool>,
 }
 
-impl Assembler {
+impl<const D: usize> Default for Assembler<D> {
+    fn default() -> Self {
+        Self {
+            layout: FieldLayout::default(),
+            inc_offsets: Vec::new(),
+            inc_entries: Vec::new(),
+            inc_pos: Vec::new(),
+            row_ptr: Vec::new(),
+            cols: Vec::new(),
+            g0: Vec::new(),
+            du: Vec::new(),
+            eb: Vec::new(),
+            evals: Vec::new(),
+            trial_history: Vec::new(),
+            key: Vec::new(),
+            key_valid: false,
+            key_all: false,
+            owned_points: Vec::new(),
+        }
+    }
+}
+
+impl<const D: usize> Assembler<D> {
     /// An empty workspace.
     pub fn new() -> Self {
         Self::default()
@@ -213,7 +244,12 @@ impl Assembler {
 
     /// Prepares a step: incidence, block pattern, `G = F_n^T g`. Call after the shape table and the
     /// unknown numbering of the step are known.
-    pub fn begin_step(&mut self, input: &StepInput<'_>) {
+    pub fn begin_step(&mut self, input: &StepInput<'_, D>) {
+        assert_eq!(
+            input.dofs.layout().dim(),
+            D,
+            "the unknowns' layout has the assembly's dimension"
+        );
         let (table, particles, dofs) = (input.table, input.particles, input.dofs);
         self.layout = dofs.layout();
         let nodes = dofs.node_indices().len();
@@ -312,7 +348,7 @@ impl Assembler {
             self.inc_pos[lo..lo + pos.len()].copy_from_slice(pos);
         }
         // G = F_n^T g per slot.
-        self.g0.resize(np * stride, Vector2::zeros());
+        self.g0.resize(np * stride, SVector::zeros());
         self.g0
             .par_chunks_mut(stride.max(1))
             .enumerate()
@@ -326,7 +362,7 @@ impl Assembler {
         let hs = particles.history_stride();
         // One slot per particle even for history-free laws, so the parallel zip stays aligned.
         self.trial_history.resize(np * hs.max(1), 0.0);
-        self.du.resize(nodes, Vector2::zeros());
+        self.du.resize(nodes, SVector::zeros());
         self.eb.resize(nodes, 0.0);
         self.key_valid = false;
         self.owned_points.clear();
@@ -335,7 +371,7 @@ impl Assembler {
     /// Restricts [`Assembler::evaluate_owned`] to the points in the support of the block rows `rows`
     /// (active nodes) until the next [`Assembler::begin_step`]: what a process needs for its own rows of
     /// the residual and the Jacobian. All rows: no restriction.
-    pub fn restrict_to_rows(&mut self, input: &StepInput<'_>, rows: std::ops::Range<usize>) {
+    pub fn restrict_to_rows(&mut self, input: &StepInput<'_, D>, rows: std::ops::Range<usize>) {
         self.owned_points.clear();
         self.key_valid = false;
         if rows.len() == self.row_ptr.len() - 1 {
@@ -403,7 +439,7 @@ impl Assembler {
 
     /// Evaluates every particle at the iterate `x` (unknowns in [`DofMap`] order) unless the cache
     /// already holds `x`. Trial history is written to the workspace, never to the particles.
-    pub fn evaluate(&mut self, input: &StepInput<'_>, x: &[f64]) -> Result<(), AssemblyError> {
+    pub fn evaluate(&mut self, input: &StepInput<'_, D>, x: &[f64]) -> Result<(), AssemblyError> {
         self.evaluate_points(input, x, true)
     }
 
@@ -412,7 +448,7 @@ impl Assembler {
     /// residual and the Jacobian. The other points keep stale values until the next full evaluation.
     pub fn evaluate_owned(
         &mut self,
-        input: &StepInput<'_>,
+        input: &StepInput<'_, D>,
         x: &[f64],
     ) -> Result<(), AssemblyError> {
         self.evaluate_points(input, x, false)
@@ -420,7 +456,7 @@ impl Assembler {
 
     fn evaluate_points(
         &mut self,
-        input: &StepInput<'_>,
+        input: &StepInput<'_, D>,
         x: &[f64],
         all: bool,
     ) -> Result<(), AssemblyError> {
@@ -432,11 +468,11 @@ impl Assembler {
         let nf = self.layout.per_node();
         let dofs = input.dofs;
         // Scatter the unknowns to grid nodes (inactive nodes stay zero).
-        self.du.iter_mut().for_each(|d| *d = Vector2::zeros());
+        self.du.iter_mut().for_each(|d| *d = SVector::zeros());
         self.eb.iter_mut().for_each(|e| *e = 0.0);
         for (a, &node) in dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
-            self.du[node] = Vector2::new(x[a * nf], x[a * nf + 1]);
+            self.du[node] = SVector::from_column_slice(&x[a * nf..a * nf + D]);
             if let Some(e) = self.layout.eta_bar() {
                 self.eb[node] = x[a * nf + e];
             }
@@ -454,15 +490,15 @@ impl Assembler {
                     return Ok(());
                 }
                 let ws = table.weights(p);
-                let mut grad_du = Matrix2::zeros();
-                let (mut ebp, mut geb) = (0.0, Vector2::zeros());
+                let mut grad_du = SMatrix::<f64, D, D>::zeros();
+                let (mut ebp, mut geb) = (0.0, SVector::<f64, D>::zeros());
                 for w in ws {
                     let n = w.node as usize;
                     grad_du += du[n] * w.grad.transpose();
                     ebp += w.value * eb[n];
                     geb += w.grad * eb[n];
                 }
-                let fn2 = particles.f[p];
+                let f_n = particles.f[p];
                 let material = &materials[particles.body[p] as usize];
                 if material.is_eroded(particles.damage[p]) {
                     // A void that keeps its mass: no stress or stiffness, F frozen (the solver restores
@@ -475,28 +511,18 @@ impl Assembler {
                         eta_bar: if nonlocal { ebp } else { 0.0 },
                         grad_eta_bar: geb,
                         damage: particles.damage[p],
-                        det: fn2.determinant(),
+                        det: det(&f_n),
                         eroded: true,
                         ..PointEval::default()
                     };
                     return Ok(());
                 }
-                let f2 = (Matrix2::identity() + grad_du) * fn2;
-                let det = f2.determinant();
+                let f = (SMatrix::<f64, D, D>::identity() + grad_du) * f_n;
+                let det = det(&f);
                 if det.is_nan() || det <= 0.0 {
                     return Err(AssemblyError::Inverted { particle: p, det });
                 }
-                let f3 = Matrix3::new(
-                    f2[(0, 0)],
-                    f2[(0, 1)],
-                    0.0,
-                    f2[(1, 0)],
-                    f2[(1, 1)],
-                    0.0,
-                    0.0,
-                    0.0,
-                    1.0,
-                );
+                let f3 = lift3(&f);
                 // The point's own law's history: the stride is the longest of all bodies' laws.
                 let hl = material.history_len();
                 let h_n = &particles.history(p)[..hl];
@@ -516,9 +542,9 @@ impl Assembler {
                 }
                 *ev = PointEval {
                     p: r.p,
-                    a: in_plane(&r),
-                    dp_deb: r.dp_deta_bar.fixed_view::<2, 2>(0, 0).into_owned(),
-                    deta_dx: r.deta_df.fixed_view::<2, 2>(0, 0) * fn2.transpose(),
+                    a: tangent_blocks(&r),
+                    dp_deb: r.dp_deta_bar.fixed_view::<D, D>(0, 0).into_owned(),
+                    deta_dx: r.deta_df.fixed_view::<D, D>(0, 0) * f_n.transpose(),
                     eta: r.eta,
                     eta_bar: ebp,
                     grad_eta_bar: geb,
@@ -545,7 +571,7 @@ impl Assembler {
     /// the reaction the constraint exerts (N).
     pub fn residual(
         &self,
-        input: &StepInput<'_>,
+        input: &StepInput<'_, D>,
         x: &[f64],
         out: &mut [f64],
         physical: bool,
@@ -558,7 +584,7 @@ impl Assembler {
     /// [`Assembler::evaluate_owned`] with these rows.
     pub fn residual_rows(
         &self,
-        input: &StepInput<'_>,
+        input: &StepInput<'_, D>,
         x: &[f64],
         out: &mut [f64],
         physical: bool,
@@ -575,13 +601,13 @@ impl Assembler {
                 return;
             }
             let node = dofs.node(a);
-            let mut ru = Vector2::zeros();
+            let mut ru = SVector::<f64, D>::zeros();
             let mut reb = 0.0;
             for &(p, k) in &self.inc_entries[self.inc_offsets[node]..self.inc_offsets[node + 1]] {
                 let (p, k) = (p as usize, k as usize);
                 let ev = &self.evals[p];
                 let g0 = self.g0[p * stride + k];
-                let pp = ev.p.fixed_view::<2, 2>(0, 0);
+                let pp = ev.p.fixed_view::<D, D>(0, 0);
                 ru += particles.vol0[p] * (pp * g0);
                 if eta_bar.is_some() {
                     let w = &table.weights(p)[k];
@@ -610,8 +636,7 @@ impl Assembler {
             if let Some(f) = input.nodal_force.get(node) {
                 ru -= f;
             }
-            r[0] = ru.x;
-            r[1] = ru.y;
+            r[..D].copy_from_slice(ru.as_slice());
             if let Some(e) = eta_bar {
                 r[e] = s * reb;
             }
@@ -634,7 +659,7 @@ impl Assembler {
     /// [`Assembler::nonzeros`] values for [`Assembler::block_pattern`]), rows in parallel (rayon).
     pub fn jacobian_into(
         &self,
-        input: &StepInput<'_>,
+        input: &StepInput<'_, D>,
         rows: std::ops::Range<usize>,
         values: &mut [f64],
         layout: BlockLayout,
@@ -669,7 +694,12 @@ impl Assembler {
     /// the local `eta < gamma_0` of the point's material. Returns the stored energy `sum_p V^0 Psi_p`
     /// (N mm) of the first `counted` points (a process's own; the rest are copies of other processes'
     /// points). `particles.f` must already hold the converged deformation gradients (after G2P).
-    pub fn commit(&self, particles: &mut Particles, materials: &[Material], counted: usize) -> f64 {
+    pub fn commit(
+        &self,
+        particles: &mut Particles<D>,
+        materials: &[Material],
+        counted: usize,
+    ) -> f64 {
         let hs = particles.history_stride();
         if hs > 0 {
             let n = particles.len() * hs;
@@ -677,18 +707,7 @@ impl Assembler {
         }
         let mut energy = 0.0;
         for (p, ev) in self.evals.iter().enumerate() {
-            let f2 = particles.f[p];
-            let f3 = Matrix3::new(
-                f2[(0, 0)],
-                f2[(0, 1)],
-                0.0,
-                f2[(1, 0)],
-                f2[(1, 1)],
-                0.0,
-                0.0,
-                0.0,
-                1.0,
-            );
+            let f3 = lift3(&particles.f[p]);
             particles.stress[p] = ev.p * f3.transpose() / ev.det;
             if !ev.eroded {
                 // An eroded point keeps its anchor value.
@@ -710,25 +729,25 @@ impl Assembler {
     }
 
     /// Nodal displacement increment of the last evaluated iterate, per grid node (mm).
-    pub fn nodal_du(&self) -> &[Vector2<f64>] {
+    pub fn nodal_du(&self) -> &[SVector<f64, D>] {
         &self.du
     }
 }
 
 /// Read-only view of the assembler used by the parallel row filling (the values are borrowed apart).
-struct AssemblerView<'a> {
+struct AssemblerView<'a, const D: usize> {
     inc_offsets: &'a [usize],
     inc_entries: &'a [(u32, u8)],
     inc_pos: &'a [u16],
     row_ptr: &'a [usize],
     cols: &'a [u32],
-    g0: &'a [Vector2<f64>],
-    evals: &'a [PointEval],
+    g0: &'a [SVector<f64, D>],
+    evals: &'a [PointEval<D>],
 }
 
-struct JacobianRows<'a> {
-    asm: AssemblerView<'a>,
-    input: &'a StepInput<'a>,
+struct JacobianRows<'a, const D: usize> {
+    asm: AssemblerView<'a, D>,
+    input: &'a StepInput<'a, D>,
     nf: usize,
     layout: BlockLayout,
 }
@@ -736,8 +755,8 @@ struct JacobianRows<'a> {
 /// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
 /// range in two (rayon::join) until it is small: parallel, allocation-free and race-free because block
 /// rows own disjoint value ranges.
-fn fill_rows(
-    ctx: &JacobianRows<'_>,
+fn fill_rows<const D: usize>(
+    ctx: &JacobianRows<'_, D>,
     rows: std::ops::Range<usize>,
     values: &mut [f64],
     base: usize,
@@ -761,7 +780,7 @@ fn fill_rows(
 }
 
 /// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
-fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
+fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]) {
     let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
     let (table, particles, dofs) = (input.table, input.particles, input.dofs);
     let stride = table.stride();
@@ -792,16 +811,9 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
         let (si, gi) = (ws[k].value, ws[k].grad);
         let v0 = particles.vol0[p];
         let vn = particles.vol[p];
-        // M[i][k][L] = sum_J G_I,J A_iJkL
-        let mut m = [[[0.0; 2]; 2]; 2];
-        for (i, mi) in m.iter_mut().enumerate() {
-            for (kk, mik) in mi.iter_mut().enumerate() {
-                for (l, v) in mik.iter_mut().enumerate() {
-                    *v = gi0.x * ev.a[(2 * i) * 4 + 2 * kk + l]
-                        + gi0.y * ev.a[(2 * i + 1) * 4 + 2 * kk + l];
-                }
-            }
-        }
+        // M[i][k]_L = sum_J G_I,J A_iJkL
+        let m: [[SVector<f64, D>; D]; D] =
+            std::array::from_fn(|i| std::array::from_fn(|kk| ev.a[i][kk].tr_mul(&gi0)));
         let q = ev.dp_deb * gi0;
         // Evolving activity: d(c grad S_I . grad eta_bar)/d(unknowns) through c(eta, eta_bar).
         let flux = gi.dot(&ev.grad_eta_bar);
@@ -812,18 +824,18 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
             }
             let pos = pos as usize;
             let gj0 = asm.g0[p * stride + kj];
-            for i in 0..2 {
-                for kk in 0..2 {
-                    row[at(i, pos, kk)] += v0 * (m[i][kk][0] * gj0.x + m[i][kk][1] * gj0.y);
+            for (i, mi) in m.iter().enumerate() {
+                for (kk, mik) in mi.iter().enumerate() {
+                    row[at(i, pos, kk)] += v0 * mik.dot(&gj0);
                 }
             }
             if let Some(e) = dofs.layout().eta_bar() {
                 let (sj, gj) = (wj.value, wj.grad);
-                row[at(0, pos, e)] += v0 * q.x * sj;
-                row[at(1, pos, e)] += v0 * q.y * sj;
                 let h = ev.deta_dx * gj;
-                row[at(e, pos, 0)] -= s * vn * (si - dc_deta) * h.x;
-                row[at(e, pos, 1)] -= s * vn * (si - dc_deta) * h.y;
+                for i in 0..D {
+                    row[at(i, pos, e)] += v0 * q[i] * sj;
+                    row[at(e, pos, i)] -= s * vn * (si - dc_deta) * h[i];
+                }
                 row[at(e, pos, e)] += s * vn * (si * sj + c * gi.dot(&gj) + dc_deb * sj);
             }
         }
@@ -833,8 +845,9 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     // not yet satisfy the constraints carries the prescribed motion into the interior (linear predictor).
     if let (Some(nm), Some(d)) = (input.newmark, diag) {
         let mf = input.mass[node] * nm.mass_factor();
-        row[at(0, d, 0)] += mf;
-        row[at(1, d, 1)] += mf;
+        for i in 0..D {
+            row[at(i, d, i)] += mf;
+        }
     }
     for i in 0..nf {
         if dofs.is_constrained(a * nf + i) {
@@ -850,19 +863,12 @@ fn fill_row(ctx: &JacobianRows<'_>, a: usize, row: &mut [f64]) {
     }
 }
 
-/// In-plane part of `A` as `(2i+J)*4 + 2k+L`.
-fn in_plane(r: &Response) -> [f64; 16] {
-    let mut out = [0.0; 16];
-    for i in 0..2 {
-        for j in 0..2 {
-            for k in 0..2 {
-                for l in 0..2 {
-                    out[(2 * i + j) * 4 + 2 * k + l] = r.a[(3 * i + j, 3 * k + l)];
-                }
-            }
-        }
-    }
-    out
+/// The `D`-dimensional part of the tangent `A` (index `(3i+J, 3k+L)` of [`Response::a`]) as
+/// `a[i][k][(J, L)]`.
+fn tangent_blocks<const D: usize>(r: &Response) -> [[SMatrix<f64, D, D>; D]; D] {
+    std::array::from_fn(|i| {
+        std::array::from_fn(|k| SMatrix::from_fn(|j, l| r.a[(3 * i + j, 3 * k + l)]))
+    })
 }
 
 /// The local model (`eta_bar = eta`, no Helmholtz field): evaluates the law with `eta_bar` set to its

@@ -763,4 +763,88 @@ mod tests {
             Err(TransferError::SizeMismatch { .. })
         ));
     }
+
+    /// A 3 x 2 x 2 mm block of 2 x 2 x 2 points per 0.5 mm cell in a 3D grid with 3 cells of margin,
+    /// with randomised masses, velocities, accelerations and positions.
+    fn setup_3d(rng: &mut StdRng) -> (Grid<3>, Particles<3>) {
+        let block = crate::solids::Solids {
+            include: vec![crate::solids::Solid::Box {
+                min: [1.0, 2.0, 0.0],
+                max: [4.0, 4.0, 2.0],
+            }],
+            exclude: vec![],
+        };
+        let mut ps = Particles::<3>::seed(
+            &block,
+            &Seeding {
+                h: 0.5,
+                points_per_cell: 2,
+                density: 2.4e-9,
+                body: 0,
+            },
+        )
+        .unwrap();
+        let (lo, hi) = ps.bounding_box().unwrap();
+        let grid = Grid::covering(lo, hi, 0.5, 3).unwrap();
+        for p in 0..ps.len() {
+            ps.mass[p] *= rng.random_range(0.5..2.0);
+            ps.v[p] = SVector::from_fn(|_, _| rng.random_range(-1e3..1e3));
+            ps.a[p] = SVector::from_fn(|_, _| rng.random_range(-1e8..1e8));
+        }
+        (grid, ps)
+    }
+
+    #[test]
+    fn transfer_3d_p2g_conserves_mass_and_momentum_and_g2p_moves_rigidly_exactly() {
+        let mut rng = StdRng::seed_from_u64(9);
+        let (grid, ps0) = setup_3d(&mut rng);
+        let (mut table, mut state) = (ShapeTable::new(), GridState::new());
+        let rot = *nalgebra::Rotation3::from_euler_angles(0.2, -0.3, 0.25).matrix();
+        let (x0, d) = (
+            SVector::from([2.0, 3.0, 1.0]),
+            SVector::from([0.05, -0.02, 0.03]),
+        );
+        let du: Vec<SVector<f64, 3>> = (0..grid.num_nodes())
+            .map(|i| (rot - SMatrix::identity()) * (grid.node_position(i) - x0) + d)
+            .collect();
+        let zero = vec![SVector::zeros(); grid.num_nodes()];
+        let solution = StepSolution {
+            du: &du,
+            acceleration: &zero,
+            gamma: 0.5,
+            dt: 1e-6,
+        };
+        for kind in ShapeKind::ALL {
+            table.compute(kind, &grid, &ps0).unwrap();
+            particles_to_grid(&table, &ps0, &grid, 0.0, &mut state).unwrap();
+            let m_p: f64 = ps0.mass.iter().sum();
+            let mv_p: SVector<f64, 3> = (0..ps0.len()).map(|p| ps0.v[p] * ps0.mass[p]).sum();
+            let ma_p: SVector<f64, 3> = (0..ps0.len()).map(|p| ps0.a[p] * ps0.mass[p]).sum();
+            let m_i: f64 = state.mass.iter().sum();
+            let mv_i: SVector<f64, 3> = (0..grid.num_nodes())
+                .map(|i| state.velocity[i] * state.mass[i])
+                .sum();
+            let ma_i: SVector<f64, 3> = (0..grid.num_nodes())
+                .map(|i| state.acceleration[i] * state.mass[i])
+                .sum();
+            assert!((m_i / m_p - 1.0).abs() < 1e-13, "{kind:?}");
+            assert!((mv_i - mv_p).norm() < 1e-12 * m_p * 1e3, "{kind:?}");
+            assert!((ma_i - ma_p).norm() < 1e-12 * m_p * 1e8, "{kind:?}");
+            let mut ps = ps0.clone();
+            grid_to_particles(&table, &grid, &solution, &mut ps).unwrap();
+            for p in 0..ps.len() {
+                let expected = rot * (ps0.x[p] - x0) + x0 + d;
+                assert!((ps.x[p] - expected).norm() < 1e-13, "{kind:?} point {p}");
+                assert!((ps.f[p] - rot).norm() < 1e-13, "{kind:?} point {p}");
+                assert!((ps.vol[p] / ps.vol0[p] - 1.0).abs() < 1e-13);
+                for c in 0..8 {
+                    let expected = rot * (ps0.corners(p)[c] - x0) + x0 + d;
+                    assert!(
+                        (ps.corners(p)[c] - expected).norm() < 1e-13,
+                        "{kind:?} point {p} corner {c}"
+                    );
+                }
+            }
+        }
+    }
 }

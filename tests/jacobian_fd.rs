@@ -1,16 +1,16 @@
 //! The assembled Jacobian of an MPM step against central differences of the assembled residual, for
 //! every interpolator and every material (the microplane model gradient-enhanced in a damaging state,
-//! and local), on a small pre-deformed block with inertia and constrained nodes.
+//! and local), on a small pre-deformed block with inertia and constrained nodes, in 2D and in 3D.
 
 use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::particles::{Body, ParticleError, Particles, Seeding};
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{self, GridState};
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{SMatrix, SVector};
 
 fn material(toml_text: &str) -> Material {
     let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
@@ -23,14 +23,32 @@ fn noise(i: usize) -> f64 {
     2.0 * (x - x.floor()) - 1.0
 }
 
-/// Max |J - J_fd| / max |J| for one interpolator and material.
+/// The block `[0, max]` (mm) as a body to seed, in `D` dimensions.
+struct Block<const D: usize>(SVector<f64, D>);
+
+impl<const D: usize> Body<D> for Block<D> {
+    fn validate(&self) -> Result<(), ParticleError> {
+        Ok(())
+    }
+
+    fn contains(&self, x: &SVector<f64, D>) -> bool {
+        (0..D).all(|d| x[d] >= 0.0 && x[d] <= self.0[d])
+    }
+
+    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
+        Some((SVector::zeros(), self.0))
+    }
+}
+
+/// Max |J - J_fd| / max |J| for one interpolator and material on the 3 x 2 mm plane block.
 fn fd_error(kind: ShapeKind, mat: Material, strain: f64, eta_bar: f64, fields: usize) -> f64 {
-    fd_check(kind, mat, strain, eta_bar, fields, |_| 0.0).0
+    fd_check::<2>(kind, mat, strain, eta_bar, fields, |_| 0.0).0
 }
 
 /// Max |J - J_fd| / max |J| and the dense Jacobian (row-major, with its size), for points with the
-/// committed damage `damage(p)`.
-fn fd_check(
+/// committed damage `damage(p)`, on a pre-deformed block of 3 x 2 mm (2D) or 2 x 2 x 1 mm (3D) with
+/// 2^D points per 1 mm cell; `fields` unknowns per node (`D`, or `D + 1` with eta_bar).
+fn fd_check<const D: usize>(
     kind: ShapeKind,
     mat: Material,
     strain: f64,
@@ -39,27 +57,32 @@ fn fd_check(
     damage: impl Fn(usize) -> f64,
 ) -> (f64, Vec<f64>, usize) {
     let h = 1.0;
-    let geometry = Geometry {
-        include: vec![Region::Rect {
-            min: [0.0, 0.0],
-            max: [3.0, 2.0],
-        }],
-        exclude: vec![],
+    let extent = if D == 2 {
+        [3.0, 2.0, 0.0]
+    } else {
+        [2.0, 2.0, 1.0]
     };
+    let size = SVector::<f64, D>::from_fn(|d, _| extent[d]);
     let seeding = Seeding {
         h,
         points_per_cell: 2,
         density: 2.4e-9,
         body: 0,
     };
-    let mut particles = Particles::seed(&geometry, &seeding).expect("seed");
-    let grid = Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(3.0, 2.0), h, 2).expect("grid");
+    let mut particles = Particles::<D>::seed(&Block(size), &seeding).expect("seed");
+    let grid = Grid::covering(SVector::zeros(), size, h, 2).expect("grid");
     // Pre-deformed start-of-step state: F_n != I (sheared and stretched domains).
-    let fn_ = Matrix2::new(1.0 + 0.02, 0.03, -0.01, 1.0 - 0.015);
+    let table3 = [
+        [1.02, 0.03, 0.01],
+        [-0.01, 0.985, 0.02],
+        [0.015, -0.02, 1.01],
+    ];
+    let fn_ = SMatrix::<f64, D, D>::from_fn(|i, j| table3[i][j]);
     for p in 0..particles.len() {
         particles.set_deformation(p, fn_);
-        particles.v[p] = Vector2::new(100.0 * noise(p), 50.0 * noise(p + 7));
-        particles.a[p] = Vector2::new(1e6 * noise(p + 3), -1e6 * noise(p + 5));
+        particles.v[p] =
+            SVector::from_fn(|d, _| [100.0, 50.0, -70.0][d] * noise(p + [0, 7, 13][d]));
+        particles.a[p] = SVector::from_fn(|d, _| [1e6, -1e6, 5e5][d] * noise(p + [3, 5, 17][d]));
     }
     particles.resize_history(mat.history_len(), 0.0);
     for p in 0..particles.len() {
@@ -75,14 +98,14 @@ fn fd_check(
     transfer::particles_to_grid(&table, &particles, &grid, 1e-10, &mut gs).expect("p2g");
     let mut dofs = DofMap::default();
     assert!(
-        fields == 2 || fields == 3,
-        "plane displacement, with eta_bar or not"
+        fields == D || fields == D + 1,
+        "displacement, with eta_bar or not"
     );
-    dofs.rebuild(&gs.active, FieldLayout::new(2, fields == 3));
+    dofs.rebuild(&gs.active, FieldLayout::new(D, fields == D + 1));
     // Constrain the x component of the active nodes on the left edge of the body.
     for node in 0..grid.num_nodes() {
         let x = grid.node_position(node);
-        if x.x.abs() < 1e-9 {
+        if x[0].abs() < 1e-9 {
             dofs.constrain(node, 0, 1e-4);
         }
     }
@@ -101,7 +124,7 @@ fn fd_check(
             gamma: 0.5,
             dt: 1e-6,
         }),
-        body_force: Vector2::new(0.0, -9810.0),
+        body_force: SVector::from_fn(|d, _| if d == 1 { -9810.0 } else { 0.0 }),
         nodal_force: &[],
         row_scale: 3e4,
         partners: &[],
@@ -112,7 +135,7 @@ fn fd_check(
     let x0: Vec<f64> = (0..n)
         .map(|i| match (i % fields, dofs.prescribed(i)) {
             (_, Some(v)) => v,
-            (2, None) => eta_bar * (1.0 + 0.3 * noise(i)),
+            (c, None) if c == D => eta_bar * (1.0 + 0.3 * noise(i)),
             _ => strain * h * noise(i),
         })
         .collect();
@@ -165,7 +188,7 @@ fn fd_check(
     let (mut max_diff, mut max_j) = (0.0f64, 0.0f64);
     let mut worst = (0, 0, 0.0, 0.0);
     for j in 0..n {
-        let step = if j % fields == 2 {
+        let step = if j % fields == D {
             1e-7 * eta_bar.max(1e-4)
         } else {
             1e-8 * h
@@ -282,7 +305,7 @@ fn jacobian_with_eroded_points_matches_finite_differences() {
     // Every third point eroded (a void: no stiffness, the lumped eta_bar anchor), the rest damaging.
     for kind in [ShapeKind::Cpdi1, ShapeKind::Bspline2] {
         let eroded = |p: usize| if p % 3 == 0 { 0.99 } else { 0.0 };
-        let (err, _, _) = fd_check(kind, material(ERODING), 1e-3, 1e-3, 3, eroded);
+        let (err, _, _) = fd_check::<2>(kind, material(ERODING), 1e-3, 1e-3, 3, eroded);
         assert!(
             err < 1e-6,
             "{}: relative Jacobian error {err:e}",
@@ -297,7 +320,7 @@ fn helmholtz_rows_stay_regular_where_only_eroded_points_support_the_grid() {
     // rank at most the number of points and is ill-conditioned wherever few points carry a patch of
     // nodes: on this block its smallest singular value was 7e-8 of the largest, and on the paper-size
     // CT it was singular. The lumped anchor is diagonal with the nodes' weight sums (ratio 4e-4 here).
-    let (_, jac, n) = fd_check(ShapeKind::Cpdi1, material(ERODING), 1e-3, 1e-3, 3, |_| 0.99);
+    let (_, jac, n) = fd_check::<2>(ShapeKind::Cpdi1, material(ERODING), 1e-3, 1e-3, 3, |_| 0.99);
     let eta: Vec<usize> = (2..n).step_by(3).collect();
     let block = nalgebra::DMatrix::from_fn(eta.len(), eta.len(), |i, j| jac[eta[i] * n + eta[j]]);
     let sv = block.singular_values();
@@ -306,4 +329,27 @@ fn helmholtz_rows_stay_regular_where_only_eroded_points_support_the_grid() {
         lo > 1e-6 * hi,
         "eta_bar block: singular values {lo:e} .. {hi:e}"
     );
+}
+
+#[test]
+fn three_dimensional_jacobians_match_finite_differences() {
+    // Elastic (neo-Hookean, 3 unknowns per node) with every interpolator; the gradient-enhanced
+    // microplane model while damaging (u_x, u_y, u_z, eta_bar) with CPDI1 and the B-spline.
+    for kind in ShapeKind::ALL {
+        let (err, _, n) = fd_check::<3>(kind, material(ELASTIC[2].1), 0.05, 0.0, 3, |_| 0.0);
+        assert!(
+            err < 1e-6,
+            "3D neo-Hookean with {}: relative Jacobian error {err:e} ({n} unknowns)",
+            kind.name()
+        );
+    }
+    let text = "model = \"microplane\"\npreset = \"paper_gamma0_1.25e-4\"";
+    for kind in [ShapeKind::Cpdi1, ShapeKind::Bspline2] {
+        let (err, _, n) = fd_check::<3>(kind, material(text), 1e-3, 1e-3, 4, |_| 0.0);
+        assert!(
+            err < 1e-6,
+            "3D microplane (u, eta_bar) with {}: relative Jacobian error {err:e} ({n} unknowns)",
+            kind.name()
+        );
+    }
 }
