@@ -199,7 +199,7 @@ fn run_case(s: &SessionGuard, h: f64, c: f64, rate: Rate) -> Result<RunResult> {
     setup.fallback_prefix = None;
     let mut sim = Simulation::new(setup)?;
     let points = sim.state.particles.len();
-    let pulled = |names: &[(String, [f64; 2])]| names.iter().position(|n| n.0 == "pulled_end");
+    let pulled = |names: &[(String, Vec<f64>)]| names.iter().position(|n| n.0 == "pulled_end");
     let t0 = Instant::now();
     let mut r = RunResult {
         h,

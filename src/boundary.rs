@@ -2,29 +2,29 @@
 //! contact, `src/contact.rs`), nodal loads along grid lines, and the prescribed motion (a velocity that
 //! rises linearly from zero) that drives them.
 //!
-//! Units: mm, s, N (per mm thickness), MPa.
+//! Units: mm, s, N (in 2D per mm thickness), MPa. Generic over the space dimension `D` (2 by default).
 
 use crate::contact::Contact;
 use crate::grid::Grid;
-use nalgebra::Vector2;
+use nalgebra::SVector;
 
 /// A force on the grid nodes of a segment, distributed as a uniform traction (consistent nodal forces of
-/// the bilinear shape functions along the grid line).
+/// the hat functions along the grid line).
 #[derive(Debug, Clone, PartialEq)]
-pub struct NodalLoad {
+pub struct NodalLoad<const D: usize = 2> {
     /// Name (history columns).
     pub name: String,
-    /// Segment end points (mm), on one grid line.
-    pub from: Vector2<f64>,
+    /// Segment end points (mm), on one grid line (parallel to an axis).
+    pub from: SVector<f64, D>,
     /// See `from`.
-    pub to: Vector2<f64>,
-    /// Resultant force (N per mm thickness).
-    pub force: Vector2<f64>,
+    pub to: SVector<f64, D>,
+    /// Resultant force (N; in 2D per mm thickness).
+    pub force: SVector<f64, D>,
     /// Linear rise from zero over this time (s); 0 = applied at once.
     pub rise_time: f64,
 }
 
-impl NodalLoad {
+impl<const D: usize> NodalLoad<D> {
     /// The load factor in [0, 1] at time `t` (s).
     pub fn factor(&self, t: f64) -> f64 {
         if self.rise_time > 0.0 {
@@ -37,42 +37,50 @@ impl NodalLoad {
     /// Share of the resultant carried by each grid node on the segment: the integral of the node's hat
     /// function along the segment divided by the segment length. Grid nodes only (the shares of nodes
     /// without unknowns are redistributed by the caller).
-    pub fn shares(&self, grid: &Grid) -> Result<Vec<(usize, f64)>, String> {
+    pub fn shares(&self, grid: &Grid<D>) -> Result<Vec<(usize, f64)>, String> {
         let h = grid.cell_size();
         let o = grid.origin();
         let d = self.to - self.from;
-        let (along, across) = if d.y == 0.0 { (0, 1) } else { (1, 0) };
-        let line = (self.from[across] - o[across]) / h;
-        if d[across] != 0.0 || (line - line.round()).abs() > 1e-6 {
+        // The segment runs along the last direction in which its ends differ (along x if it is a point).
+        let along = (0..D).rev().find(|&k| d[k] != 0.0).unwrap_or(0);
+        let off_line = (0..D).filter(|&k| k != along).any(|k| {
+            let line = (self.from[k] - o[k]) / h;
+            d[k] != 0.0 || (line - line.round()).abs() > 1e-6
+        });
+        if off_line {
             return Err(format!(
-                "load `{}`: the segment from {:?} to {:?} must lie on a grid line (a coordinate that is \
-                 a multiple of h = {h} mm from the grid origin)",
+                "load `{}`: the segment from {:?} to {:?} must lie on a grid line (parallel to an axis, \
+                 the other coordinates multiples of h = {h} mm from the grid origin)",
                 self.name,
-                [self.from.x, self.from.y],
-                [self.to.x, self.to.y]
+                self.from.as_slice(),
+                self.to.as_slice()
             ));
         }
         let (a, b) = (
             self.from[along].min(self.to[along]),
             self.from[along].max(self.to[along]),
         );
-        let line = line.round() as i64;
-        let count = [grid.nx() as i64, grid.ny() as i64];
-        if line < 0 || line > count[across] {
-            return Err(format!(
-                "load `{}`: the segment lies outside the grid",
-                self.name
-            ));
+        let count = grid.cells();
+        let mut node = [0_usize; D];
+        for k in (0..D).filter(|&k| k != along) {
+            let line = ((self.from[k] - o[k]) / h).round() as i64;
+            if line < 0 || line > count[k] as i64 {
+                return Err(format!(
+                    "load `{}`: the segment lies outside the grid",
+                    self.name
+                ));
+            }
+            node[k] = line as usize;
         }
         let first = (((a - o[along]) / h).floor() as i64).max(0);
-        let last = (((b - o[along]) / h).ceil() as i64).min(count[along]);
+        let last = (((b - o[along]) / h).ceil() as i64).min(count[along] as i64);
         let mut shares = Vec::new();
         for k in first..=last {
             let c = o[along] + k as f64 * h;
             let w = hat_integral(a, b, c, h) / (b - a);
             if w > 0.0 {
-                let (i, j) = if along == 0 { (k, line) } else { (line, k) };
-                shares.push((grid.node_index(i as usize, j as usize), w));
+                node[along] = k as usize;
+                shares.push((grid.node_at(node), w));
             }
         }
         Ok(shares)
@@ -104,15 +112,15 @@ pub enum Motion {
 
 /// Grid nodes inside an axis-aligned box (mm), constrained per component.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NodeBox {
+pub struct NodeBox<const D: usize = 2> {
     /// Name used in reports (reaction force columns).
     pub name: String,
-    /// Lower-left corner (mm).
-    pub min: Vector2<f64>,
-    /// Upper-right corner (mm).
-    pub max: Vector2<f64>,
-    /// Motion of the x and y components.
-    pub motion: [Motion; 2],
+    /// Lowest corner (mm).
+    pub min: SVector<f64, D>,
+    /// Highest corner (mm).
+    pub max: SVector<f64, D>,
+    /// Motion of each displacement component.
+    pub motion: [Motion; D],
     /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
     pub rise_time: f64,
 }
@@ -123,11 +131,11 @@ pub struct NodeBox {
 /// components each step. In contact ([`Contact`]): it pushes on the specimen through unilateral contact
 /// on its face (and, with a pin, turns freely about the pin).
 #[derive(Debug, Clone)]
-pub struct RigidBody {
+pub struct RigidBody<const D: usize = 2> {
     /// Name used in reports.
     pub name: String,
-    /// Motion of the x and y components.
-    pub motion: [Motion; 2],
+    /// Motion of each displacement component.
+    pub motion: [Motion; D],
     /// Prescribed velocities rise linearly from zero over this time (s); 0 = a velocity step.
     pub rise_time: f64,
     /// Unilateral contact instead of gluing (both motion components must then be prescribed).
@@ -165,6 +173,7 @@ pub fn prescribed_acceleration(v: f64, rise: f64, t: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector2;
 
     #[test]
     fn hat_integral_matches_quadrature() {

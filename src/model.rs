@@ -16,7 +16,7 @@ use crate::grid::Grid;
 use crate::material::Material;
 use crate::particles::Particles;
 use crate::shape::{ShapeKind, ShapeTable};
-use nalgebra::Vector2;
+use nalgebra::SVector;
 
 /// Time integration settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -94,11 +94,11 @@ pub enum Method {
 
 /// A run as a scenario builds it: the model's parameters and the bodies at t = 0.
 /// [`Simulation::new`](crate::solver::Simulation::new) splits it into [`Model`] and [`State`].
-pub struct Setup {
+pub struct Setup<const D: usize = 2> {
     /// Background grid.
-    pub grid: Grid,
+    pub grid: Grid<D>,
     /// Deformable material points (body tag = index into `materials`).
-    pub particles: Particles,
+    pub particles: Particles<D>,
     /// One constitutive law per body tag.
     pub materials: Vec<Material>,
     /// The velocity field of each body tag on the grid (multi-velocity-field contact): bodies of field
@@ -111,18 +111,18 @@ pub struct Setup {
     /// Time integration.
     pub time: TimeIntegration,
     /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
-    pub body_force: Vector2<f64>,
+    pub body_force: SVector<f64, D>,
     /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
     pub body_force_ramp: f64,
     /// Node-box constraints.
-    pub boxes: Vec<NodeBox>,
+    pub boxes: Vec<NodeBox<D>>,
     /// Rigid loading bodies.
-    pub rigid: Vec<RigidBody>,
+    pub rigid: Vec<RigidBody<D>>,
     /// The points of each rigid body at t = 0 (one per entry of `rigid`; only positions and domains are
     /// used).
-    pub rigid_points: Vec<Particles>,
+    pub rigid_points: Vec<Particles<D>>,
     /// Applied forces.
-    pub loads: Vec<NodalLoad>,
+    pub loads: Vec<NodalLoad<D>>,
     /// MPM or FEM on the grid cells.
     pub method: Method,
     /// Options prefix of the SNES (None: plain `-snes_*`).
@@ -134,15 +134,15 @@ pub struct Setup {
     pub fallback_prefix: Option<String>,
 }
 
-impl Setup {
+impl<const D: usize> Setup<D> {
     /// A model of the deformable points `particles` (body tag = index into `materials`) on `grid`, with
     /// the defaults of a configuration file for the rest: no constraints, rigid bodies, loads or body
     /// force, MPM, nodes with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a
     /// prefix and no fallback solver. Set the other fields with struct-update syntax:
     /// `Setup { boxes, ..Setup::new(grid, particles, materials, shape, time) }`.
     pub fn new(
-        grid: Grid,
-        particles: Particles,
+        grid: Grid<D>,
+        particles: Particles<D>,
         materials: Vec<Material>,
         shape: ShapeKind,
         time: TimeIntegration,
@@ -154,7 +154,7 @@ impl Setup {
             fields: Vec::new(),
             shape,
             time,
-            body_force: Vector2::zeros(),
+            body_force: SVector::zeros(),
             body_force_ramp: 0.0,
             boxes: Vec::new(),
             rigid: Vec::new(),
@@ -169,9 +169,9 @@ impl Setup {
 }
 
 /// What defines a run and stays fixed while it runs.
-pub struct Model {
+pub struct Model<const D: usize = 2> {
     /// Background grid.
-    pub grid: Grid,
+    pub grid: Grid<D>,
     /// One constitutive law per body tag.
     pub materials: Vec<Material>,
     /// The velocity field of each body tag (one entry per material; see [`Setup::fields`]).
@@ -181,15 +181,15 @@ pub struct Model {
     /// Time integration.
     pub time: TimeIntegration,
     /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
-    pub body_force: Vector2<f64>,
+    pub body_force: SVector<f64, D>,
     /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
     pub body_force_ramp: f64,
     /// Node-box constraints.
-    pub boxes: Vec<NodeBox>,
+    pub boxes: Vec<NodeBox<D>>,
     /// Rigid loading bodies (their points move with them: [`State::rigid`]).
-    pub rigid: Vec<RigidBody>,
+    pub rigid: Vec<RigidBody<D>>,
     /// Applied forces.
-    pub loads: Vec<NodalLoad>,
+    pub loads: Vec<NodalLoad<D>>,
     /// MPM or FEM on the grid cells.
     pub method: Method,
     /// Options prefix of the SNES (None: plain `-snes_*`).
@@ -202,23 +202,23 @@ pub struct Model {
     /// Node shares of every load (see [`NodalLoad::shares`]).
     pub(crate) load_shares: Vec<Vec<(usize, f64)>>,
     /// FEM mode: the shape functions of the reference configuration (that of t = 0).
-    pub(crate) fem: Option<FemReference>,
+    pub(crate) fem: Option<FemReference<D>>,
 }
 
 /// The FEM mode's reference shape functions, fixed at t = 0.
 #[derive(Debug, Clone)]
-pub(crate) struct FemReference {
+pub(crate) struct FemReference<const D: usize> {
     /// `N_I(X_p)` and `grad_X N_I(X_p)` at the reference Gauss points.
-    pub(crate) points: ShapeTable,
+    pub(crate) points: ShapeTable<D>,
     /// The rigid bodies' points on the grid (glued bodies constrain these nodes in every step).
-    pub(crate) rigid: Vec<ShapeTable>,
+    pub(crate) rigid: Vec<ShapeTable<D>>,
 }
 
-impl Model {
-    /// The unknowns of a node: the plane displacement, and `eta_bar` if any material is
+impl<const D: usize> Model<D> {
+    /// The unknowns of a node: the `D` displacement components, and `eta_bar` if any material is
     /// gradient-enhanced.
     pub fn layout(&self) -> FieldLayout {
-        FieldLayout::new(2, self.materials.iter().any(Material::is_nonlocal))
+        FieldLayout::new(D, self.materials.iter().any(Material::is_nonlocal))
     }
 
     /// Number of velocity fields (1 without contact between deformable bodies).
@@ -249,11 +249,11 @@ impl Model {
 
 /// What a checkpoint holds: everything of a run that changes from step to step.
 #[derive(Debug, Clone)]
-pub struct State {
+pub struct State<const D: usize = 2> {
     /// Deformable material points with their history (body tag = index into [`Model::materials`]).
-    pub particles: Particles,
+    pub particles: Particles<D>,
     /// The points of each rigid body of [`Model::rigid`] where the body has moved them.
-    pub rigid: Vec<Particles>,
+    pub rigid: Vec<Particles<D>>,
     /// Time reached (s).
     pub time: f64,
     /// Steps completed.
@@ -267,10 +267,11 @@ pub struct State {
     /// Kinetic energy of the points at t = 0 (N mm per mm thickness; bodies start stress-free): with
     /// the external work, the energy the run has been given (`dissipated = W + E_0 - K - Psi`).
     pub initial_energy: f64,
-    /// Accumulated prescribed displacement per constraint set (mm), in report order.
-    pub accumulated: Vec<[f64; 2]>,
-    /// Last reactions per constraint set (N per mm thickness; the trapezoidal work increment).
-    pub last_reactions: Vec<[f64; 2]>,
+    /// Accumulated prescribed displacement per constraint set and component (mm), in report order.
+    pub accumulated: Vec<[f64; D]>,
+    /// Last reactions per constraint set and component (N, in 2D per mm thickness; the trapezoidal work
+    /// increment).
+    pub last_reactions: Vec<[f64; D]>,
     /// Rotation of each rigid body about its pin since t = 0 (rad; 0 without a pin).
     pub rotations: Vec<f64>,
     /// Rotation rate of each rigid body in the last step (rad/s), the first guess of the next step.
@@ -283,17 +284,17 @@ pub struct State {
     pub closed_pairs: Vec<usize>,
     /// FEM mode: the nodal velocity and acceleration carried to the next step (None in MPM mode and
     /// before the first step).
-    pub fem_nodal: Option<NodalState>,
+    pub fem_nodal: Option<NodalState<D>>,
     /// `particles` holds this process's own points only (MPM on several processes, from the first
     /// step on; [`crate::partition`]); false: every point. Not checkpointed: a checkpoint holds every
     /// point, gathered ([`State::with_points`]).
     pub distributed: bool,
 }
 
-impl State {
+impl<const D: usize> State<D> {
     /// The state at t = 0 of `particles` and the rigid bodies' points, with `nsets` constraint sets
     /// (boxes, rigid bodies, loads) and a first time step `dt` (s).
-    pub fn new(particles: Particles, rigid: Vec<Particles>, nsets: usize, dt: f64) -> Self {
+    pub fn new(particles: Particles<D>, rigid: Vec<Particles<D>>, nsets: usize, dt: f64) -> Self {
         let nrigid = rigid.len();
         let initial_energy = (0..particles.len())
             .map(|p| 0.5 * particles.mass[p] * particles.v[p].norm_squared())
@@ -307,8 +308,8 @@ impl State {
             calm_steps: 0,
             external_work: 0.0,
             initial_energy,
-            accumulated: vec![[0.0; 2]; nsets],
-            last_reactions: vec![[0.0; 2]; nsets],
+            accumulated: vec![[0.0; D]; nsets],
+            last_reactions: vec![[0.0; D]; nsets],
             rotations: vec![0.0; nrigid],
             rotation_rates: vec![0.0; nrigid],
             contact_statuses: vec![Vec::new(); nrigid],
@@ -319,8 +320,8 @@ impl State {
     }
 
     /// This state with `particles` (e.g. every point, gathered from the processes) in place of its own.
-    pub fn with_points(&self, particles: Particles) -> State {
-        State {
+    pub fn with_points(&self, particles: Particles<D>) -> Self {
+        Self {
             particles,
             rigid: self.rigid.clone(),
             contact_statuses: self.contact_statuses.clone(),
@@ -334,7 +335,9 @@ impl State {
             ..*self
         }
     }
+}
 
+impl State<2> {
     /// The counters besides the points (the header of a checkpoint).
     pub fn counters(&self) -> Counters {
         Counters {
@@ -416,4 +419,4 @@ pub struct Counters {
 }
 
 /// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
-pub type NodalState = (Vec<Vector2<f64>>, Vec<Vector2<f64>>);
+pub type NodalState<const D: usize = 2> = (Vec<SVector<f64, D>>, Vec<SVector<f64, D>>);

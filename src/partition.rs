@@ -1,5 +1,6 @@
 //! Material points owned by processes (`docs/theory.md`, "Processes"): on `P` processes the grid's cell
-//! rows are cut into `P` contiguous bands holding about the same number of points; a process owns the
+//! rows (layers of cells across the last axis: rows along y in 2D, slabs along z in 3D) are cut into `P`
+//! contiguous bands holding about the same number of points; a process owns the
 //! points in its cells and the grid nodes of its node rows (the block rows of the Jacobian it assembles).
 //! Every step, points that moved into another process's band migrate to it, and every process receives
 //! copies (ghosts) of the other processes' points whose support may reach its node rows, so that it can
@@ -11,7 +12,7 @@ use crate::model::State;
 use crate::particles::Particles;
 use crate::petsc::{PetscError, SessionGuard};
 use crate::shape::ShapeTable;
-use nalgebra::Vector2;
+use nalgebra::SVector;
 use std::borrow::Cow;
 use std::ops::Range;
 
@@ -29,25 +30,31 @@ pub struct Partition {
     y0: f64,
     h: f64,
     ny: usize,
-    /// Nodes per node row (`nx + 1`).
+    /// Nodes per node row (`nx + 1` in 2D, `(nx + 1)(ny + 1)` in 3D).
     row_nodes: usize,
+}
+
+/// The axis across the rows (the last one, whose node index varies slowest).
+const fn row_axis(d: usize) -> usize {
+    d - 1
 }
 
 impl Partition {
     /// Bands of about equal point counts for the processes of `session`, from the points of
     /// `particles` (all points if `all_here`, else this process's share: the counts are summed).
-    pub fn balanced(
+    pub fn balanced<const D: usize>(
         session: &SessionGuard,
-        grid: &Grid,
-        particles: &Particles,
+        grid: &Grid<D>,
+        particles: &Particles<D>,
         all_here: bool,
     ) -> Result<Self, String> {
-        let ny = grid.ny();
+        let axis = row_axis(D);
+        let ny = grid.cells()[axis];
         let mut counts = vec![0.0; ny];
         let h = grid.cell_size();
-        let y0 = grid.origin().y;
+        let y0 = grid.origin()[axis];
         for x in &particles.x {
-            counts[cell_row(y0, h, ny, x.y)] += 1.0;
+            counts[cell_row(y0, h, ny, x[axis])] += 1.0;
         }
         if !all_here {
             session.sum(&mut counts).map_err(|e| e.to_string())?;
@@ -56,8 +63,14 @@ impl Partition {
     }
 
     /// Bands of about equal sums of `counts` (points per cell row) for process `rank` of `size`.
-    fn from_counts(rank: usize, size: usize, grid: &Grid, counts: &[f64]) -> Result<Self, String> {
-        let ny = grid.ny();
+    fn from_counts<const D: usize>(
+        rank: usize,
+        size: usize,
+        grid: &Grid<D>,
+        counts: &[f64],
+    ) -> Result<Self, String> {
+        let axis = row_axis(D);
+        let ny = grid.cells()[axis];
         if ny < size {
             return Err(format!(
                 "{size} processes for a grid of {ny} cell rows: each process needs at least one row"
@@ -79,10 +92,10 @@ impl Partition {
         Ok(Self {
             rank,
             cuts,
-            y0: grid.origin().y,
+            y0: grid.origin()[axis],
             h: grid.cell_size(),
             ny,
-            row_nodes: grid.nx() + 1,
+            row_nodes: grid.cells()[..axis].iter().map(|n| n + 1).product(),
         })
     }
 
@@ -97,8 +110,8 @@ impl Partition {
     }
 
     /// The process owning a point at `x` (mm): the process of its cell.
-    pub fn owner(&self, x: Vector2<f64>) -> usize {
-        self.owner_of_row(self.cell_row(x.y))
+    pub fn owner<const D: usize>(&self, x: SVector<f64, D>) -> usize {
+        self.owner_of_row(self.cell_row(x[row_axis(D)]))
     }
 
     /// Node rows of process `r`.
@@ -115,13 +128,13 @@ impl Partition {
 
     /// The node rows point `p`'s support may reach: the cell rows of its position and domain corners,
     /// widened by [`REACH_ROWS`].
-    fn reach(&self, particles: &Particles, p: usize) -> Range<isize> {
+    fn reach<const D: usize>(&self, particles: &Particles<D>, p: usize) -> Range<isize> {
         let (lo, hi) = particles
             .corners(p)
             .iter()
             .chain(std::iter::once(&particles.x[p]))
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
-                (lo.min(c.y), hi.max(c.y))
+                (lo.min(c[row_axis(D)]), hi.max(c[row_axis(D)]))
             });
         let row = |y: f64| ((y - self.y0) / self.h).floor() as isize;
         row(lo) - REACH_ROWS + 1..row(hi) + REACH_ROWS + 1
@@ -139,10 +152,10 @@ impl Partition {
     /// Checks that the support of each of the first `owned` points in `table` lies within the node rows
     /// its ghosts were sent for (a domain stretched beyond [`REACH_ROWS`] rows of its corners would leave
     /// another process without the point).
-    pub fn check_reach(
+    pub fn check_reach<const D: usize>(
         &self,
-        table: &ShapeTable,
-        particles: &Particles,
+        table: &ShapeTable<D>,
+        particles: &Particles<D>,
         owned: usize,
     ) -> Result<(), String> {
         for p in 0..owned {
@@ -153,10 +166,10 @@ impl Partition {
                 if !reach.contains(&row) {
                     let x = particles.x[p];
                     return Err(format!(
-                        "the point at ({:.3}, {:.3}) mm reaches grid node row {row}, beyond the rows \
+                        "the point at {:.3?} mm reaches grid node row {row}, beyond the rows \
                          {reach:?} its copies were sent for (a support wider than {REACH_ROWS} cells \
                          beyond its domain)",
-                        x.x, x.y
+                        x.as_slice()
                     ));
                 }
             }
@@ -171,7 +184,7 @@ fn cell_row(y0: f64, h: f64, ny: usize, y: f64) -> usize {
 }
 
 /// Keeps the points of this process from a set every process holds whole.
-pub fn keep_own(partition: &Partition, particles: &mut Particles) {
+pub fn keep_own<const D: usize>(partition: &Partition, particles: &mut Particles<D>) {
     let keep: Vec<bool> = particles
         .x
         .iter()
@@ -181,8 +194,8 @@ pub fn keep_own(partition: &Partition, particles: &mut Particles) {
 }
 
 /// Records of the chosen points per destination, in process order, with their counts.
-fn send_buffer(
-    particles: &Particles,
+fn send_buffer<const D: usize>(
+    particles: &Particles<D>,
     size: usize,
     mut destinations: impl FnMut(usize, &mut Vec<usize>),
 ) -> (Vec<usize>, Vec<f64>) {
@@ -202,10 +215,10 @@ fn send_buffer(
 
 /// Sends this process's points that moved into another process's band to it and appends the points
 /// it receives. Returns the number of points that left.
-pub fn migrate(
+pub fn migrate<const D: usize>(
     session: &SessionGuard,
     partition: &Partition,
-    particles: &mut Particles,
+    particles: &mut Particles<D>,
 ) -> Result<usize, PetscError> {
     let width = particles.record_width();
     let owners: Vec<usize> = particles.x.iter().map(|&x| partition.owner(x)).collect();
@@ -227,10 +240,10 @@ pub fn migrate(
 
 /// Appends copies of the other processes' points whose support may reach this process's node rows
 /// (after this process's own points, which stay first). Returns the number of copies received.
-pub fn add_ghosts(
+pub fn add_ghosts<const D: usize>(
     session: &SessionGuard,
     partition: &Partition,
-    particles: &mut Particles,
+    particles: &mut Particles<D>,
 ) -> Result<usize, PetscError> {
     let width = particles.record_width();
     let (counts, send) = send_buffer(particles, session.size(), |p, to| {
@@ -245,10 +258,10 @@ pub fn add_ghosts(
 
 /// The whole set of points on process 0, in the order of their ids (the order of the serial run), from
 /// every process's own points (`None` on the other processes). Collective.
-pub fn gather(
+pub fn gather<const D: usize>(
     session: &SessionGuard,
-    particles: &Particles,
-) -> Result<Option<Particles>, PetscError> {
+    particles: &Particles<D>,
+) -> Result<Option<Particles<D>>, PetscError> {
     let width = particles.record_width();
     let mut counts = vec![0; session.size()];
     counts[0] = particles.len();
@@ -271,10 +284,10 @@ pub fn gather(
 
 /// The whole state for output and checkpoints: `state` itself where it holds every point; gathered on
 /// process 0 ([`gather`]) where the points are shared out (`None` on the other processes). Collective.
-pub fn whole_state<'a>(
+pub fn whole_state<'a, const D: usize>(
     session: &SessionGuard,
-    state: &'a State,
-) -> Result<Option<Cow<'a, State>>, PetscError> {
+    state: &'a State<D>,
+) -> Result<Option<Cow<'a, State<D>>>, PetscError> {
     if !state.distributed {
         return Ok(Some(Cow::Borrowed(state)));
     }
@@ -285,7 +298,7 @@ pub fn whole_state<'a>(
 mod tests {
     use super::*;
     use crate::shape::ShapeKind;
-    use nalgebra::Matrix2;
+    use nalgebra::{Matrix2, Vector2};
 
     fn grid() -> Grid {
         Grid::new(Vector2::new(-2.0, -4.0), 1.0, [12, 30]).expect("grid")

@@ -19,8 +19,9 @@ use crate::petsc::{
     PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
 };
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
+use crate::space::{from_xy, rotation_xy, xy};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
-use nalgebra::Vector2;
+use nalgebra::{SMatrix, SVector, Vector2};
 use std::ops::Range;
 use std::time::Instant;
 
@@ -113,10 +114,10 @@ pub struct StepReport {
     pub unknowns: usize,
     /// Jacobian nonzeros.
     pub nonzeros: usize,
-    /// Reaction force per constraint set, `(name, [R_x, R_y])` (N per mm thickness).
-    pub reactions: Vec<(String, [f64; 2])>,
-    /// Mean prescribed displacement of each constraint set, `(name, [u_x, u_y])` (mm).
-    pub displacements: Vec<(String, [f64; 2])>,
+    /// Reaction force per constraint set, `(name, [R_x, R_y(, R_z)])` (N; in 2D per mm thickness).
+    pub reactions: Vec<(String, Vec<f64>)>,
+    /// Mean prescribed displacement of each constraint set, `(name, [u_x, u_y(, u_z)])` (mm).
+    pub displacements: Vec<(String, Vec<f64>)>,
     /// Kinetic energy `sum 1/2 m v^2` (N mm per mm thickness).
     pub kinetic_energy: f64,
     /// Stored energy `sum V^0 Psi` (N mm per mm thickness).
@@ -164,18 +165,18 @@ pub struct StepReport {
 /// outlives a step's meaning: a workspace may be dropped and rebuilt between steps (a resumed run
 /// starts with a fresh one) without changing the results.
 #[derive(Default)]
-pub struct Workspace {
+pub struct Workspace<const D: usize = 2> {
     /// Shape functions of the points in the step's configuration.
-    table: ShapeTable,
+    table: ShapeTable<D>,
     /// Shape functions of the rigid bodies' points (MPM mode; FEM mode uses the reference ones).
-    rigid_tables: Vec<ShapeTable>,
+    rigid_tables: Vec<ShapeTable<D>>,
     /// Grid mass, velocity and acceleration from P2G.
-    grid_state: GridState,
+    grid_state: GridState<D>,
     /// The unknowns and their constraints.
     dofs: DofMap,
     /// Per node copy, its partner in contact between bodies ([`INACTIVE`]: none; empty: one field).
     partners: Vec<u32>,
-    assembler: Assembler,
+    assembler: Assembler<D>,
     /// PETSc objects reused while the pattern does not change.
     system: Option<LinearSystem>,
     /// PETSc log events `MPMSetup` (shape functions, P2G, pattern) and `MPMAssembly` (residuals and
@@ -190,7 +191,7 @@ pub struct Workspace {
     moved: [usize; 2],
 }
 
-impl Workspace {
+impl<const D: usize> Workspace<D> {
     /// An empty workspace; its buffers grow at the first step.
     pub fn new() -> Self {
         Self::default()
@@ -198,12 +199,12 @@ impl Workspace {
 }
 
 /// A running simulation: the model, its state and the workspace of its steps.
-pub struct Simulation {
+pub struct Simulation<const D: usize = 2> {
     /// What defines the run.
-    pub model: Model,
+    pub model: Model<D>,
     /// The committed state.
-    pub state: State,
-    workspace: Workspace,
+    pub state: State<D>,
+    workspace: Workspace<D>,
 }
 
 /// Per load, its active grid nodes and their shares of the resultant (summing to 1).
@@ -211,17 +212,17 @@ type LoadNodes = Vec<Vec<(usize, f64)>>;
 
 /// What `Step::prepare` sets up for one step attempt, owned so that the later phases can borrow
 /// the simulation freely.
-struct StepPlan {
+struct StepPlan<const D: usize> {
     /// Time step of the attempt (s) and the time it reaches.
     dt: f64,
     t_new: f64,
     /// Prescribed increment per constraint set and component (mm), boxes first, then rigid bodies.
-    set_du: Vec<[Option<f64>; 2]>,
+    set_du: Vec<[Option<f64>; D]>,
     /// The constrained unknowns of each set.
     sets: Vec<Vec<usize>>,
-    /// Per rigid body: translation increment (mm), pin position (mm; `None` without a pin) and rotation
-    /// increment about the pin (rad; settled with the contact active set).
-    translations: Vec<Vector2<f64>>,
+    /// Per rigid body: translation increment (mm), in-plane pin position (mm; `None` without a pin) and
+    /// rotation increment about the pin (rad, in the x-y plane; settled with the contact active set).
+    translations: Vec<SVector<f64, D>>,
     pins: Vec<Option<Vector2<f64>>>,
     dtheta: Vec<f64>,
     /// Per rigid body, its contact with the specimen (`None` without contact) and its face length (mm).
@@ -230,7 +231,7 @@ struct StepPlan {
     /// Contact between the specimen and bodies of other velocity fields.
     bodies: BodyContact,
     /// Inertia and applied forces of the step, and the nodes of each load.
-    loading: Loading,
+    loading: Loading<D>,
     load_nodes: LoadNodes,
     /// Whether the PETSc objects were built anew for this step.
     new_pattern: bool,
@@ -239,13 +240,13 @@ struct StepPlan {
 }
 
 /// Inertia and applied forces of a step: what the assembler needs besides the points and the grid.
-struct Loading {
+struct Loading<const D: usize> {
     /// Newmark parameters (`None`: quasi-static).
     newmark: Option<Newmark>,
     /// The body-force factor of a quasi-static ramp.
     load_factor: f64,
     /// Applied nodal forces at `t_n+1` (N per mm thickness, one per grid node; empty without loads).
-    nodal_force: Vec<Vector2<f64>>,
+    nodal_force: Vec<SVector<f64, D>>,
 }
 
 /// What `Step::solve` hands to `Step::finish`.
@@ -264,11 +265,11 @@ struct Solved {
 }
 
 /// The nonlinear problem of one step, handed to SNES.
-struct StepProblem<'a, 'b> {
-    input: &'a StepInput<'b>,
+struct StepProblem<'a, 'b, const D: usize> {
+    input: &'a StepInput<'b, D>,
     /// PETSc log event of the residual and Jacobian evaluations (shown by `-log_view`).
     event: LogEvent,
-    assembler: &'a mut Assembler,
+    assembler: &'a mut Assembler<D>,
     /// Wall time spent in residual and Jacobian evaluations (s).
     assembly_time: f64,
     /// Residual and Jacobian evaluations.
@@ -288,7 +289,7 @@ struct StepProblem<'a, 'b> {
     scratch: Vec<f64>,
 }
 
-impl NonlinearProblem for StepProblem<'_, '_> {
+impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
     fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
         let _event = self.event.begin();
         let t = Instant::now();
@@ -425,7 +426,7 @@ struct OwnedRows {
 
 impl OwnedRows {
     /// The block rows `rows` (from [`Step::own_rows`]) with their pattern.
-    fn new(asm: &Assembler, rows: Range<usize>, nf: usize) -> Self {
+    fn new<const D: usize>(asm: &Assembler<D>, rows: Range<usize>, nf: usize) -> Self {
         let (mut row_ptr, mut cols) = (Vec::new(), Vec::new());
         asm.block_rows_pattern(rows.clone(), &mut row_ptr, &mut cols);
         Self {
@@ -493,7 +494,12 @@ impl LinearSystem {
     /// True if the objects fit the step's unknowns and the pattern of this process's rows (the other
     /// rows of a process holding part of the points are partial; every process decides on its own
     /// rows, and the objects are rebuilt if any process's no longer fit).
-    fn fits(&self, prefix: Option<&str>, dofs: &DofMap, asm: &Assembler) -> bool {
+    fn fits<const D: usize>(
+        &self,
+        prefix: Option<&str>,
+        dofs: &DofMap,
+        asm: &Assembler<D>,
+    ) -> bool {
         if self.prefix.as_deref() != prefix || self.active != dofs.active_nodes() {
             return false;
         }
@@ -509,12 +515,12 @@ impl LinearSystem {
     /// New objects for the step's pattern: vector, matrix (exact structure, the rigid-body near-null
     /// space of the displacement block for algebraic multigrid), SNES configured from the options
     /// database with the (u, eta_bar) index sets for `-pc_type fieldsplit`.
-    fn new(
+    fn new<const D: usize>(
         session: &SessionGuard,
         prefix: Option<&str>,
-        grid: &Grid,
+        grid: &Grid<D>,
         dofs: &DofMap,
-        asm: &Assembler,
+        asm: &Assembler<D>,
         rows: Range<usize>,
     ) -> Result<Self, StepError> {
         let nf = dofs.fields();
@@ -539,25 +545,19 @@ impl LinearSystem {
         // (docs/benchmarks.md); GAMG and the field split need AIJ anyway.
         let mut jac = Matrix::new(session, n, nf)?;
         jac.set_block_pattern(&owned.pattern())?;
-        // Near-null space of the displacement block (two translations and the in-plane rotation) for
-        // algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
-        let mut modes = [
-            Vector::new(session, n, nf)?,
-            Vector::new(session, n, nf)?,
-            Vector::new(session, n, nf)?,
-        ];
+        // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
+        // 6 in 3D) for algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
+        let rotations = D * (D - 1) / 2;
+        let mut modes = (0..D + rotations)
+            .map(|_| Vector::new(session, n, nf))
+            .collect::<Result<Vec<_>, _>>()?;
         for (k, mode) in modes.iter_mut().enumerate() {
             mode.write(|m| {
                 m.fill(0.0);
                 for (a, &node) in dofs.active_nodes()[owned.rows.clone()].iter().enumerate() {
                     let x = grid.node_position(node as usize);
-                    let (ux, uy) = match k {
-                        0 => (1.0, 0.0),
-                        1 => (0.0, 1.0),
-                        _ => (-x.y, x.x),
-                    };
-                    m[a * nf] = ux;
-                    m[a * nf + 1] = uy;
+                    let u = rigid_mode(k, &x);
+                    m[a * nf..a * nf + D].copy_from_slice(u.as_slice());
                 }
             })?;
         }
@@ -589,10 +589,30 @@ impl LinearSystem {
     }
 }
 
-impl Simulation {
+/// Rigid-body mode `k` of the displacement at `x` (mm): the translations along the axes (`k < D`), then
+/// the rotations (2D: about z; 3D: about x, y and z).
+fn rigid_mode<const D: usize>(k: usize, x: &SVector<f64, D>) -> SVector<f64, D> {
+    let mut u = SVector::zeros();
+    if k < D {
+        u[k] = 1.0;
+        return u;
+    }
+    // Rotation in the plane of axes (i, j): u_i = -x_j, u_j = x_i.
+    let (i, j) = match (D, k - D) {
+        (2, _) => (0, 1),
+        (_, 0) => (1, 2),
+        (_, 1) => (2, 0),
+        _ => (0, 1),
+    };
+    u[i] = -x[j];
+    u[j] = x[i];
+    u
+}
+
+impl<const D: usize> Simulation<D> {
     /// A simulation at t = 0 with virgin material history: `setup` split into [`Model`] and [`State`],
     /// with an empty [`Workspace`].
-    pub fn new(setup: Setup) -> Result<Self, StepError> {
+    pub fn new(setup: Setup<D>) -> Result<Self, StepError> {
         let (model, state) = split(setup)?;
         Ok(Self {
             model,
@@ -611,7 +631,7 @@ impl Simulation {
 /// checking what the step relies on: material points exist, devices in contact have both motion
 /// components prescribed, a unit normal and a friction coefficient >= 0, loads lie on grid lines, the FEM
 /// mode uses the linear interpolator.
-pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
+pub fn split<const D: usize>(setup: Setup<D>) -> Result<(Model<D>, State<D>), StepError> {
     let Setup {
         grid,
         mut particles,
@@ -653,6 +673,13 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
         )));
     }
     let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
+    if nfields > 1 && D != 2 {
+        return Err(StepError::Setup(
+            "contact between bodies (a body with its own velocity field) is two-dimensional for now; \
+             in 3D, bond the bodies (one velocity field) or use contact devices"
+                .into(),
+        ));
+    }
     if nfields > 1 && (shape == ShapeKind::Cpdi2 || method == Method::Fem) {
         return Err(StepError::Setup(
             "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
@@ -747,10 +774,10 @@ pub fn split(setup: Setup) -> Result<(Model, State), StepError> {
 /// [`GROW_AFTER`] steps in a row converged at their first try. The first step of a dynamic run starts with the consistent initial
 /// acceleration unless `initial_acceleration` is [`InitialAcceleration::Zero`] (computed into `state`
 /// before the first attempt). A failed attempt leaves `state` as it was.
-pub fn advance(
-    model: &Model,
-    state: &mut State,
-    workspace: &mut Workspace,
+pub fn advance<const D: usize>(
+    model: &Model<D>,
+    state: &mut State<D>,
+    workspace: &mut Workspace<D>,
     session: &SessionGuard,
 ) -> Result<StepReport, StepError> {
     Step {
@@ -762,13 +789,13 @@ pub fn advance(
 }
 
 /// One step in progress: the model, the state it advances and the workspace it uses.
-struct Step<'a> {
-    m: &'a Model,
-    st: &'a mut State,
-    ws: &'a mut Workspace,
+struct Step<'a, const D: usize> {
+    m: &'a Model<D>,
+    st: &'a mut State<D>,
+    ws: &'a mut Workspace<D>,
 }
 
-impl Step<'_> {
+impl<const D: usize> Step<'_, D> {
     /// Advances one step of (at most) `self.st.dt` (the rules of [`advance`]). The first step of a
     /// dynamic run starts with the consistent initial acceleration unless `initial_acceleration` is
     /// [`InitialAcceleration::Zero`].
@@ -879,14 +906,14 @@ impl Step<'_> {
     /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
     /// assembler and the PETSc objects stay free to be borrowed mutably beside it).
     fn step_input<'a>(
-        model: &'a Model,
-        particles: &'a Particles,
-        table: &'a ShapeTable,
+        model: &'a Model<D>,
+        particles: &'a Particles<D>,
+        table: &'a ShapeTable<D>,
         dofs: &'a DofMap,
-        grid_state: &'a GridState,
-        loading: &'a Loading,
+        grid_state: &'a GridState<D>,
+        loading: &'a Loading<D>,
         partners: &'a [u32],
-    ) -> StepInput<'a> {
+    ) -> StepInput<'a, D> {
         StepInput {
             table,
             particles,
@@ -911,7 +938,7 @@ impl Step<'_> {
         session: &SessionGuard,
         dt: f64,
         prefix: Option<&str>,
-    ) -> Result<StepPlan, StepError> {
+    ) -> Result<StepPlan<D>, StepError> {
         if session.size() > 1 && self.m.num_fields() > 1 {
             return Err(StepError::Setup(
                 "contact between bodies (a body with its own velocity field) runs on one process: \
@@ -927,9 +954,9 @@ impl Step<'_> {
         // Contact devices: translation from the prescribed motion, rotation about the pin first guessed as
         // the last step's rate.
         let nb = self.m.boxes.len();
-        let translations: Vec<Vector2<f64>> = set_du[nb..]
+        let translations: Vec<SVector<f64, D>> = set_du[nb..]
             .iter()
-            .map(|d| Vector2::new(d[0].unwrap_or(0.0), d[1].unwrap_or(0.0)))
+            .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
             .collect();
         let pins: Vec<Option<Vector2<f64>>> =
             (0..self.m.rigid.len()).map(|k| self.pin_of(k)).collect();
@@ -1036,10 +1063,9 @@ impl Step<'_> {
                         dt * self.ws.grid_state.velocity[node]
                             + 0.5 * dt * dt * self.ws.grid_state.acceleration[node]
                     }
-                    None => Vector2::zeros(),
+                    None => SVector::zeros(),
                 };
-                xs[a * nf] = du.x;
-                xs[a * nf + 1] = du.y;
+                xs[a * nf..a * nf + D].copy_from_slice(du.as_slice());
                 if let Some(e) = self.ws.dofs.layout().eta_bar() {
                     xs[a * nf + e] = eta_bar[node];
                 }
@@ -1068,7 +1094,7 @@ impl Step<'_> {
     fn solve(
         &mut self,
         session: &SessionGuard,
-        plan: &mut StepPlan,
+        plan: &mut StepPlan<D>,
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, Failure>, StepError> {
         let t1 = Instant::now();
@@ -1246,7 +1272,7 @@ impl Step<'_> {
                 let (Some(d), Some(pin)) = (d.as_mut(), pins[k]) else {
                     continue;
                 };
-                let (f, m) = d.resultant(&phys, nf, |i| grid.node_position(i), pin);
+                let (f, m) = d.resultant(&phys, nf, |i| xy(&grid.node_position(i)), pin);
                 // Balanced to 1e-5 of the force times the face length (the resultant within 1e-5 of the
                 // face length from the pin), the force taken at least as `1e-4 s h` (a strain of 1e-4
                 // over one cell): a device that barely touches (a support the wave has not reached, a
@@ -1265,9 +1291,9 @@ impl Step<'_> {
                 secant[k] = Some((th, m));
                 dtheta[k] = next;
                 let r = contact::rotation(next) - nalgebra::Matrix2::identity();
-                let du_t = translations[k];
+                let du_t = xy(&translations[k]);
                 for c in &mut d.nodes {
-                    c.du_device = du_t + r * (grid.node_position(c.node) - pin);
+                    c.du_device = du_t + r * (xy(&grid.node_position(c.node)) - pin);
                 }
             }
             if (changes == 0 || frozen) && moments_ok {
@@ -1316,7 +1342,7 @@ impl Step<'_> {
     fn finish(
         &mut self,
         session: &SessionGuard,
-        plan: StepPlan,
+        plan: StepPlan<D>,
         solved: Solved,
         t0: Instant,
     ) -> Result<StepReport, StepError> {
@@ -1352,10 +1378,10 @@ impl Step<'_> {
         let n = self.ws.dofs.len();
         let s = self.m;
         let grid = &s.grid;
-        let mut reactions: Vec<[f64; 2]> = sets
+        let mut reactions: Vec<[f64; D]> = sets
             .iter()
             .map(|dofs| {
-                let mut r = [0.0; 2];
+                let mut r = [0.0; D];
                 for &d in dofs {
                     r[d % nf] += phys[d];
                 }
@@ -1365,13 +1391,15 @@ impl Step<'_> {
         for (k, d) in devices.iter().enumerate() {
             if let Some(d) = d {
                 let pin = pins[k].unwrap_or_else(Vector2::zeros);
-                let (f, _) = d.resultant(&phys, nf, |i| grid.node_position(i), pin);
-                reactions[s.boxes.len() + k] = [f.x, f.y];
+                let (f, _) = d.resultant(&phys, nf, |i| xy(&grid.node_position(i)), pin);
+                let r = &mut reactions[s.boxes.len() + k];
+                r[0] = f.x;
+                r[1] = f.y;
             }
         }
         let nodes = s.field_nodes();
         let du_nodes = self.ws.assembler.nodal_du().to_vec();
-        let mut acc_nodes = vec![Vector2::zeros(); nodes];
+        let mut acc_nodes = vec![SVector::<f64, D>::zeros(); nodes];
         if let Some(nm) = newmark {
             for &node in self.ws.dofs.active_nodes() {
                 let node = node as usize;
@@ -1392,15 +1420,15 @@ impl Step<'_> {
             let first = s.boxes.len();
             for (k, d) in devices.iter().enumerate() {
                 let Some(d) = d else { continue };
-                let (n, t) = (d.normal, d.tangent());
+                let (n, t) = (from_xy::<D>(d.normal), from_xy::<D>(d.tangent()));
                 for c in d.nodes.iter().filter(|c| c.status.closed()) {
                     let (v, a) = (
                         self.ws.grid_state.velocity[c.node],
                         self.ws.grid_state.acceleration[c.node],
                     );
-                    let target = c.du_device / dt;
+                    let target = from_xy::<D>(c.du_device) / dt;
                     // The acceleration that makes v_n + dt ((1 - gamma) a_n + gamma a) equal the target.
-                    let fit = |e: Vector2<f64>| {
+                    let fit = |e: SVector<f64, D>| {
                         (e.dot(&target) - e.dot(&v) - dt * (1.0 - nm.gamma) * e.dot(&a))
                             / (nm.gamma * dt)
                     };
@@ -1411,8 +1439,9 @@ impl Step<'_> {
                         *acc += (fit(t) - t.dot(acc)) * t;
                     }
                     let f = self.ws.grid_state.mass[c.node] * (*acc - before);
-                    reactions[first + k][0] += f.x;
-                    reactions[first + k][1] += f.y;
+                    for (r, f) in reactions[first + k].iter_mut().zip(f.iter()) {
+                        *r += f;
+                    }
                 }
             }
             // Closed pairs between bodies leave the step with one normal velocity, the mass-weighted mean
@@ -1420,8 +1449,8 @@ impl Step<'_> {
             // and opposite impulses, so the momentum of the pair is kept.
             let gs = &self.ws.grid_state;
             for c in bodies.pairs.iter().filter(|c| c.closed) {
-                let n = c.normal;
-                let normal_velocity = |node: usize, acc: &Vector2<f64>| {
+                let n = from_xy::<D>(c.normal);
+                let normal_velocity = |node: usize, acc: &SVector<f64, D>| {
                     n.dot(
                         &(gs.velocity[node]
                             + dt * ((1.0 - nm.gamma) * gs.acceleration[node] + nm.gamma * acc)),
@@ -1452,17 +1481,17 @@ impl Step<'_> {
             gamma,
             dt,
         };
-        let mut displacements: Vec<[f64; 2]> =
+        let mut displacements: Vec<[f64; D]> =
             set_du.iter().map(|d| d.map(|v| v.unwrap_or(0.0))).collect();
         for (load, nodes) in s.loads.iter().zip(&load_nodes) {
             // A load reports its resultant and the share-weighted mean displacement of its nodes.
             let f = load.force * load.factor(t_new);
-            let du: Vector2<f64> = nodes.iter().map(|&(n, w)| w * du_nodes[n]).sum();
-            reactions.push([f.x, f.y]);
-            displacements.push([du.x, du.y]);
+            let du: SVector<f64, D> = nodes.iter().map(|&(n, w)| w * du_nodes[n]).sum();
+            reactions.push(std::array::from_fn(|c| f[c]));
+            displacements.push(std::array::from_fn(|c| du[c]));
         }
         for (k, (r, du)) in reactions.iter().zip(&displacements).enumerate() {
-            for c in 0..2 {
+            for c in 0..D {
                 work += 0.5 * (r[c] + self.st.last_reactions[k][c]) * du[c];
             }
         }
@@ -1506,13 +1535,13 @@ impl Step<'_> {
                             + nm.gamma * a[node]);
                 }
             } else {
-                v.iter_mut().for_each(|v| *v = Vector2::zeros());
+                v.iter_mut().for_each(|v| *v = SVector::zeros());
             }
             self.st.fem_nodal = Some((v, a));
         }
         if s.time.quasi_static {
-            ps.v.iter_mut().for_each(|v| *v = Vector2::zeros());
-            ps.a.iter_mut().for_each(|a| *a = Vector2::zeros());
+            ps.v.iter_mut().for_each(|v| *v = SVector::zeros());
+            ps.a.iter_mut().for_each(|a| *a = SVector::zeros());
         }
         let stored = self.ws.assembler.commit(ps, &s.materials, counted);
         for (k, (rb, du)) in self
@@ -1522,11 +1551,12 @@ impl Step<'_> {
             .zip(&displacements[s.boxes.len()..])
             .enumerate()
         {
-            // x' = x + du + (R(dtheta) - I) (x - pin): translation with the pin, rotation about it.
-            let dx = Vector2::new(du[0], du[1]);
-            let pin = pins[k].unwrap_or_else(Vector2::zeros);
-            let r = contact::rotation(dtheta[k]) - nalgebra::Matrix2::identity();
-            let moved = |x: &mut Vector2<f64>| *x += dx + r * (*x - pin);
+            // x' = x + du + (R(dtheta) - I) (x - pin): translation with the pin, rotation about it (about
+            // the pin's axis, z, in 3D).
+            let dx = SVector::<f64, D>::from_fn(|c, _| du[c]);
+            let pin = from_xy::<D>(pins[k].unwrap_or_else(Vector2::zeros));
+            let r = rotation_xy::<D>(dtheta[k]) - SMatrix::<f64, D, D>::identity();
+            let moved = |x: &mut SVector<f64, D>| *x += dx + r * (*x - pin);
             rb.x.iter_mut().for_each(moved);
             rb.corners.iter_mut().for_each(moved);
             self.st.rotations[k] += dtheta[k];
@@ -1543,8 +1573,9 @@ impl Step<'_> {
             .collect();
         self.st.closed_pairs.sort_unstable();
         for (acc, du) in self.st.accumulated.iter_mut().zip(&displacements) {
-            acc[0] += du[0];
-            acc[1] += du[1];
+            for c in 0..D {
+                acc[c] += du[c];
+            }
         }
         self.st.last_reactions = reactions.clone();
         self.st.external_work += work;
@@ -1589,11 +1620,11 @@ impl Step<'_> {
             reactions: names
                 .iter()
                 .cloned()
-                .zip(reactions.iter().copied())
+                .zip(reactions.iter().map(|r| r.to_vec()))
                 .collect(),
             displacements: names
                 .into_iter()
-                .zip(self.st.accumulated.iter().copied())
+                .zip(self.st.accumulated.iter().map(|d| d.to_vec()))
                 .collect(),
             kinetic_energy: kinetic,
             stored_energy: stored,
@@ -1732,7 +1763,7 @@ impl Step<'_> {
 
     /// Per constraint set (boxes first, then rigid bodies) and component: `value(v, rise_time)` for a
     /// component moving with velocity `v`, `None` for a free one.
-    fn constraint_values(&self, value: impl Fn(f64, f64) -> f64) -> Vec<[Option<f64>; 2]> {
+    fn constraint_values(&self, value: impl Fn(f64, f64) -> f64) -> Vec<[Option<f64>; D]> {
         let s = self.m;
         s.boxes
             .iter()
@@ -1749,7 +1780,7 @@ impl Step<'_> {
 
     /// Prescribes `values` (one per set, as from `Step::constraint_values`) on the active nodes of
     /// every constraint set; returns each set's constrained unknowns.
-    fn constrain(&mut self, values: &[[Option<f64>; 2]]) -> Result<Vec<Vec<usize>>, StepError> {
+    fn constrain(&mut self, values: &[[Option<f64>; D]]) -> Result<Vec<Vec<usize>>, StepError> {
         let s = self.m;
         let grid = &s.grid;
         let nf = self.ws.dofs.fields();
@@ -1759,7 +1790,7 @@ impl Step<'_> {
             // A box holds every body's copy of its nodes.
             for node in 0..s.field_nodes() {
                 let x = grid.node_position(node);
-                let inside = (0..2).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
+                let inside = (0..D).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
                 if let (true, Some(a)) = (inside, self.ws.dofs.active_index(node)) {
                     for (c, d) in du.iter().enumerate() {
                         if let Some(d) = d {
@@ -1832,7 +1863,7 @@ impl Step<'_> {
     fn contact_devices(
         &self,
         session: &SessionGuard,
-        translations: &[Vector2<f64>],
+        translations: &[SVector<f64, D>],
         pins: &[Option<Vector2<f64>>],
         dtheta: &[f64],
         dt: f64,
@@ -1853,8 +1884,8 @@ impl Step<'_> {
             let n = contact::rotation(self.st.rotations[k]) * c.normal;
             let t = Vector2::new(-n.y, n.x);
             let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for x in &self.st.rigid[k].corners {
-                for (j, v) in [n.dot(x), t.dot(x)].into_iter().enumerate() {
+            for x in self.st.rigid[k].corners.iter().map(xy) {
+                for (j, v) in [n.dot(&x), t.dot(&x)].into_iter().enumerate() {
                     lo[j] = lo[j].min(v);
                     hi[j] = hi[j].max(v);
                 }
@@ -1862,21 +1893,22 @@ impl Step<'_> {
             // Face plane n . x = c_f; depth of the device along n.
             let (cf, depth) = (hi[0], hi[0] - lo[0]);
             let r = contact::rotation(dtheta[k]) - nalgebra::Matrix2::identity();
+            let translation = xy(&translations[k]);
             let device_du = |x: Vector2<f64>| match pins[k] {
-                Some(pin) => translations[k] + r * (x - pin),
-                None => translations[k],
+                Some(pin) => translation + r * (x - pin),
+                None => translation,
             };
             let warm = &self.st.contact_statuses[k];
             let mut nodes = Vec::new();
             for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
                 let node = node as usize;
-                let x = grid.node_position(node);
+                let x = xy(&grid.node_position(node));
                 let tx = t.dot(&x);
                 if node / grid.num_nodes() != rb.field as usize
                     || (n.dot(&x) - cf).abs() > 0.5 * h + 1e-9
                     || tx < lo[1] - 1e-9
                     || tx > hi[1] + 1e-9
-                    || (0..2).any(|c| self.ws.dofs.is_constrained(a * nf + c))
+                    || (0..D).any(|c| self.ws.dofs.is_constrained(a * nf + c))
                 {
                     continue;
                 }
@@ -1893,13 +1925,13 @@ impl Step<'_> {
             // back face) interpolating to the node.
             let p = &self.st.particles;
             for q in 0..p.len() {
-                if n.dot(&p.x[q]) < cf - depth {
+                if n.dot(&xy(&p.x[q])) < cf - depth {
                     continue;
                 }
                 let near = p
                     .corners(q)
                     .iter()
-                    .map(|c| n.dot(c))
+                    .map(|c| n.dot(&xy(c)))
                     .fold(f64::INFINITY, f64::min);
                 for w in self.ws.table.weights(q) {
                     let i = index[w.node as usize];
@@ -1936,7 +1968,7 @@ impl Step<'_> {
                     self.ws.grid_state.velocity[c.node],
                     self.ws.grid_state.acceleration[c.node],
                 );
-                let slide = t.dot(&(dt * v + 0.5 * dt * dt * a - c.du_device));
+                let slide = t.dot(&(xy(&(dt * v + 0.5 * dt * dt * a)) - c.du_device));
                 let fresh = if closed == NodeStatus::Stick && slide.abs() > 1e-9 * h {
                     NodeStatus::Slip(if slide > 0.0 { 1 } else { -1 })
                 } else {
@@ -1983,10 +2015,11 @@ impl Step<'_> {
         let (nodes, all, h) = (grid.num_nodes(), s.field_nodes(), grid.cell_size());
         let (p, table, dofs) = (&self.st.particles, &self.ws.table, &self.ws.dofs);
         let nf = dofs.fields();
+        // Contact between bodies is planar (refused in 3D by `split`): the in-plane parts.
         let mut grad_m = vec![Vector2::zeros(); all];
         for q in 0..p.len() {
             for w in table.weights(q) {
-                grad_m[w.node as usize] += p.mass[q] * w.grad;
+                grad_m[w.node as usize] += p.mass[q] * xy(&w.grad);
             }
         }
         // Copies held by a device stay with it.
@@ -1996,7 +2029,7 @@ impl Step<'_> {
         }
         let free = |node: usize| {
             dofs.active_index(node)
-                .filter(|&a| !taken[node] && (0..2).all(|c| !dofs.is_constrained(a * nf + c)))
+                .filter(|&a| !taken[node] && (0..D).all(|c| !dofs.is_constrained(a * nf + c)))
         };
         let mut pairs = Vec::new();
         let mut pair_of = vec![usize::MAX; all];
@@ -2014,7 +2047,7 @@ impl Step<'_> {
                     "the grid node at ({:.3}, {:.3}) mm carries the specimen and two other bodies: \
                      contact is between the specimen and one body per node; keep the other bodies at \
                      least two cells apart",
-                    x.x, x.y
+                    x[0], x[1]
                 )));
             }
             let (Some(row_a), Some(row_b)) = (free(i), free(b)) else {
@@ -2046,7 +2079,7 @@ impl Step<'_> {
                     continue;
                 }
                 let n = pairs[k].normal;
-                let along = p.corners(q).iter().map(|c| n.dot(c));
+                let along = p.corners(q).iter().map(|c| n.dot(&xy(c)));
                 if w.node as usize == pairs[k].node_a {
                     far_a[k] = along.fold(far_a[k], f64::max);
                 } else {
@@ -2057,7 +2090,7 @@ impl Step<'_> {
         self.ws.partners.resize(all, INACTIVE);
         let gs = &self.ws.grid_state;
         let predicted =
-            |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
+            |node: usize| xy(&(dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node]));
         for (k, c) in pairs.iter_mut().enumerate() {
             c.gap = (near_b[k] - far_a[k]).max(0.0);
             let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
@@ -2071,7 +2104,7 @@ impl Step<'_> {
 
     /// The loads at time `t` on the active nodes: the nodal forces (one per grid node; empty without
     /// loads) and, per load, its nodes with their shares renormalised to 1.
-    fn nodal_loads(&self, t: f64) -> Result<(Vec<Vector2<f64>>, LoadNodes), StepError> {
+    fn nodal_loads(&self, t: f64) -> Result<(Vec<SVector<f64, D>>, LoadNodes), StepError> {
         let s = self.m;
         let mut nodal_force = Vec::new();
         let mut load_nodes = Vec::with_capacity(s.loads.len());
@@ -2090,7 +2123,7 @@ impl Step<'_> {
                 )));
             }
             if nodal_force.is_empty() {
-                nodal_force = vec![Vector2::zeros(); s.grid.num_nodes()];
+                nodal_force = vec![SVector::zeros(); s.grid.num_nodes()];
             }
             let f = load.force * load.factor(t);
             let active: Vec<(usize, f64)> =
@@ -2173,11 +2206,11 @@ impl Step<'_> {
         agreed(session, self.st.distributed, local.map_err(StepError::from))?;
         let rows = self.own_rows(session);
         complete_rows(session, self.st.distributed, rows, nf, &mut r)?;
-        let mut acc = vec![Vector2::zeros(); s.field_nodes()];
+        let mut acc = vec![SVector::<f64, D>::zeros(); s.field_nodes()];
         for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
             let m = self.ws.grid_state.mass[node];
-            acc[node] = Vector2::from_fn(|c, _| {
+            acc[node] = SVector::from_fn(|c, _| {
                 let d = a * nf + c;
                 self.ws.dofs.prescribed(d).unwrap_or(-r[d] / m)
             });
@@ -2186,31 +2219,32 @@ impl Step<'_> {
         // the device's normal acceleration (node by node: the lumped mass decouples them; friction is not
         // applied at t = 0).
         let nb = s.boxes.len();
-        let device_acc: Vec<Vector2<f64>> = prescribed[nb..]
+        let device_acc: Vec<SVector<f64, D>> = prescribed[nb..]
             .iter()
-            .map(|d| Vector2::new(d[0].unwrap_or(0.0), d[1].unwrap_or(0.0)))
+            .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
             .collect();
         let pins: Vec<Option<Vector2<f64>>> = (0..s.rigid.len()).map(|k| self.pin_of(k)).collect();
         let (devices, _) =
             self.contact_devices(session, &device_acc, &pins, &vec![0.0; s.rigid.len()], 0.0)?;
-        let mut contact_forces = vec![Vector2::zeros(); devices.len()];
+        let mut contact_forces = vec![SVector::<f64, D>::zeros(); devices.len()];
         for (k, d) in devices.iter().enumerate() {
             let Some(d) = d else { continue };
-            let n = d.normal;
+            let n = from_xy::<D>(d.normal);
             for c in d.nodes.iter().filter(|c| c.status.closed()) {
-                let push = n.dot(&(c.du_device - acc[c.node]));
+                let push = n.dot(&(from_xy::<D>(c.du_device) - acc[c.node]));
                 if push > 0.0 {
                     acc[c.node] += push * n;
                     let b = c.row * nf;
                     let m = self.ws.grid_state.mass[c.node];
-                    contact_forces[k] += Vector2::new(r[b], r[b + 1]) + m * acc[c.node];
+                    contact_forces[k] +=
+                        SVector::<f64, D>::from_column_slice(&r[b..b + D]) + m * acc[c.node];
                 }
             }
         }
         // The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
         // with the initial inertia in each constrained set, the applied resultant of each load.
         for (reaction, dofs) in self.st.last_reactions.iter_mut().zip(&sets) {
-            *reaction = [0.0; 2];
+            *reaction = [0.0; D];
             for &d in dofs {
                 let (node, c) = (self.ws.dofs.node(d / nf), d % nf);
                 reaction[c] += r[d] + self.ws.grid_state.mass[node] * acc[node][c];
@@ -2218,7 +2252,7 @@ impl Step<'_> {
         }
         for (k, f) in contact_forces.iter().enumerate() {
             if devices[k].is_some() {
-                self.st.last_reactions[nb + k] = [f.x, f.y];
+                self.st.last_reactions[nb + k] = std::array::from_fn(|c| f[c]);
             }
         }
         for (reaction, load) in self.st.last_reactions[sets.len()..]
@@ -2226,7 +2260,7 @@ impl Step<'_> {
             .zip(&s.loads)
         {
             let f = load.force * load.factor(t);
-            *reaction = [f.x, f.y];
+            *reaction = std::array::from_fn(|c| f[c]);
         }
         let table = &self.ws.table;
         for (p, ap) in self.st.particles.a.iter_mut().enumerate() {

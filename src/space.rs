@@ -1,7 +1,7 @@
 //! Small dense algebra that does not depend on the space dimension `D` (2 or 3): determinants and
 //! cofactor matrices without inversion, and the lift of an in-plane deformation gradient to 3 x 3.
 
-use nalgebra::{Matrix3, SMatrix};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector2};
 
 /// The cofactor matrix `cof A = det(A) A^-T` of a 2 x 2 or 3 x 3 matrix, defined also for singular `A`.
 #[inline]
@@ -37,6 +37,32 @@ pub fn lift3<const D: usize>(f: &SMatrix<f64, D, D>) -> Matrix3<f64> {
         } else {
             0.0
         }
+    })
+}
+
+/// The in-plane (x, y) part of a `D`-vector: the plane of the loading devices and their contact.
+#[inline]
+pub fn xy<const D: usize>(v: &SVector<f64, D>) -> Vector2<f64> {
+    Vector2::new(v[0], v[1])
+}
+
+/// The `D`-vector with in-plane part `v` and zero z component (3D).
+#[inline]
+pub fn from_xy<const D: usize>(v: Vector2<f64>) -> SVector<f64, D> {
+    SVector::from_fn(|d, _| if d < 2 { v[d] } else { 0.0 })
+}
+
+/// The rotation by `theta` (rad, counter-clockwise) in the x-y plane, about the z axis in 3D (the axis of
+/// the loading pins of plate specimens).
+#[inline]
+pub fn rotation_xy<const D: usize>(theta: f64) -> SMatrix<f64, D, D> {
+    let (s, c) = theta.sin_cos();
+    SMatrix::from_fn(|i, j| match (i, j) {
+        (0, 0) | (1, 1) => c,
+        (0, 1) => -s,
+        (1, 0) => s,
+        _ if i == j => 1.0,
+        _ => 0.0,
     })
 }
 
