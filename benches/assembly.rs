@@ -14,27 +14,10 @@ use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
-use mpm_concrete::particles::{Body, ParticleError, Particles, Seeding};
+use mpm_concrete::particles::{BoxBody, Particles, Seeding};
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{GridState, particles_to_grid};
-
-/// The block `[0, size]` (mm).
-struct Block<const D: usize>(SVector<f64, D>);
-
-impl<const D: usize> Body<D> for Block<D> {
-    fn validate(&self) -> Result<(), ParticleError> {
-        Ok(())
-    }
-
-    fn contains(&self, x: &SVector<f64, D>) -> bool {
-        (0..D).all(|d| x[d] >= 0.0 && x[d] <= self.0[d])
-    }
-
-    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
-        Some((SVector::zeros(), self.0))
-    }
-}
 
 fn material(text: &str) -> Material {
     toml::from_str::<MaterialConfig>(text)
@@ -52,7 +35,7 @@ fn bench_block<const D: usize>(c: &mut Criterion, size: SVector<f64, D>) {
         density: 2.4e-9,
         body: 0,
     };
-    let mut particles = Particles::<D>::seed(&Block(size), &seeding).expect("seed");
+    let mut particles = Particles::<D>::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
     let grid = Grid::covering(SVector::zeros(), size, h, 2).expect("grid");
     let f = SMatrix::<f64, D, D>::from_fn(|i, j| if i == j { 1.0 + 1e-5 } else { 2e-6 });
     for p in 0..particles.len() {

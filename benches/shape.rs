@@ -10,7 +10,7 @@
 //! Run: `cargo bench --bench shape`.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use std::hint::black_box;
 
 use mpm_concrete::grid::Grid;
@@ -44,31 +44,24 @@ fn ct_plate() -> (Grid, Particles) {
     (grid, particles)
 }
 
-/// Applies a homogeneous deformation `F` about `centre` to positions, F, CPDI domains and volumes.
-fn deform(particles: &mut Particles, f: Matrix2<f64>, centre: Vector2<f64>) {
-    for p in 0..particles.len() {
-        particles.x[p] = centre + f * (particles.x[p] - centre);
-        particles.set_deformation(p, f);
-    }
-}
-
-fn bench_shape(c: &mut Criterion) {
-    let (grid, seeded) = ct_plate();
-    let mut deformed = seeded.clone();
-    deform(
-        &mut deformed,
-        Matrix2::new(1.002, 0.001, 0.0005, 0.998),
-        Vector2::new(100.0, 100.0),
-    );
+/// Shape functions of every interpolator for the `seeded` and `deformed` points, then P2G and G2P with
+/// the linear and CPDI1 tables, as the groups `shape_{tag}{n}` and `transfer_{tag}{n}`.
+fn bench_points<const D: usize>(
+    c: &mut Criterion,
+    tag: &str,
+    grid: &Grid<D>,
+    seeded: &Particles<D>,
+    deformed: &Particles<D>,
+) {
     let n = seeded.len();
-    let mut group = c.benchmark_group(format!("shape_{n}"));
+    let mut group = c.benchmark_group(format!("shape_{tag}{n}"));
     let mut table = ShapeTable::new();
     for kind in ShapeKind::ALL {
-        for (state, particles) in [("seeded", &seeded), ("deformed", &deformed)] {
+        for (state, particles) in [("seeded", seeded), ("deformed", deformed)] {
             group.bench_function(BenchmarkId::new(kind.name(), state), |b| {
                 b.iter(|| {
                     table
-                        .compute(black_box(kind), &grid, black_box(particles))
+                        .compute(black_box(kind), grid, black_box(particles))
                         .expect("in grid")
                 })
             });
@@ -76,23 +69,23 @@ fn bench_shape(c: &mut Criterion) {
     }
     group.finish();
 
-    let mut group = c.benchmark_group(format!("transfer_{n}"));
+    let mut group = c.benchmark_group(format!("transfer_{tag}{n}"));
     let mut state = GridState::new();
     for kind in [ShapeKind::Linear, ShapeKind::Cpdi1] {
-        table.compute(kind, &grid, &deformed).expect("in grid");
+        table.compute(kind, grid, deformed).expect("in grid");
         group.bench_function(BenchmarkId::new("p2g", kind.name()), |b| {
             b.iter(|| {
                 particles_to_grid(
                     &table,
-                    black_box(&deformed),
-                    &grid,
+                    black_box(deformed),
+                    grid,
                     DEFAULT_RELATIVE_MASS_TOLERANCE,
                     &mut state,
                 )
                 .expect("sizes match")
             })
         });
-        let zero = vec![Vector2::zeros(); grid.num_nodes()];
+        let zero = vec![SVector::<f64, D>::zeros(); grid.num_nodes()];
         let solution = StepSolution {
             du: &zero,
             acceleration: &zero,
@@ -102,12 +95,33 @@ fn bench_shape(c: &mut Criterion) {
         let mut particles = deformed.clone();
         group.bench_function(BenchmarkId::new("g2p", kind.name()), |b| {
             b.iter(|| {
-                grid_to_particles(&table, &grid, black_box(&solution), &mut particles)
+                grid_to_particles(&table, grid, black_box(&solution), &mut particles)
                     .expect("sizes match")
             })
         });
     }
     group.finish();
+}
+
+/// `particles` deformed homogeneously by `f` about `centre`.
+fn deformed<const D: usize>(
+    particles: &Particles<D>,
+    f: SMatrix<f64, D, D>,
+    centre: SVector<f64, D>,
+) -> Particles<D> {
+    let mut out = particles.clone();
+    for p in 0..out.len() {
+        out.x[p] = centre + f * (out.x[p] - centre);
+        out.set_deformation(p, f);
+    }
+    out
+}
+
+fn bench_shape(c: &mut Criterion) {
+    let (grid, seeded) = ct_plate();
+    let f = Matrix2::new(1.002, 0.001, 0.0005, 0.998);
+    let moved = deformed(&seeded, f, Vector2::new(100.0, 100.0));
+    bench_points(c, "", &grid, &seeded, &moved);
 }
 
 /// The 3D plate 40 x 40 x 12 mm, h = 1 mm, 2 x 2 x 2 points per cell (153,600 points, about the CT's
@@ -132,59 +146,8 @@ fn bench_shape_3d(c: &mut Criterion) {
     let f = Matrix3::new(
         1.002, 0.001, 0.0004, 0.0005, 0.998, -0.0003, 0.0002, 0.0006, 1.001,
     );
-    let centre = Vector3::new(20.0, 20.0, 6.0);
-    let mut deformed = seeded.clone();
-    for p in 0..deformed.len() {
-        deformed.x[p] = centre + f * (deformed.x[p] - centre);
-        deformed.set_deformation(p, f);
-    }
-    let n = seeded.len();
-    let mut group = c.benchmark_group(format!("shape_3d_{n}"));
-    let mut table = ShapeTable::new();
-    for kind in ShapeKind::ALL {
-        for (state, particles) in [("seeded", &seeded), ("deformed", &deformed)] {
-            group.bench_function(BenchmarkId::new(kind.name(), state), |b| {
-                b.iter(|| {
-                    table
-                        .compute(black_box(kind), &grid, black_box(particles))
-                        .expect("in grid")
-                })
-            });
-        }
-    }
-    group.finish();
-    let mut group = c.benchmark_group(format!("transfer_3d_{n}"));
-    let mut state = GridState::new();
-    for kind in [ShapeKind::Linear, ShapeKind::Cpdi1] {
-        table.compute(kind, &grid, &deformed).expect("in grid");
-        group.bench_function(BenchmarkId::new("p2g", kind.name()), |b| {
-            b.iter(|| {
-                particles_to_grid(
-                    &table,
-                    black_box(&deformed),
-                    &grid,
-                    DEFAULT_RELATIVE_MASS_TOLERANCE,
-                    &mut state,
-                )
-                .expect("sizes match")
-            })
-        });
-        let zero = vec![Vector3::zeros(); grid.num_nodes()];
-        let solution = StepSolution {
-            du: &zero,
-            acceleration: &zero,
-            gamma: 0.5,
-            dt: 1e-6,
-        };
-        let mut particles = deformed.clone();
-        group.bench_function(BenchmarkId::new("g2p", kind.name()), |b| {
-            b.iter(|| {
-                grid_to_particles(&table, &grid, black_box(&solution), &mut particles)
-                    .expect("sizes match")
-            })
-        });
-    }
-    group.finish();
+    let moved = deformed(&seeded, f, Vector3::new(20.0, 20.0, 6.0));
+    bench_points(c, "3d_", &grid, &seeded, &moved);
 }
 
 criterion_group!(benches, bench_shape, bench_shape_3d);

@@ -16,7 +16,7 @@ use crate::plot::{LinePlot, ScatterField, Series};
 use crate::schema::{file, history};
 use crate::solver::StepReport;
 use hdf5_metno::types::VarLenUnicode;
-use nalgebra::Vector2;
+use nalgebra::{SVector, Vector2};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -356,6 +356,11 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
 
 /// The XDMF index of the snapshots of `n` points: a temporal collection of point clouds, one vertex cell
 /// per point (explicit connectivity), vectors with 3 components.
+/// A point as x, y, z (mm; z = 0 in 2D).
+fn xyz<const D: usize>(x: &SVector<f64, D>) -> [f64; 3] {
+    std::array::from_fn(|d| if d < D { x[d] } else { 0.0 })
+}
+
 fn xdmf(snapshots: &[Snapshot], n: usize) -> String {
     let mut s = String::from("<?xml version=\"1.0\" ?>\n<!-- units: ");
     s.push_str(UNITS);
@@ -425,7 +430,8 @@ pub struct RunOutput {
     config_text: String,
     rows: Vec<StepReport>,
     snapshots: Vec<Snapshot>,
-    initial_position: Vec<Vector2<f64>>,
+    /// Positions at t = 0 as x, y, z (z = 0 in 2D), for the displacement field (mm).
+    initial_position: Vec<[f64; 3]>,
     /// Cell size of the background grid (mm), the resolution of the crack metrics and the damage maps.
     cell_size: f64,
     /// False for the records of a run whose files another process writes.
@@ -438,17 +444,17 @@ pub struct RunOutput {
 impl RunOutput {
     /// Creates (or reuses) `dir`, keeps a copy of the configuration text as `config.toml`; displacements
     /// are measured from the points of `initial` (the state at t = 0 of `model`).
-    pub fn create(
+    pub fn create<const D: usize>(
         dir: &Path,
         title: &str,
         config_text: &str,
-        model: &Model,
-        initial: &State,
+        model: &Model<D>,
+        initial: &State<D>,
     ) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
         Ok(Self {
-            initial_position: initial.particles.x.clone(),
+            initial_position: initial.particles.x.iter().map(xyz).collect(),
             writes: true,
             ..Self::mirror(dir, title, config_text, model.grid.cell_size())
         })
@@ -588,21 +594,7 @@ impl RunOutput {
         if !self.writes {
             return Ok(());
         }
-        let file = file::numbered(file::FIELDS, state.step);
-        let path = self.dir.join(&file);
-        let tmp = tmp_name(&path);
-        self.write_h5(&tmp, state).map_err(|e| OutputError::Hdf5 {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
-        std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
-        self.snapshots.retain(|s| s.step != state.step);
-        self.snapshots.push(Snapshot {
-            step: state.step,
-            time: state.time,
-            file,
-        });
-        self.write_xdmf(state.particles.len())?;
+        self.write_fields(state)?;
         if let Some((tip, criteria)) = &self.crack {
             let p = &state.particles;
             let mut measured = crack::measure(
@@ -634,7 +626,31 @@ impl RunOutput {
         )
     }
 
-    fn write_h5(&self, path: &Path, state: &State) -> hdf5_metno::Result<()> {
+    /// The point fields of `state` (2D or 3D) as `fields_<step>.h5` (written, then renamed), indexed in
+    /// `fields.xdmf` for ParaView: the part of [`RunOutput::snapshot`] that does not depend on the
+    /// dimension (a 3D run's snapshot; crack metrics and damage maps are plane).
+    pub fn write_fields<const D: usize>(&mut self, state: &State<D>) -> Result<(), OutputError> {
+        if !self.writes {
+            return Ok(());
+        }
+        let file = file::numbered(file::FIELDS, state.step);
+        let path = self.dir.join(&file);
+        let tmp = tmp_name(&path);
+        self.write_h5(&tmp, state).map_err(|e| OutputError::Hdf5 {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
+        self.snapshots.retain(|s| s.step != state.step);
+        self.snapshots.push(Snapshot {
+            step: state.step,
+            time: state.time,
+            file,
+        });
+        self.write_xdmf(state.particles.len())
+    }
+
+    fn write_h5<const D: usize>(&self, path: &Path, state: &State<D>) -> hdf5_metno::Result<()> {
         let p = &state.particles;
         let n = p.len();
         let f = hdf5_metno::File::create(path)?;
@@ -686,17 +702,19 @@ impl RunOutput {
         Ok(())
     }
 
-    /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0).
-    fn point_values(&self, state: &State) -> [Vec<f64>; FIELDS.len()] {
+    /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0
+    /// in 2D).
+    fn point_values<const D: usize>(&self, state: &State<D>) -> [Vec<f64>; FIELDS.len()] {
         let p = &state.particles;
-        let vec3 = |v: &mut dyn Iterator<Item = Vector2<f64>>| -> Vec<f64> {
-            v.flat_map(|x| [x.x, x.y, 0.0]).collect()
-        };
         let comp = |i: usize, j: usize| p.stress.iter().map(|s| s[(i, j)]).collect::<Vec<f64>>();
+        let displacement = p.x.iter().zip(&self.initial_position).flat_map(|(x, x0)| {
+            let x = xyz(x);
+            [x[0] - x0[0], x[1] - x0[1], x[2] - x0[2]]
+        });
         [
-            vec3(&mut p.x.iter().copied()),
-            vec3(&mut p.x.iter().zip(&self.initial_position).map(|(x, x0)| x - x0)),
-            vec3(&mut p.v.iter().copied()),
+            p.x.iter().flat_map(xyz).collect(),
+            displacement.collect(),
+            p.v.iter().flat_map(xyz).collect(),
             comp(0, 0),
             comp(1, 1),
             comp(0, 1),

@@ -9,14 +9,14 @@
 //! A step is [`advance`](crate::solver::advance)`(&Model, &mut State, &mut Workspace, ..)`; output and
 //! checkpoints read `&State`. Units: mm, s, N, MPa, t (tonne).
 
-use crate::boundary::{NodalLoad, NodeBox, RigidBody};
+use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
 use crate::contact::NodeStatus;
 use crate::dofs::FieldLayout;
 use crate::grid::Grid;
 use crate::material::Material;
 use crate::particles::Particles;
 use crate::shape::{ShapeKind, ShapeTable};
-use nalgebra::SVector;
+use nalgebra::{Matrix3, SVector};
 
 /// Time integration settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -420,3 +420,136 @@ pub struct Counters {
 
 /// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
 pub type NodalState<const D: usize = 2> = (Vec<SVector<f64, D>>, Vec<SVector<f64, D>>);
+
+/// Cells of empty grid beyond the plate's faces in z of an extruded set-up (the B-spline support reaches
+/// 1.5 cells beyond a point).
+const EXTRUSION_MARGIN: usize = 2;
+
+impl Setup<2> {
+    /// The plane set-up extruded to a plate of `thickness` (mm) along z, `0 <= z <= thickness`: every
+    /// material point (specimen and rigid bodies) becomes a column of points through the thickness at the
+    /// spacing of its own in-plane domain (`2 r^0_xx`: 2 points per cell and direction as seeded, so
+    /// `2^3` per cell), with its volume and mass per mm of thickness times that spacing; the grid gets the
+    /// plate's cells in z plus a margin of 2 cells on both faces. The plate's faces are free: node boxes
+    /// keep z free; rigid bodies (loading plates) hold z fixed (glued ones at their nodes; a device in
+    /// contact pushes in the x-y plane, its pin along z). The thickness must be a multiple of the cell
+    /// size; FEM mode and nodal loads along grid lines (2D segments) are refused.
+    pub fn extrude(self, thickness: f64) -> Result<Setup<3>, String> {
+        let h = self.grid.cell_size();
+        let layers = (thickness / h).round();
+        if !(thickness.is_finite() && thickness > 0.0 && layers >= 1.0)
+            || (layers * h - thickness).abs() > 1e-9 * thickness
+        {
+            return Err(format!(
+                "thickness {thickness} mm: a positive multiple of the cell size h = {h} mm"
+            ));
+        }
+        if self.method == Method::Fem {
+            return Err("the FEM mode is plane only; extrude an MPM set-up".into());
+        }
+        if !self.loads.is_empty() {
+            return Err(
+                "nodal loads along grid lines are plane; load a plate with boxes or rigid bodies"
+                    .into(),
+            );
+        }
+        let g = &self.grid;
+        let origin = g.origin();
+        let margin = EXTRUSION_MARGIN as f64 * h;
+        let grid = Grid::new(
+            SVector::from([origin.x, origin.y, -margin]),
+            h,
+            [g.nx(), g.ny(), layers as usize + 2 * EXTRUSION_MARGIN],
+        )
+        .map_err(|e| e.to_string())?;
+        let particles = extrude_points(&self.particles, thickness)?;
+        let rigid_points = self
+            .rigid_points
+            .iter()
+            .map(|p| extrude_points(p, thickness))
+            .collect::<Result<Vec<_>, _>>()?;
+        let far = f64::INFINITY;
+        let boxes = self
+            .boxes
+            .into_iter()
+            .map(|b| NodeBox {
+                name: b.name,
+                min: SVector::from([b.min.x, b.min.y, -far]),
+                max: SVector::from([b.max.x, b.max.y, far]),
+                motion: [b.motion[0], b.motion[1], Motion::Free],
+                rise_time: b.rise_time,
+            })
+            .collect();
+        let rigid = self
+            .rigid
+            .into_iter()
+            .map(|r| RigidBody {
+                name: r.name,
+                motion: [r.motion[0], r.motion[1], Motion::Velocity(0.0)],
+                rise_time: r.rise_time,
+                contact: r.contact,
+                field: r.field,
+            })
+            .collect();
+        Ok(Setup {
+            grid,
+            particles,
+            materials: self.materials,
+            fields: self.fields,
+            shape: self.shape,
+            time: self.time,
+            body_force: SVector::from([self.body_force.x, self.body_force.y, 0.0]),
+            body_force_ramp: self.body_force_ramp,
+            boxes,
+            rigid,
+            rigid_points,
+            loads: Vec::new(),
+            method: self.method,
+            options_prefix: self.options_prefix,
+            mass_tolerance: self.mass_tolerance,
+            fallback_prefix: self.fallback_prefix,
+        })
+    }
+}
+
+/// The points of `plane` repeated through `0 <= z <= thickness` (mm) at the spacing `2 r^0_xx` of each
+/// point's undeformed domain, at rest and undeformed as [`Particles::push`] makes them.
+fn extrude_points(plane: &Particles, thickness: f64) -> Result<Particles<3>, String> {
+    let mut out = Particles::<3>::new();
+    for p in 0..plane.len() {
+        let (r0, x, v) = (plane.r0[p], plane.x[p], plane.v[p]);
+        let spacing = 2.0 * r0[(0, 0)];
+        let count = (thickness / spacing).round();
+        if !(spacing > 0.0 && count >= 1.0)
+            || (count * spacing - thickness).abs() > 1e-9 * thickness
+        {
+            return Err(format!(
+                "a point of spacing {spacing} mm does not tile the thickness {thickness} mm"
+            ));
+        }
+        let r = Matrix3::new(
+            r0[(0, 0)],
+            r0[(0, 1)],
+            0.0,
+            r0[(1, 0)],
+            r0[(1, 1)],
+            0.0,
+            0.0,
+            0.0,
+            0.5 * spacing,
+        );
+        for k in 0..count as usize {
+            let z = (k as f64 + 0.5) * spacing;
+            out.push(
+                SVector::from([x.x, x.y, z]),
+                plane.vol0[p] * spacing,
+                plane.mass[p] * spacing,
+                r,
+                plane.body[p],
+            );
+            let q = out.len() - 1;
+            out.v[q] = SVector::from([v.x, v.y, 0.0]);
+        }
+    }
+    Ok(out)
+}

@@ -246,20 +246,7 @@ fn polygon_edges(vertices: &[[f64; 2]]) -> impl Iterator<Item = (Vector2<f64>, V
 impl Geometry {
     /// Checks every region; an empty `include` list is an error.
     pub fn validate(&self) -> Result<(), ParticleError> {
-        if self.include.is_empty() {
-            return Err(ParticleError::EmptyGeometry);
-        }
-        for (list, regions) in [("include", &self.include), ("exclude", &self.exclude)] {
-            for (index, r) in regions.iter().enumerate() {
-                r.validate()
-                    .map_err(|reason| ParticleError::InvalidRegion {
-                        list,
-                        index,
-                        reason,
-                    })?;
-            }
-        }
-        Ok(())
+        validate_lists(&self.include, &self.exclude, Region::validate)
     }
 
     /// Whether `x` is material: in the closure of some include region and in the interior of no exclude
@@ -286,6 +273,76 @@ pub trait Body<const D: usize> {
     fn contains(&self, x: &SVector<f64, D>) -> bool;
     /// Bounding box of the include regions (mm); `None` without include regions.
     fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)>;
+}
+
+/// A closed axis-aligned box `[min, max]` (mm) in `D` dimensions as a body to seed: a block, a bar, a
+/// column.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxBody<const D: usize> {
+    /// Lowest corner (mm).
+    pub min: SVector<f64, D>,
+    /// Highest corner (mm).
+    pub max: SVector<f64, D>,
+}
+
+impl<const D: usize> BoxBody<D> {
+    /// The box `[0, size]` (mm).
+    pub fn from_origin(size: SVector<f64, D>) -> Self {
+        Self {
+            min: SVector::zeros(),
+            max: size,
+        }
+    }
+}
+
+impl<const D: usize> Body<D> for BoxBody<D> {
+    fn validate(&self) -> Result<(), ParticleError> {
+        let ok = (0..D).all(|d| self.min[d].is_finite() && self.max[d].is_finite())
+            && (0..D).all(|d| self.min[d] < self.max[d]);
+        if ok {
+            Ok(())
+        } else {
+            Err(ParticleError::InvalidRegion {
+                list: "include",
+                index: 0,
+                reason: format!(
+                    "box needs finite corners with min < max, got min = {:?}, max = {:?}",
+                    self.min.as_slice(),
+                    self.max.as_slice()
+                ),
+            })
+        }
+    }
+
+    fn contains(&self, x: &SVector<f64, D>) -> bool {
+        (0..D).all(|d| x[d] >= self.min[d] - BOUNDARY_TOL && x[d] <= self.max[d] + BOUNDARY_TOL)
+    }
+
+    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
+        Some((self.min, self.max))
+    }
+}
+
+/// Checks the `include` (at least one) and `exclude` regions of a body with `check`, naming the list and
+/// the index of the first bad region.
+pub(crate) fn validate_lists<R>(
+    include: &[R],
+    exclude: &[R],
+    check: impl Fn(&R) -> Result<(), String>,
+) -> Result<(), ParticleError> {
+    if include.is_empty() {
+        return Err(ParticleError::EmptyGeometry);
+    }
+    for (list, regions) in [("include", include), ("exclude", exclude)] {
+        for (index, r) in regions.iter().enumerate() {
+            check(r).map_err(|reason| ParticleError::InvalidRegion {
+                list,
+                index,
+                reason,
+            })?;
+        }
+    }
+    Ok(())
 }
 
 impl Body<2> for Geometry {

@@ -10,7 +10,7 @@
 use nalgebra::{Vector2, Vector3};
 use serde::Deserialize;
 
-use crate::particles::{BOUNDARY_TOL, Body, ParticleError, Region};
+use crate::particles::{BOUNDARY_TOL, Body, ParticleError, Region, validate_lists};
 
 /// A solid region of space (mm).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -154,20 +154,7 @@ pub struct Solids {
 
 impl Body<3> for Solids {
     fn validate(&self) -> Result<(), ParticleError> {
-        if self.include.is_empty() {
-            return Err(ParticleError::EmptyGeometry);
-        }
-        for (list, solids) in [("include", &self.include), ("exclude", &self.exclude)] {
-            for (index, s) in solids.iter().enumerate() {
-                s.validate()
-                    .map_err(|reason| ParticleError::InvalidRegion {
-                        list,
-                        index,
-                        reason,
-                    })?;
-            }
-        }
-        Ok(())
+        validate_lists(&self.include, &self.exclude, Solid::validate)
     }
 
     fn contains(&self, x: &Vector3<f64>) -> bool {

@@ -6,7 +6,7 @@ use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
-use mpm_concrete::particles::{Body, ParticleError, Particles, Seeding};
+use mpm_concrete::particles::{BoxBody, Particles, Seeding};
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{self, GridState};
@@ -21,23 +21,6 @@ fn material(toml_text: &str) -> Material {
 fn noise(i: usize) -> f64 {
     let x = ((i as f64 + 1.0) * 12.9898).sin() * 43758.5453;
     2.0 * (x - x.floor()) - 1.0
-}
-
-/// The block `[0, max]` (mm) as a body to seed, in `D` dimensions.
-struct Block<const D: usize>(SVector<f64, D>);
-
-impl<const D: usize> Body<D> for Block<D> {
-    fn validate(&self) -> Result<(), ParticleError> {
-        Ok(())
-    }
-
-    fn contains(&self, x: &SVector<f64, D>) -> bool {
-        (0..D).all(|d| x[d] >= 0.0 && x[d] <= self.0[d])
-    }
-
-    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
-        Some((SVector::zeros(), self.0))
-    }
 }
 
 /// Max |J - J_fd| / max |J| for one interpolator and material on the 3 x 2 mm plane block.
@@ -69,7 +52,7 @@ fn fd_check<const D: usize>(
         density: 2.4e-9,
         body: 0,
     };
-    let mut particles = Particles::<D>::seed(&Block(size), &seeding).expect("seed");
+    let mut particles = Particles::<D>::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
     let grid = Grid::covering(SVector::zeros(), size, h, 2).expect("grid");
     // Pre-deformed start-of-step state: F_n != I (sheared and stretched domains).
     let table3 = [

@@ -9,7 +9,7 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Setup, TimeIntegration};
-use mpm_concrete::particles::{Body, ParticleError, Particles, Seeding};
+use mpm_concrete::particles::{BoxBody, Particles, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;
@@ -19,23 +19,6 @@ use nalgebra::SVector;
 fn material(toml_text: &str) -> Material {
     let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
     cfg.build().expect("valid material")
-}
-
-/// The box `[0, size]` (mm) as a body to seed.
-struct Block<const D: usize>(SVector<f64, D>);
-
-impl<const D: usize> Body<D> for Block<D> {
-    fn validate(&self) -> Result<(), ParticleError> {
-        Ok(())
-    }
-
-    fn contains(&self, x: &SVector<f64, D>) -> bool {
-        (0..D).all(|d| x[d] >= 0.0 && x[d] <= self.0[d])
-    }
-
-    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
-        Some((SVector::zeros(), self.0))
-    }
 }
 
 /// Nodes with `lo <= x_d <= hi` in direction `d` (and anything in the others), moving as `motion`.
@@ -58,7 +41,7 @@ fn seeded<const D: usize>(size: SVector<f64, D>, h: f64, rho: f64) -> (Grid<D>, 
         density: rho,
         body: 0,
     };
-    let particles = Particles::seed(&Block(size), &seeding).expect("seed");
+    let particles = Particles::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
     let grid = Grid::covering(SVector::zeros(), size, h, 2).expect("grid");
     (grid, particles)
 }
@@ -369,4 +352,64 @@ fn a_3d_block_between_rollers_reproduces_the_plane_strain_result() {
         f2[7] / 8.0 < 0.98 * f2[0],
         "the block damages: forces {f2:?} (peak {peak})"
     );
+}
+
+/// A plane set-up extruded to a plate: every point becomes a column of points through the thickness with
+/// the volume and mass per mm of thickness times the spacing, the grid gets the plate's layers and a
+/// margin, node boxes keep z free; a thickness that is no multiple of the cell size is an error.
+#[test]
+fn an_extruded_plane_setup_is_the_plate_seeded_in_3d() {
+    let (grid, particles) = seeded(SVector::from([4.0, 8.0]), 1.0, 2.4e-9);
+    let plane = Setup {
+        boxes: vec![slab("base", 1, -1e6, 0.0, [FREE, FIXED])],
+        body_force: SVector::from([0.0, -9810.0]),
+        ..Setup::new(
+            grid,
+            particles.clone(),
+            vec![material(
+                "model = \"neo_hookean\"\nyoungs_modulus = 30000.0\npoisson_ratio = 0.25",
+            )],
+            ShapeKind::Cpdi1,
+            TimeIntegration::default(),
+        )
+    };
+    let bad = Setup {
+        boxes: vec![],
+        ..Setup::new(
+            plane.grid.clone(),
+            particles.clone(),
+            vec![],
+            ShapeKind::Cpdi1,
+            TimeIntegration::default(),
+        )
+    };
+    let e = bad
+        .extrude(2.5)
+        .err()
+        .expect("2.5 mm is no multiple of 1 mm");
+    assert!(e.contains("multiple of the cell size"), "{e}");
+    let plate = plane.extrude(3.0).expect("extrude");
+    let (_, direct) = seeded(SVector::from([4.0, 8.0, 3.0]), 1.0, 2.4e-9);
+    let p = &plate.particles;
+    assert_eq!(p.len(), direct.len());
+    assert_eq!(p.len(), particles.len() * 6);
+    let sorted = |ps: &Particles<3>| {
+        let mut xs: Vec<[f64; 3]> = ps.x.iter().map(|x| [x.x, x.y, x.z]).collect();
+        xs.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+        xs
+    };
+    assert_eq!(
+        sorted(p),
+        sorted(&direct),
+        "the same points as seeded in 3D"
+    );
+    let volume: f64 = p.vol0.iter().sum();
+    assert!((volume - 4.0 * 8.0 * 3.0).abs() < 1e-9);
+    assert!((p.mass.iter().sum::<f64>() / (2.4e-9 * volume) - 1.0).abs() < 1e-12);
+    assert_eq!(p.r0[0], direct.r0[0]);
+    assert!(p.corners.iter().all(|c| c.z >= 0.0 && c.z <= 3.0));
+    assert_eq!(plate.grid.cells()[2], 3 + 4);
+    assert_eq!(plate.grid.origin().z, -2.0);
+    assert_eq!(plate.boxes[0].motion, [FREE, FIXED, FREE]);
+    assert_eq!(plate.body_force, SVector::from([0.0, -9810.0, 0.0]));
 }
