@@ -354,13 +354,13 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
     Ok(states)
 }
 
-/// The XDMF index of the snapshots of `n` points: a temporal collection of point clouds, one vertex cell
-/// per point (explicit connectivity), vectors with 3 components.
 /// A point as x, y, z (mm; z = 0 in 2D).
 fn xyz<const D: usize>(x: &SVector<f64, D>) -> [f64; 3] {
     std::array::from_fn(|d| if d < D { x[d] } else { 0.0 })
 }
 
+/// The XDMF index of the snapshots of `n` points: a temporal collection of point clouds, one vertex cell
+/// per point (explicit connectivity), vectors with 3 components.
 fn xdmf(snapshots: &[Snapshot], n: usize) -> String {
     let mut s = String::from("<?xml version=\"1.0\" ?>\n<!-- units: ");
     s.push_str(UNITS);

@@ -433,7 +433,8 @@ impl Setup<2> {
     /// plate's cells in z plus a margin of 2 cells on both faces. The plate's faces are free: node boxes
     /// keep z free; rigid bodies (loading plates) hold z fixed (glued ones at their nodes; a device in
     /// contact pushes in the x-y plane, its pin along z). The thickness must be a multiple of the cell
-    /// size; FEM mode and nodal loads along grid lines (2D segments) are refused.
+    /// size; FEM mode, nodal loads along grid lines (2D segments) and a quasi-static plate that nothing
+    /// holds in z (no glued rigid body) are refused.
     pub fn extrude(self, thickness: f64) -> Result<Setup<3>, String> {
         let h = self.grid.cell_size();
         let layers = (thickness / h).round();
@@ -450,6 +451,15 @@ impl Setup<2> {
         if !self.loads.is_empty() {
             return Err(
                 "nodal loads along grid lines are plane; load a plate with boxes or rigid bodies"
+                    .into(),
+            );
+        }
+        // The faces are free and devices in contact push in the plane: only a glued rigid body holds the
+        // plate in z. Inertia does that in a dynamic run; a quasi-static one would be singular.
+        if self.time.quasi_static && self.rigid.iter().all(|r| r.contact.is_some()) {
+            return Err(
+                "a quasi-static plate needs its motion in z held: glue a loading plate (no contact) or \
+                 run dynamically"
                     .into(),
             );
         }

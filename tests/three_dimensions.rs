@@ -388,6 +388,21 @@ fn an_extruded_plane_setup_is_the_plate_seeded_in_3d() {
         .err()
         .expect("2.5 mm is no multiple of 1 mm");
     assert!(e.contains("multiple of the cell size"), "{e}");
+    let quasi_static = Setup {
+        time: TimeIntegration {
+            quasi_static: true,
+            ..TimeIntegration::default()
+        },
+        ..Setup::new(
+            plane.grid.clone(),
+            particles.clone(),
+            vec![],
+            ShapeKind::Cpdi1,
+            TimeIntegration::default(),
+        )
+    };
+    let e = quasi_static.extrude(3.0).err().expect("nothing holds z");
+    assert!(e.contains("held"), "{e}");
     let plate = plane.extrude(3.0).expect("extrude");
     let (_, direct) = seeded(SVector::from([4.0, 8.0, 3.0]), 1.0, 2.4e-9);
     let p = &plate.particles;
