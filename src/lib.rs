@@ -7,9 +7,12 @@
 //! Source: Oropeza-Navarro, Platen, Chihadeh, Kaliske, "Modeling concrete at high-loading rates: insights by
 //! the material point method". Units everywhere: mm, s, N, MPa, t (tonne).
 //!
+//! The kinematic core and the step are generic over the space dimension (`D` = 2, plane strain, by
+//! default; `D` = 3 for specimens of finite thickness, e.g. `Setup::extrude`).
+//!
 //! Dependencies point one way:
 //! `cli (main.rs) -> app -> io -> scenario -> solver -> model -> {boundary, assembly, transfer, material,
-//! shape} -> {grid, particles} -> tensor`,
+//! shape} -> {grid, particles, solids} -> space`,
 //! and only `assembly`, `solver`, `solver_defaults` (and the PETSc smoke problem, `app::smoke`) talk to
 //! [`petsc`], the one module with `unsafe` FFI.
 
