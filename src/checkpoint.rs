@@ -14,7 +14,7 @@
 use crate::io::{OutputError, RunOutput};
 use crate::model::{Counters, Method, Model, State};
 use crate::rundir::RunIdentity;
-use nalgebra::Vector2;
+use nalgebra::SVector;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -54,14 +54,12 @@ pub enum CheckpointError {
 /// The state of a rigid body's points that moves with it (the rest comes from the configuration).
 const RIGID_COLUMNS: [&str; 2] = ["x", "corners"];
 
-fn flat2(v: &[Vector2<f64>]) -> Vec<f64> {
-    v.iter().flat_map(|x| [x.x, x.y]).collect()
+fn flat<const D: usize>(v: &[SVector<f64, D>]) -> Vec<f64> {
+    v.iter().flat_map(|x| x.iter().copied()).collect()
 }
 
-fn unflat2(f: &[f64]) -> Vec<Vector2<f64>> {
-    f.chunks_exact(2)
-        .map(|c| Vector2::new(c[0], c[1]))
-        .collect()
+fn unflat<const D: usize>(f: &[f64]) -> Vec<SVector<f64, D>> {
+    f.chunks_exact(D).map(SVector::from_column_slice).collect()
 }
 
 /// CRC-32 of the little-endian bytes of `data`.
@@ -78,9 +76,9 @@ fn crc_f64(data: &[f64]) -> u32 {
 
 /// Writes `state`, the records of `out` and the run's `identity` to `dir/checkpoint.h5`
 /// (through a temporary file, so a failed write leaves the previous checkpoint).
-pub fn save(
+pub fn save<const D: usize>(
     dir: &Path,
-    state: &State,
+    state: &State<D>,
     out: &RunOutput,
     identity: &RunIdentity,
 ) -> Result<(), OutputError> {
@@ -96,9 +94,9 @@ pub fn save(
     })
 }
 
-fn write(
+fn write<const D: usize>(
     path: &Path,
-    state: &State,
+    state: &State<D>,
     out: &RunOutput,
     identity: &RunIdentity,
 ) -> hdf5_metno::Result<()> {
@@ -128,8 +126,8 @@ fn write(
         }
     }
     if let Some((v, a)) = &state.fem_nodal {
-        put("fem_nodal_velocity".into(), &flat2(v))?;
-        put("fem_nodal_acceleration".into(), &flat2(a))?;
+        put("fem_nodal_velocity".into(), &flat(v))?;
+        put("fem_nodal_acceleration".into(), &flat(a))?;
     }
     let counters = serde_json::to_value(state.counters())
         .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))?;
@@ -242,7 +240,11 @@ pub fn read_header(dir: &Path) -> Result<Header, CheckpointError> {
 /// Restores `state` (freshly built from the same configuration as `model`) from `dir/checkpoint.h5`: every
 /// dataset is read and checked against its checksum and the configuration before `state` is changed.
 /// Returns the header (for the output's records).
-pub fn load(dir: &Path, model: &Model, state: &mut State) -> Result<Header, CheckpointError> {
+pub fn load<const D: usize>(
+    dir: &Path,
+    model: &Model<D>,
+    state: &mut State<D>,
+) -> Result<Header, CheckpointError> {
     let (f, header, path) = open(dir)?;
     let shown = path.display().to_string();
     let corrupt = |detail: String| CheckpointError::Corrupt {
@@ -280,6 +282,18 @@ pub fn load(dir: &Path, model: &Model, state: &mut State) -> Result<Header, Chec
             header.points
         )));
     }
+    let c = &header.counters;
+    if let Some(l) = c
+        .accumulated
+        .iter()
+        .chain(&c.last_reactions)
+        .find(|l| l.len() != D)
+    {
+        return Err(unusable(format!(
+            "the checkpoint is of a {}D run, the configuration of a {D}D one",
+            l.len()
+        )));
+    }
     if header.history_stride != p.history_stride() {
         return Err(unusable(
             "the checkpoint's material history has a different layout than the configuration"
@@ -301,8 +315,8 @@ pub fn load(dir: &Path, model: &Model, state: &mut State) -> Result<Header, Chec
     let fem = model.method == Method::Fem && data.contains_key("fem_nodal_velocity");
     if fem {
         let nodes = model.grid.num_nodes();
-        expected.push(("fem_nodal_velocity".into(), 2 * nodes));
-        expected.push(("fem_nodal_acceleration".into(), 2 * nodes));
+        expected.push(("fem_nodal_velocity".into(), D * nodes));
+        expected.push(("fem_nodal_acceleration".into(), D * nodes));
     }
     for (name, len) in &expected {
         match data.get(name.as_str()) {
@@ -329,10 +343,12 @@ pub fn load(dir: &Path, model: &Model, state: &mut State) -> Result<Header, Chec
     }
     if fem {
         state.fem_nodal = Some((
-            unflat2(&take("fem_nodal_velocity")),
-            unflat2(&take("fem_nodal_acceleration")),
+            unflat(&take("fem_nodal_velocity")),
+            unflat(&take("fem_nodal_acceleration")),
         ));
     }
-    state.set_counters(header.counters.clone());
+    state
+        .set_counters(header.counters.clone())
+        .map_err(&unusable)?;
     Ok(header)
 }

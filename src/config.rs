@@ -88,6 +88,20 @@ pub struct RunConfig {
     /// Loads (`[[load]]`).
     #[serde(default)]
     pub load: Vec<LoadSection>,
+    /// The plane set-up extruded to a plate and run in 3D (`[extrusion]`); absent: plane strain.
+    pub extrusion: Option<ExtrusionSection>,
+}
+
+/// `[extrusion]`: the set-up of the file, read as a plane (x, y) one, extruded along z to a plate of
+/// finite thickness with free faces and run in three dimensions (docs/theory.md, "Three dimensions").
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtrusionSection {
+    /// Plate thickness (mm), `0 <= z <= thickness`; a multiple of `grid.cell_size`.
+    pub thickness: f64,
+    /// The z (mm) of the section on which the crack is measured and the damage maps are drawn (the layer
+    /// of points seeded nearest it); default: the mid-plane.
+    pub section_z: Option<f64>,
 }
 
 /// `[run]`
@@ -742,6 +756,35 @@ impl RunConfig {
                 ));
             }
         }
+        if let Some(e) = &self.extrusion {
+            let h = self.grid.cell_size;
+            let layers = e.thickness / h;
+            if !(e.thickness.is_finite() && e.thickness > 0.0)
+                || (layers - layers.round()).abs() > 1e-9 * layers.max(1.0)
+            {
+                return Err(bad(
+                    "extrusion.thickness",
+                    e.thickness.to_string(),
+                    &format!("a plate thickness > 0 (mm), a multiple of grid.cell_size = {h}"),
+                ));
+            }
+            if self.shape.method == Method::Fem {
+                return Err(bad(
+                    "shape.method",
+                    "\"fem\"".into(),
+                    "\"mpm\" with [extrusion] (the FEM mode is plane only)",
+                ));
+            }
+            if let Some(z) = e.section_z
+                && !(0.0..=e.thickness).contains(&z)
+            {
+                return Err(bad(
+                    "extrusion.section_z",
+                    z.to_string(),
+                    &format!("a z within the plate, 0 to {} (mm)", e.thickness),
+                ));
+            }
+        }
         if !finite(&self.body_force) {
             return Err(bad(
                 "body_force",
@@ -1173,6 +1216,27 @@ impl RunConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every configuration the repository ships parses and validates (a renamed field breaks no run
+    /// unnoticed), and the 3D demo is the plane demo extruded.
+    #[test]
+    fn the_shipped_configurations_are_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+        let mut checked = 0;
+        for entry in std::fs::read_dir(&dir).expect("configs/") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                RunConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+                checked += 1;
+            }
+        }
+        assert!(checked >= 10, "{checked} configurations");
+        let plane = RunConfig::from_file(&dir.join("ct-demo.toml")).expect("ct-demo");
+        let plate = RunConfig::from_file(&dir.join("ct-3d-demo.toml")).expect("ct-3d-demo");
+        assert!(plane.extrusion.is_none());
+        assert_eq!(plate.extrusion.map(|e| e.thickness), Some(8.0));
+        assert_eq!(format!("{:?}", plane.ct), format!("{:?}", plate.ct));
+    }
 
     const MINIMAL: &str = r#"
 [run]

@@ -115,7 +115,7 @@ pub const CONNECTIVITY: Field = Field {
 };
 
 /// The point fields of a snapshot (float64); `position` is the XDMF geometry, the others its attributes.
-pub const FIELDS: [Field; 13] = [
+pub const FIELDS: [Field; 15] = [
     Field {
         name: "position",
         kind: Kind::Vector,
@@ -156,7 +156,19 @@ pub const FIELDS: [Field; 13] = [
         name: "sigma_zz",
         kind: Kind::Scalar,
         units: "MPa",
-        description: "Cauchy stress, zz component (out of plane, plane strain)",
+        description: "Cauchy stress, zz component (out of plane in 2D, plane strain)",
+    },
+    Field {
+        name: "sigma_xz",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "Cauchy stress, xz component (0 in 2D)",
+    },
+    Field {
+        name: "sigma_yz",
+        kind: Kind::Scalar,
+        units: "MPa",
+        description: "Cauchy stress, yz component (0 in 2D)",
     },
     Field {
         name: "damage",
@@ -202,6 +214,7 @@ pub const FIELDS: [Field; 13] = [
 /// Writes `crack.json` of the crack states `cracks` into `dir` (write, then rename).
 fn write_crack_json(
     dir: &Path,
+    plate: bool,
     tip: Vector2<f64>,
     criteria: &CrackCriteria,
     cracks: &[CrackState],
@@ -217,8 +230,12 @@ fn write_crack_json(
         })
         .collect();
     let json = serde_json::json!({
-        "units": "length mm, time s, speed mm/s, angles degrees against the notch axis (+x), counter-clockwise \
-                  positive, energies N mm per mm of thickness",
+        "units": format!("length mm, time s, speed mm/s, angles degrees against the notch axis (+x), \
+                  counter-clockwise positive, energies {}", if plate {
+                      "N mm (of the whole plate; the other metrics of its section layer)"
+                  } else {
+                      "N mm per mm of thickness"
+                  }),
         "notch_tip": [tip.x, tip.y],
         "criteria": criteria,
         "states": cracks,
@@ -322,20 +339,38 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
             .dataset("damage")
             .and_then(|d| d.read_raw())
             .map_err(h5)?;
-        let width = position.len() / damage.len().max(1);
-        let x: Vec<Vector2<f64>> = position
-            .chunks_exact(width.max(1))
-            .map(|c| Vector2::new(c[0], c[1]))
+        let width = (position.len() / damage.len().max(1)).max(1);
+        // A plate (3D run): the layer of the section, found by the points' initial z.
+        let section: Vec<usize> = match &cfg.extrusion {
+            Some(e) => {
+                let displacement: Vec<f64> = file
+                    .dataset("displacement")
+                    .and_then(|d| d.read_raw())
+                    .map_err(h5)?;
+                let z0: Vec<f64> = position
+                    .chunks_exact(width)
+                    .zip(displacement.chunks_exact(width))
+                    .map(|(x, u)| x[2] - u[2])
+                    .collect();
+                section_layer(&z0, e.section_z.unwrap_or(0.5 * e.thickness)).1
+            }
+            None => (0..damage.len()).collect(),
+        };
+        let x: Vec<Vector2<f64>> = section
+            .iter()
+            .map(|&k| Vector2::new(position[width * k], position[width * k + 1]))
             .collect();
-        let mut state = crack::measure(&x, &damage, tip, h, spacing, &criteria, time);
+        let layer_damage: Vec<f64> = section.iter().map(|&k| damage[k]).collect();
+        let mut state = crack::measure(&x, &layer_damage, tip, h, spacing, &criteria, time);
         if let Ok(nonlocal) = file
             .dataset("nonlocal_damage")
             .and_then(|d| d.read_raw::<f64>())
         {
-            state.nonlocal_points = damage
+            state.nonlocal_points = section
                 .iter()
-                .zip(&nonlocal)
-                .filter(|&(&d, &n)| d >= criteria.damage_threshold && n >= 0.5 * d)
+                .filter(|&&k| {
+                    damage[k] >= criteria.damage_threshold && nonlocal[k] >= 0.5 * damage[k]
+                })
                 .count();
         }
         if let Some(o) = old
@@ -350,8 +385,38 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         return Err(run_err(dir, "no snapshots fields_*.h5".into()));
     }
     states.sort_by(|a, b| a.time.total_cmp(&b.time));
-    write_crack_json(dir, tip, &criteria, &states)?;
+    write_crack_json(dir, cfg.extrusion.is_some(), tip, &criteria, &states)?;
     Ok(states)
+}
+
+/// The layer of points seeded nearest the plane `z` (mm), from the points' initial z `z0`: its z and the
+/// points within a quarter of the layer spacing of it (the layers of a seeded plate are a point spacing
+/// apart).
+fn section_layer(z0: &[f64], z: f64) -> (f64, Vec<usize>) {
+    let layer = z0
+        .iter()
+        .copied()
+        .min_by(|a, b| (a - z).abs().total_cmp(&(b - z).abs()).then(a.total_cmp(b)))
+        .unwrap_or(z);
+    let spacing = z0
+        .iter()
+        .map(|&w| (w - layer).abs())
+        .filter(|&d| d > 1e-9 * layer.abs().max(1.0))
+        .fold(f64::INFINITY, f64::min);
+    let tol = if spacing.is_finite() {
+        0.25 * spacing
+    } else {
+        1e-9
+    };
+    let points = (0..z0.len())
+        .filter(|&k| (z0[k] - layer).abs() < tol)
+        .collect();
+    (layer, points)
+}
+
+/// The in-plane part (x, y) of a point (mm).
+fn xy<const D: usize>(x: &SVector<f64, D>) -> Vector2<f64> {
+    Vector2::new(x[0], x[1])
 }
 
 /// A point as x, y, z (mm; z = 0 in 2D).
@@ -439,6 +504,12 @@ pub struct RunOutput {
     /// Notch tip (mm) and criteria of the crack metrics, if tracked.
     crack: Option<(Vector2<f64>, CrackCriteria)>,
     cracks: Vec<CrackState>,
+    /// 2 or 3: a 3D run's forces are N and its energies N mm (of the whole plate), a 2D run's per mm of
+    /// thickness.
+    dimension: usize,
+    /// 3D: the z (mm) of the section whose layer of points the crack metrics and damage maps show;
+    /// `None`: the middle of the points' initial z range.
+    section_z: Option<f64>,
 }
 
 impl RunOutput {
@@ -456,6 +527,7 @@ impl RunOutput {
         Ok(Self {
             initial_position: initial.particles.x.iter().map(xyz).collect(),
             writes: true,
+            dimension: D,
             ..Self::mirror(dir, title, config_text, model.grid.cell_size())
         })
     }
@@ -474,7 +546,33 @@ impl RunOutput {
             writes: false,
             crack: None,
             cracks: Vec::new(),
+            dimension: 2,
+            section_z: None,
         }
+    }
+
+    /// 3D: measure the crack and draw the damage maps on the layer of points seeded nearest `z` (mm)
+    /// instead of the middle one.
+    pub fn set_section(&mut self, z: f64) {
+        self.section_z = Some(z);
+    }
+
+    /// The points of `state` that the crack metrics and damage maps show: every point in 2D, in 3D the
+    /// layer of points seeded nearest the section plane (by their initial z, so that a layer stays one as
+    /// the plate deforms), and that plane's z.
+    fn section<const D: usize>(&self, state: &State<D>) -> (Vec<usize>, Option<f64>) {
+        let n = state.particles.len();
+        if D < 3 || self.initial_position.len() != n {
+            return ((0..n).collect(), None);
+        }
+        let z0: Vec<f64> = self.initial_position.iter().map(|x| x[2]).collect();
+        let (lo, hi) = z0
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| {
+                (a.min(z), b.max(z))
+            });
+        let (layer, points) = section_layer(&z0, self.section_z.unwrap_or(0.5 * (lo + hi)));
+        (points, Some(layer))
     }
 
     /// Measures the crack grown from `notch_tip` (mm) at every snapshot and writes `crack.json`.
@@ -504,7 +602,7 @@ impl RunOutput {
         let Some((tip, criteria)) = &self.crack else {
             return Ok(());
         };
-        write_crack_json(&self.dir, *tip, criteria, &self.cracks)
+        write_crack_json(&self.dir, self.dimension == 3, *tip, criteria, &self.cracks)
     }
 
     /// True if this process writes the run's files (false for a [`RunOutput::mirror`]).
@@ -533,11 +631,14 @@ impl RunOutput {
 
     fn write_history(&self) -> Result<(), OutputError> {
         let mut s = String::new();
-        s.push_str("# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s\n");
+        s.push_str(match self.dimension {
+            3 => "# units: time s, dt s, displacement mm, force N (3D: of the whole plate), rotation rad, energy N mm, wall s\n",
+            _ => "# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s\n",
+        });
         let mut columns: Vec<String> = history::LEADING.map(String::from).to_vec();
         if let Some(r) = self.rows.first() {
             for (name, _) in &r.reactions {
-                columns.extend(history::reaction_columns(name));
+                columns.extend(history::reaction_columns(name, self.dimension));
             }
             for (name, _) in &r.rotations {
                 columns.push(history::rotation_column(name));
@@ -564,7 +665,9 @@ impl RunOutput {
                 r.unknowns
             );
             for ((_, f), (_, u)) in r.reactions.iter().zip(&r.displacements) {
-                let _ = write!(s, ",{:.9e},{:.9e},{:.9e},{:.9e}", u[0], u[1], f[0], f[1]);
+                for v in u.iter().chain(f) {
+                    let _ = write!(s, ",{v:.9e}");
+                }
             }
             for (_, theta) in &r.rotations {
                 let _ = write!(s, ",{theta:.9e}");
@@ -589,17 +692,21 @@ impl RunOutput {
         write_atomic(&self.dir.join(file::HISTORY), s.as_bytes())
     }
 
-    /// Writes the point fields of the current state (HDF5 + XDMF index) and a damage map (PNG).
-    pub fn snapshot(&mut self, state: &State) -> Result<(), OutputError> {
+    /// Writes the point fields of the current state (HDF5 + XDMF index), measures the crack (if tracked) and
+    /// draws a damage map (PNG); in 3D both of the section layer ([`RunOutput::set_section`]).
+    pub fn snapshot<const D: usize>(&mut self, state: &State<D>) -> Result<(), OutputError> {
         if !self.writes {
             return Ok(());
         }
         self.write_fields(state)?;
+        let (section, _) = self.section(state);
         if let Some((tip, criteria)) = &self.crack {
             let p = &state.particles;
+            let x: Vec<Vector2<f64>> = section.iter().map(|&k| xy(&p.x[k])).collect();
+            let damage: Vec<f64> = section.iter().map(|&k| p.damage[k]).collect();
             let mut measured = crack::measure(
-                &p.x,
-                &p.damage,
+                &x,
+                &damage,
                 *tip,
                 self.cell_size,
                 p.point_spacing(),
@@ -610,8 +717,9 @@ impl RunOutput {
                 .dissipated
                 .iter()
                 .fold([0.0; 2], |a, d| [a[0] + d[0], a[1] + d[1]]);
-            measured.nonlocal_points = (0..p.len())
-                .filter(|&i| {
+            measured.nonlocal_points = section
+                .iter()
+                .filter(|&&i| {
                     p.damage[i] >= criteria.damage_threshold
                         && p.nonlocal_damage[i] >= 0.5 * p.damage[i]
                 })
@@ -719,6 +827,8 @@ impl RunOutput {
             comp(1, 1),
             comp(0, 1),
             comp(2, 2),
+            comp(0, 2),
+            comp(1, 2),
             p.damage.clone(),
             p.eta_bar.clone(),
             (0..p.len())
@@ -745,26 +855,45 @@ impl RunOutput {
         )
     }
 
-    /// Damage map of the current state.
-    pub fn damage_map(&self, state: &State, path: &Path) -> Result<(), OutputError> {
+    /// Damage map of the current state (in 3D of the section layer).
+    pub fn damage_map<const D: usize>(
+        &self,
+        state: &State<D>,
+        path: &Path,
+    ) -> Result<(), OutputError> {
         if !self.writes {
             return Ok(());
         }
         let p = &state.particles;
-        let h = self.cell_size;
+        let (section, z) = self.section(state);
+        let plane = match z {
+            Some(z) => format!(", layer z = {z:.1} mm"),
+            None => String::new(),
+        };
         let plot = ScatterField {
-            title: format!("{}: damage at t = {:.1} us", self.title, state.time * 1e6),
-            x: p.x.iter().map(|x| x.x).collect(),
-            y: p.x.iter().map(|x| x.y).collect(),
-            value: p.damage.clone(),
+            title: format!(
+                "{}: damage at t = {:.1} us{plane}",
+                self.title,
+                state.time * 1e6
+            ),
+            x: section.iter().map(|&k| p.x[k][0]).collect(),
+            y: section.iter().map(|&k| p.x[k][1]).collect(),
+            value: section.iter().map(|&k| p.damage[k]).collect(),
             value_label: "damage [-]".into(),
             range: Some((0.0, 1.0)),
-            point_size: h / 2.0,
+            point_size: self.cell_size / 2.0,
         };
         plot.save_png(path).map_err(|e| OutputError::Plot {
             path: path.display().to_string(),
             message: e.to_string(),
         })
+    }
+
+    fn force_label(&self) -> String {
+        match self.dimension {
+            3 => "reaction F_y [N]".into(),
+            _ => "reaction F_y [N/mm]".into(),
+        }
     }
 
     /// Reaction force against time and against the prescribed displacement, one curve per constraint set
@@ -806,7 +935,7 @@ impl RunOutput {
             LinePlot {
                 title: format!("{}: reaction force", self.title),
                 x_label: "time [us]".into(),
-                y_label: "reaction F_y [N/mm]".into(),
+                y_label: self.force_label(),
                 series: vs_t,
             },
             file::FORCE_TIME,
@@ -816,7 +945,7 @@ impl RunOutput {
                 LinePlot {
                     title: format!("{}: reaction force vs load-point displacement", self.title),
                     x_label: "|u_y| of the constraint [mm]".into(),
-                    y_label: "reaction F_y [N/mm]".into(),
+                    y_label: self.force_label(),
                     series: vs_u,
                 },
                 file::FORCE_DISPLACEMENT,

@@ -622,10 +622,10 @@ fn append_history_note(dir: &Path, note: &str) -> Result<()> {
 /// Writes the point fields, the force plots and the checkpoint of the current state.
 /// Writes the point fields, the force plots and the checkpoint of the current state (with the points
 /// shared out over processes, process 0 gathers them first). Collective.
-fn save_state(
+fn save_state<const D: usize>(
     session: &SessionGuard,
     out: &mut RunOutput,
-    sim: &Simulation,
+    sim: &Simulation<D>,
     dir: &Path,
     identity: &RunIdentity,
 ) -> Result<()> {
@@ -752,21 +752,31 @@ fn run_simulation(
 
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
     share_cores(&session);
-    simulate(
-        &session,
-        own_args,
-        petsc_args,
-        path,
-        &flags,
-        Prepared {
-            cfg,
-            overrides,
-            effective,
-            identity,
-            dir,
-            resume_from,
-        },
-    )?;
+    let prepared = Prepared {
+        cfg,
+        overrides,
+        effective,
+        identity,
+        dir,
+        resume_from,
+    };
+    // A plane set-up, or the plate it is extruded to ([extrusion]): the same run in 2D or 3D.
+    match prepared.cfg.extrusion.as_ref().map(|e| e.thickness) {
+        None => simulate::<2>(&session, own_args, petsc_args, path, &flags, prepared, &Ok)?,
+        Some(thickness) => simulate::<3>(
+            &session,
+            own_args,
+            petsc_args,
+            path,
+            &flags,
+            prepared,
+            &|plane: Setup| {
+                plane
+                    .extrude(thickness)
+                    .map_err(|e| format!("extrusion.thickness: {e}"))
+            },
+        )?,
+    }
     Session::finalize(session)?;
     Ok(())
 }
@@ -782,13 +792,16 @@ struct Prepared {
     resume_from: Option<checkpoint::Header>,
 }
 
-fn simulate(
+/// The run of a prepared configuration: `lift` turns the plane set-up the configuration describes into
+/// the one of `D` dimensions that runs (2D: itself; 3D: its extrusion).
+fn simulate<const D: usize>(
     session: &SessionGuard,
     own_args: &[String],
     petsc_args: &[String],
     path: &Path,
     flags: &RunFlags,
     prepared: Prepared,
+    lift: &dyn Fn(Setup) -> Result<Setup<D>, String>,
 ) -> Result<()> {
     let Prepared {
         cfg,
@@ -801,13 +814,14 @@ fn simulate(
     let file = path.display().to_string();
     petsc::apply_default_options(session, &cfg.run.petsc_options)
         .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
-    let model = || scenario::build(&cfg).map_err(|e| bad(format!("{file}: {e}")));
-    let simulation = |setup: Setup| Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")));
-    let mut setup = model()?;
+    let plane = || scenario::build(&cfg).map_err(|e| bad(format!("{file}: {e}")));
+    let model = || lift(plane()?).map_err(|e| bad(format!("{file}: {e}")));
+    let mut setup = plane()?;
     // The solver defaults follow the kind of step (docs/solvers.md); those a user's solver choice makes
     // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
     let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
-    let mut sim = simulation(setup)?;
+    let setup = lift(setup).map_err(|e| bad(format!("{file}: {e}")))?;
+    let mut sim = Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")))?;
     // On several processes every one holds the whole model and its own share of the points (from the
     // first step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes");
     // process 0 gathers the points and alone writes.
@@ -831,12 +845,16 @@ fn simulate(
     let np = sim.state.particles.len();
     let grid = &sim.model.grid;
     if root {
+        let cells: Vec<String> = grid.cells().iter().map(usize::to_string).collect();
         eprintln!(
-            "{}: {np} material points, grid {}x{} cells of {} mm, {} steps of {:e} s, {} unknowns per node, {}output in {}",
+            "{}: {np} material points, grid {} cells of {} mm{}, {} steps of {:e} s, {} unknowns per node, {}output in {}",
             cfg.run.name,
-            grid.nx(),
-            grid.ny(),
+            cells.join("x"),
             grid.cell_size(),
+            match &cfg.extrusion {
+                Some(e) => format!(", a {} mm plate (3D)", e.thickness),
+                None => String::new(),
+            },
             cfg.run.steps,
             cfg.time.dt,
             sim.model.layout().per_node(),
@@ -925,6 +943,9 @@ fn simulate(
         }
         None => RunOutput::mirror(&dir, &cfg.run.name, &config_copy, cfg.grid.cell_size),
     };
+    if let Some(z) = cfg.extrusion.as_ref().and_then(|e| e.section_z) {
+        out.set_section(z);
+    }
     if let Some(ct) = &cfg.ct {
         out.track_crack(
             nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
@@ -963,7 +984,7 @@ fn simulate(
     let hint = resume_command(own_args, petsc_args, &dir);
     let finish = |record: &mut RunRecord,
                   out: &RunOutput,
-                  sim: &Simulation,
+                  sim: &Simulation<D>,
                   status: &str,
                   why: Option<String>|
      -> Result<Option<String>> {
@@ -1129,9 +1150,12 @@ fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
     println!("| peak memory | {peak:.0} MB |");
     if let Some(last) = rows.last() {
         for (name, f) in &last.reactions {
+            let components: Vec<String> = f.iter().map(|v| format!("{v:.4e}")).collect();
+            // A 3D run's reactions are of the whole plate, a 2D run's per mm of thickness.
+            let units = if f.len() == 3 { "N" } else { "N/mm" };
             println!(
-                "| final reaction `{name}` | ({:.4e}, {:.4e}) N/mm |",
-                f[0], f[1]
+                "| final reaction `{name}` | ({}) {units} |",
+                components.join(", ")
             );
         }
     }

@@ -337,7 +337,7 @@ impl<const D: usize> State<D> {
     }
 }
 
-impl State<2> {
+impl<const D: usize> State<D> {
     /// The counters besides the points (the header of a checkpoint).
     pub fn counters(&self) -> Counters {
         Counters {
@@ -347,8 +347,8 @@ impl State<2> {
             calm_steps: self.calm_steps,
             external_work: self.external_work,
             initial_energy: Some(self.initial_energy),
-            accumulated: self.accumulated.clone(),
-            last_reactions: self.last_reactions.clone(),
+            accumulated: self.accumulated.iter().map(|a| a.to_vec()).collect(),
+            last_reactions: self.last_reactions.iter().map(|f| f.to_vec()).collect(),
             rotations: self.rotations.clone(),
             rotation_rates: self.rotation_rates.clone(),
             contact_statuses: self.contact_statuses.clone(),
@@ -357,8 +357,24 @@ impl State<2> {
     }
 
     /// Restores the counters of a checkpoint (the points are restored by the caller); lists of an older
-    /// checkpoint without pins or contact are padded to one entry per rigid body.
-    pub fn set_counters(&mut self, c: Counters) {
+    /// checkpoint without pins or contact are padded to one entry per rigid body. An error says which
+    /// list does not have `D` components per constraint set.
+    pub fn set_counters(&mut self, c: Counters) -> Result<(), String> {
+        let per_set = |name: &str, lists: &[Vec<f64>]| -> Result<Vec<[f64; D]>, String> {
+            lists
+                .iter()
+                .map(|l| {
+                    <[f64; D]>::try_from(l.as_slice()).map_err(|_| {
+                        format!(
+                            "counters.{name}: {} components per constraint set, this run has {D}",
+                            l.len()
+                        )
+                    })
+                })
+                .collect()
+        };
+        let accumulated = per_set("accumulated", &c.accumulated)?;
+        let last_reactions = per_set("last_reactions", &c.last_reactions)?;
         let nr = self.rigid.len();
         self.time = c.time;
         self.step = c.step;
@@ -368,8 +384,8 @@ impl State<2> {
         if let Some(e) = c.initial_energy {
             self.initial_energy = e;
         }
-        self.accumulated = c.accumulated;
-        self.last_reactions = c.last_reactions;
+        self.accumulated = accumulated;
+        self.last_reactions = last_reactions;
         self.rotations = c.rotations;
         self.rotations.resize(nr, 0.0);
         self.rotation_rates = c.rotation_rates;
@@ -377,6 +393,7 @@ impl State<2> {
         self.contact_statuses = c.contact_statuses;
         self.contact_statuses.resize(nr, Vec::new());
         self.closed_pairs = c.closed_pairs;
+        Ok(())
     }
 }
 
@@ -398,10 +415,10 @@ pub struct Counters {
     /// the value the configuration gives).
     #[serde(default)]
     pub initial_energy: Option<f64>,
-    /// Accumulated prescribed displacement per constraint set (mm).
-    pub accumulated: Vec<[f64; 2]>,
-    /// Last reactions per constraint set (N per mm thickness).
-    pub last_reactions: Vec<[f64; 2]>,
+    /// Accumulated prescribed displacement per constraint set, one value per component (mm).
+    pub accumulated: Vec<Vec<f64>>,
+    /// Last reactions per constraint set, one value per component (N; in 2D per mm thickness).
+    pub last_reactions: Vec<Vec<f64>>,
     /// Rotation of each rigid body about its pin (rad; 0 without a pin).
     #[serde(default)]
     pub rotations: Vec<f64>,

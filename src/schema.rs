@@ -112,9 +112,12 @@ pub mod history {
         NEW_PATTERN,
     ];
 
-    /// Displacement (mm) and force (N per mm thickness) columns of a constraint set, rigid body or load.
-    pub fn reaction_columns(name: &str) -> [String; 4] {
-        ["ux", "uy", "fx", "fy"].map(|c| format!("{name}_{c}"))
+    /// Displacement (mm) and force (N per mm thickness; in 3D N) columns of a constraint set, rigid body
+    /// or load, `dimension` (2 or 3) components each.
+    pub fn reaction_columns(name: &str, dimension: usize) -> Vec<String> {
+        let d = dimension.min(3);
+        let (u, f) = (&["ux", "uy", "uz"][..d], &["fx", "fy", "fz"][..d]);
+        u.iter().chain(f).map(|c| format!("{name}_{c}")).collect()
     }
 
     /// Rotation column (rad) of a pinned device.

@@ -654,7 +654,13 @@ fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
     assert_eq!(remeasured.len(), snapshots);
     assert_eq!(written.len(), remeasured.len());
     for (a, b) in written.iter().zip(&remeasured) {
-        for key in ["time", "classification", "length", "points", "band_width"] {
+        for key in [
+            "time",
+            "classification",
+            "length",
+            "band_width",
+            "nonlocal_points",
+        ] {
             assert_eq!(a[key], b[key], "{key}: {a} vs {b}");
         }
     }
