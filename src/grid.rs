@@ -3,8 +3,10 @@
 //!
 //! A uniform grid with origin `x_0` (mm), square (cubic) cells of size `h` (mm), `n_1 x .. x n_D` cells and
 //! `(n_1 + 1) .. (n_D + 1)` nodes. Node `(i, j[, k])` sits at `x_0 + (i, j[, k]) h` and has the global index
-//! `I = i + (n_1 + 1) (j + (n_2 + 1) k)`; cell `(i, j[, k])` spans `x_0 + [i, i + 1] h x [j, j + 1] h [x ..]`
-//! and has the index `i + n_1 (j + n_2 k)`.
+//! `I = i + (n_1 + 1) j` in 2D and `I = i + (n_1 + 1) (k + (n_3 + 1) j)` in 3D: x varies fastest and y
+//! slowest in both ([`AXIS_ORDER`]), so that the bands of processes, cut across y ([`crate::partition`]),
+//! own contiguous node ranges, also for a plate extruded along z. Cell `(i, j[, k])` spans
+//! `x_0 + [i, i + 1] h x [j, j + 1] h [x ..]` and is numbered in the same axis order.
 //!
 //! The grid functions are the multilinear hat functions
 //!
@@ -160,6 +162,19 @@ pub struct Grid<const D: usize = 2> {
     cells: [usize; D],
 }
 
+/// The axes from the one whose node index varies fastest to the slowest, for `D` = 2 and 3 (the first `D`
+/// entries of row `D - 2`): x, y in 2D; x, z, y in 3D.
+pub const AXIS_ORDER: [[usize; 3]; 2] = [[0, 1, 2], [0, 2, 1]];
+
+/// The axis whose node index varies slowest (y): the axis across which processes cut their bands.
+pub const SLOWEST_AXIS: usize = 1;
+
+/// Axis `k` of [`AXIS_ORDER`] for dimension `D` (0: the fastest).
+#[inline]
+pub const fn axis<const D: usize>(k: usize) -> usize {
+    AXIS_ORDER[D - 2][k]
+}
+
 /// Lattice offset `(c_0, .., c_{D-1})` in `{0, 1}^D` of node `c` of a cell ([`CellWeights`] order).
 #[inline]
 pub fn cell_node_offset<const D: usize>(c: usize) -> [usize; D] {
@@ -273,28 +288,34 @@ impl<const D: usize> Grid<D> {
         self.origin + SVector::<f64, D>::from_fn(|d, _| self.cells[d] as f64) * self.h
     }
 
-    /// Global index `I = i + (n_1 + 1) (j + (n_2 + 1) k)` of the node at lattice position `ijk`.
+    /// Global index of the node at lattice position `ijk` (the module's numbering: x fastest, y slowest).
     #[inline]
     pub fn node_at(&self, ijk: [usize; D]) -> usize {
-        (0..D)
-            .rev()
-            .fold(0, |acc, d| acc * (self.cells[d] + 1) + ijk[d])
+        (0..D).rev().fold(0, |acc, k| {
+            let d = axis::<D>(k);
+            acc * (self.cells[d] + 1) + ijk[d]
+        })
     }
 
-    /// Global index `i + n_1 (j + n_2 k)` of the cell at lattice position `ijk`.
+    /// Global index of the cell at lattice position `ijk` (numbered as the nodes).
     pub fn cell_at(&self, ijk: [usize; D]) -> usize {
-        (0..D).rev().fold(0, |acc, d| acc * self.cells[d] + ijk[d])
+        (0..D).rev().fold(0, |acc, k| {
+            let d = axis::<D>(k);
+            acc * self.cells[d] + ijk[d]
+        })
     }
 
     /// Lattice position of node `I`; the copy `I + f N` of node `I` in velocity field `f`
     /// ([`ShapeTable::offset_fields`](crate::shape::ShapeTable::offset_fields)) maps to node `I`.
     pub fn node_lattice(&self, node: usize) -> [usize; D] {
         let mut rest = node % self.num_nodes();
-        std::array::from_fn(|d| {
-            let i = rest % (self.cells[d] + 1);
+        let mut ijk = [0; D];
+        for k in 0..D {
+            let d = axis::<D>(k);
+            ijk[d] = rest % (self.cells[d] + 1);
             rest /= self.cells[d] + 1;
-            i
-        })
+        }
+        ijk
     }
 
     /// Position `x_I` of node `I` (mm), also of its copies in other velocity fields.
@@ -528,11 +549,20 @@ mod tests {
         let g = Grid::<3>::new(Vector3::new(-1.0, 0.0, 2.0), 0.5, [4, 3, 2]).unwrap();
         assert_eq!((g.num_nodes(), g.num_cells()), (5 * 4 * 3, 24));
         assert_eq!(g.nz(), 2);
+        // x fastest, then z, y slowest: a y row of nodes is a contiguous range.
         let n = g.node_at([2, 1, 2]);
-        assert_eq!(n, 2 + 5 * (1 + 4 * 2));
+        assert_eq!(n, 2 + 5 * (2 + 3)); // i + (nx + 1) (k + (nz + 1) j), j = 1
         assert_eq!(g.node_lattice(n), [2, 1, 2]);
         assert_eq!(g.node_position(n), Vector3::new(0.0, 0.5, 3.0));
-        assert_eq!(g.cell_at([3, 2, 1]), 3 + 4 * (2 + 3));
+        assert_eq!(g.cell_at([3, 2, 1]), 3 + 4 * (1 + 2 * 2));
+        let row: Vec<usize> = (0..3)
+            .flat_map(|k| (0..5).map(move |i| [i, 1, k]))
+            .map(|ijk| g.node_at(ijk))
+            .collect();
+        assert_eq!(row, (15..30).collect::<Vec<_>>());
+        for node in 0..g.num_nodes() {
+            assert_eq!(g.node_at(g.node_lattice(node)), node);
+        }
         assert_eq!(g.upper(), Vector3::new(1.0, 1.5, 3.0));
         assert_eq!(g.cell_of(Vector3::new(1.0, 1.5, 3.0)), Some([3, 2, 1]));
         assert_eq!(g.cell_of(Vector3::new(0.0, 0.0, 1.99)), None);

@@ -1,13 +1,14 @@
 //! Material points owned by processes (`docs/theory.md`, "Processes"): on `P` processes the grid's cell
-//! rows (layers of cells across the last axis: rows along y in 2D, slabs along z in 3D) are cut into `P`
-//! contiguous bands holding about the same number of points; a process owns the
+//! rows (layers of cells across y, the axis whose node index varies slowest in 2D and 3D,
+//! [`crate::grid::SLOWEST_AXIS`]) are cut into `P` contiguous bands holding about the same number of points
+//! (a plate extruded along z is cut across its height, not its thickness); a process owns the
 //! points in its cells and the grid nodes of its node rows (the block rows of the Jacobian it assembles).
 //! Every step, points that moved into another process's band migrate to it, and every process receives
 //! copies (ghosts) of the other processes' points whose support may reach its node rows, so that it can
 //! evaluate its rows completely. Points travel as records ([`Particles::pack`]) through a PETSc star
 //! forest (`PetscSF`, [`SessionGuard::exchange`]). Units: mm.
 
-use crate::grid::Grid;
+use crate::grid::{Grid, SLOWEST_AXIS};
 use crate::model::State;
 use crate::particles::Particles;
 use crate::petsc::{PetscError, SessionGuard};
@@ -30,13 +31,8 @@ pub struct Partition {
     y0: f64,
     h: f64,
     ny: usize,
-    /// Nodes per node row (`nx + 1` in 2D, `(nx + 1)(ny + 1)` in 3D).
+    /// Nodes per node row (`nx + 1` in 2D, `(nx + 1)(nz + 1)` in 3D).
     row_nodes: usize,
-}
-
-/// The axis across the rows (the last one, whose node index varies slowest).
-const fn row_axis(d: usize) -> usize {
-    d - 1
 }
 
 impl Partition {
@@ -48,7 +44,7 @@ impl Partition {
         particles: &Particles<D>,
         all_here: bool,
     ) -> Result<Self, String> {
-        let axis = row_axis(D);
+        let axis = SLOWEST_AXIS;
         let ny = grid.cells()[axis];
         let mut counts = vec![0.0; ny];
         let h = grid.cell_size();
@@ -69,7 +65,7 @@ impl Partition {
         grid: &Grid<D>,
         counts: &[f64],
     ) -> Result<Self, String> {
-        let axis = row_axis(D);
+        let axis = SLOWEST_AXIS;
         let ny = grid.cells()[axis];
         if ny < size {
             return Err(format!(
@@ -95,7 +91,10 @@ impl Partition {
             y0: grid.origin()[axis],
             h: grid.cell_size(),
             ny,
-            row_nodes: grid.cells()[..axis].iter().map(|n| n + 1).product(),
+            row_nodes: (0..D)
+                .filter(|&d| d != axis)
+                .map(|d| grid.cells()[d] + 1)
+                .product(),
         })
     }
 
@@ -111,7 +110,7 @@ impl Partition {
 
     /// The process owning a point at `x` (mm): the process of its cell.
     pub fn owner<const D: usize>(&self, x: SVector<f64, D>) -> usize {
-        self.owner_of_row(self.cell_row(x[row_axis(D)]))
+        self.owner_of_row(self.cell_row(x[SLOWEST_AXIS]))
     }
 
     /// Node rows of process `r`.
@@ -134,7 +133,7 @@ impl Partition {
             .iter()
             .chain(std::iter::once(&particles.x[p]))
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
-                (lo.min(c[row_axis(D)]), hi.max(c[row_axis(D)]))
+                (lo.min(c[SLOWEST_AXIS]), hi.max(c[SLOWEST_AXIS]))
             });
         let row = |y: f64| ((y - self.y0) / self.h).floor() as isize;
         row(lo) - REACH_ROWS + 1..row(hi) + REACH_ROWS + 1

@@ -36,7 +36,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::{Interpolator, ShapeError, Weight, add_merged, outside};
-use crate::grid::{Grid, Locus, MAX_CELL_NODES, cell_node_offset};
+use crate::grid::{Grid, Locus, MAX_CELL_NODES, axis, cell_node_offset};
 use crate::particles::{Particles, corner_signs, domain_corner};
 use crate::space::{cofactor, det};
 
@@ -118,16 +118,18 @@ fn corner_weights<const D: usize>(
         }
         return Ok(count);
     }
-    // Window slot `sum_d a_d 4^d` is node `low + a`; `out` (4^D entries) is the window, written on first
-    // touch (no clearing), then compacted in ascending slot order (a slot is never below its new place).
+    // Window slot `sum_k a_(axis k) 4^k` is node `low + a` (axes in the grid's numbering order, so that
+    // ascending slots are ascending nodes); `out` (4^D entries) is the window, written on first touch (no
+    // clearing), then compacted in ascending slot order (a slot is never below its new place).
     let mut used = 0_u64;
     for (c, cell) in cells.iter().enumerate() {
         for (k, &n) in hats[c][..nc].iter().enumerate() {
             if n != 0.0 {
                 let off = cell_node_offset::<D>(k);
-                let slot = (0..D)
-                    .rev()
-                    .fold(0, |acc, d| 4 * acc + cell[d] - low[d] + off[d]);
+                let slot = (0..D).rev().fold(0, |acc, k| {
+                    let d = axis::<D>(k);
+                    4 * acc + cell[d] - low[d] + off[d]
+                });
                 let (value, grad) = (wf[c] * n, wg[c] * n);
                 if used & (1 << slot) == 0 {
                     out[slot].value = value;
@@ -144,7 +146,11 @@ fn corner_weights<const D: usize>(
     while used != 0 {
         let slot = used.trailing_zeros() as usize;
         used &= used - 1;
-        let node = grid.node_at(std::array::from_fn(|d| low[d] + (slot >> (2 * d)) % 4));
+        let mut ijk = low;
+        for k in 0..D {
+            ijk[axis::<D>(k)] += (slot >> (2 * k)) % 4;
+        }
+        let node = grid.node_at(ijk);
         out[count] = Weight {
             node: node as u32,
             value: out[slot].value,
