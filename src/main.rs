@@ -819,7 +819,7 @@ fn simulate<const D: usize>(
     let mut setup = plane()?;
     // The solver defaults follow the kind of step (docs/solvers.md); those a user's solver choice makes
     // irrelevant (e.g. the MUMPS option under -pc_type hypre) must not be reported as unused.
-    let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
+    let (_, defaults) = solver_defaults::apply(session, &mut setup, D)?;
     let setup = lift(setup).map_err(|e| bad(format!("{file}: {e}")))?;
     let mut sim = Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")))?;
     // On several processes every one holds the whole model and its own share of the points (from the
