@@ -20,7 +20,7 @@
 //! is updated (tensile nodes released, penetrating nodes added, stick/slip switched by the Coulomb
 //! cone and the slip direction) until it does not change.
 
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{Matrix2, SVector, Vector2};
 
 /// The contact law of a rigid device (`[[rigid_body]] contact = {...}`).
 #[derive(Debug, Clone, PartialEq)]
@@ -292,9 +292,10 @@ fn row_order(n: Vector2<f64>) -> ((usize, f64), (usize, f64)) {
 }
 
 /// One node of two-body grid contact in a step: the copies of a grid node in the velocity field of the
-/// specimen (`a`) and of another body (`b`), both active (`docs/theory.md`, "Contact between bodies").
+/// specimen (`a`) and of another body (`b`), both active (`docs/theory.md`, "Contact between bodies"),
+/// in `D` = 2 or 3 dimensions.
 #[derive(Debug, Clone)]
-pub struct NodePair {
+pub struct NodePair<const D: usize = 2> {
     /// The specimen's copy of the grid node (field 0: the grid node id).
     pub node_a: usize,
     /// The other body's copy, `node_a + f N` for field `f` and `N` grid nodes.
@@ -304,58 +305,86 @@ pub struct NodePair {
     /// Active-node index (block row) of `node_b`.
     pub row_b: usize,
     /// Unit normal from body `a` into body `b` (from the nodal mass gradients of the two fields).
-    pub normal: Vector2<f64>,
+    pub normal: SVector<f64, D>,
     /// Gap between the bodies along the normal at the start of the step (mm), >= 0.
     pub gap: f64,
     /// Whether the normal constraint is active (frictionless: no tangential force when it is).
     pub closed: bool,
 }
 
-impl NodePair {
-    /// Unit tangent `t = (-n_y, n_x)`.
-    pub fn tangent(&self) -> Vector2<f64> {
-        Vector2::new(-self.normal.y, self.normal.x)
+/// A row of copy `b` of a closed pair: its component, its sign and the direction it constrains.
+type PairRow<const D: usize> = (usize, f64, SVector<f64, D>);
+
+impl<const D: usize> NodePair<D> {
+    /// The rows of copy `b`: first the normal constraint, in the component where `n` is largest; then
+    /// the `D - 1` frictionless rows `t . R_b = 0` in the other components, each signed so that its
+    /// diagonal entry is positive (pivoting-free factorisations need non-zero pivots). In 2D `t = (-n_y,
+    /// n_x)`; in 3D the tangent of component `k` is the projection of `e_k` onto the contact plane,
+    /// `(e_k - n_k n) / |e_k - n_k n|` (the two span the plane because `n` is largest in the third).
+    pub fn rows(&self) -> [PairRow<D>; D] {
+        let n = self.normal;
+        let rn = (0..D).fold(0, |m, k| if n[k].abs() > n[m].abs() { k } else { m });
+        let mut rows = [(rn, n[rn].signum(), n); D];
+        let others = (0..D).filter(|&k| k != rn);
+        if D == 2 {
+            let t = SVector::<f64, D>::from_fn(|k, _| if k == 0 { -n[1] } else { n[0] });
+            let rt = 1 - rn;
+            rows[1] = (rt, t[rt].signum(), t);
+        } else {
+            for (slot, k) in others.enumerate() {
+                let t = SVector::<f64, D>::from_fn(|d, _| f64::from(u8::from(d == k))) - n * n[k];
+                rows[slot + 1] = (k, 1.0, t / t.norm());
+            }
+        }
+        rows
     }
 }
 
 /// Frictionless unilateral contact between the specimen's velocity field and the fields of other
 /// deformable bodies (multi-velocity-field grid contact after Bardenhagen et al. 2001, with the
 /// displacement gap of Nairn 2013), enforced with an active set settled within the step like
-/// [`DeviceContact`]. At a closed pair the four block rows `R_a`, `R_b` (the physical residuals of the
-/// two copies, i.e. the contact forces on the two bodies) become
+/// [`DeviceContact`]. At a closed pair the block rows `R_a`, `R_b` (the physical residuals of the two
+/// copies, i.e. the contact forces on the two bodies) become
 ///
 /// ```text
 /// R_a + R_b = 0                       (the contact forces are equal and opposite: momentum)
 /// s (g + n . (du_b - du_a)) = 0       (no gap left, no penetration)
-/// t . R_b = 0                         (frictionless)
+/// t . R_b = 0  for the D - 1 tangents (frictionless)
 /// ```
 ///
-/// in the rows of copy `a` (both components) and of copy `b` (normal, tangential component). All are
-/// linear in the physical rows or in `du`, so the Jacobian stays exact; the two rows of a pair share
-/// their block columns (the assembler's pattern joins them), so the sum is formed entry by entry.
-/// A closed pair opens when the normal force on `b` pulls (`n . R_b < 0`), an open one closes when the
-/// bodies overlap (`g + n . (du_b - du_a) < 0`).
+/// in the rows of copy `a` (all components) and of copy `b` (normal, tangential components,
+/// [`NodePair::rows`]). All are linear in the physical rows or in `du`, so the Jacobian stays exact; the
+/// two rows of a pair share their block columns (the assembler's pattern joins them), so the sum is
+/// formed entry by entry. A closed pair opens when the normal force on `b` pulls (`n . R_b < 0`), an
+/// open one closes when the bodies overlap (`g + n . (du_b - du_a) < 0`).
 #[derive(Debug, Clone, Default)]
-pub struct BodyContact {
+pub struct BodyContact<const D: usize = 2> {
     /// The pairs of the step.
-    pub pairs: Vec<NodePair>,
+    pub pairs: Vec<NodePair<D>>,
 }
 
-impl BodyContact {
+/// The `D` components of block row `first` (e.g. `row * nf`) of `v`.
+fn block<const D: usize>(v: &[f64], first: usize) -> SVector<f64, D> {
+    SVector::from_fn(|d, _| v[first + d])
+}
+
+impl<const D: usize> BodyContact<D> {
     /// Rewrites the residual block rows of the closed pairs (`r`: the physical residual, `nf` unknowns
     /// per node, `x` the iterate, `s` the row scale in MPa).
     pub fn residual_rows(&self, x: &[f64], r: &mut [f64], nf: usize, s: f64) {
         for c in self.pairs.iter().filter(|c| c.closed) {
-            let (n, t) = (c.normal, c.tangent());
-            let ((rn, sn), (rt, st)) = row_order(n);
+            let n = c.normal;
+            let rows = c.rows();
+            let ((rn, sn, _), tangents) = (rows[0], &rows[1..]);
             let (a, b) = (c.row_a * nf, c.row_b * nf);
-            let dua = Vector2::new(x[a], x[a + 1]);
-            let dub = Vector2::new(x[b], x[b + 1]);
-            let rb = Vector2::new(r[b], r[b + 1]);
-            r[a] += rb.x;
-            r[a + 1] += rb.y;
+            let (dua, dub, rb) = (block::<D>(x, a), block::<D>(x, b), block::<D>(r, b));
+            for d in 0..D {
+                r[a + d] += rb[d];
+            }
             r[b + rn] = sn * s * (c.gap + n.dot(&(dub - dua)));
-            r[b + rt] = st * t.dot(&rb);
+            for &(rt, st, t) in tangents {
+                r[b + rt] = st * t.dot(&rb);
+            }
         }
     }
 
@@ -379,21 +408,23 @@ impl BodyContact {
                 ncols, ncols_b,
                 "the rows of a contact pair share their columns"
             );
-            let (n, t) = (c.normal, c.tangent());
-            let ((rn, sn), (rt, st)) = row_order(n);
+            let n = c.normal;
+            let rows = c.rows();
+            let ((rn, sn, _), tangents) = (rows[0], &rows[1..]);
             for pos in 0..ncols {
                 for k in 0..nf {
-                    let (b0, b1) = (
-                        values[sb + offset(ncols, 0, pos, k)],
-                        values[sb + offset(ncols, 1, pos, k)],
-                    );
-                    values[sa + offset(ncols, 0, pos, k)] += b0;
-                    values[sa + offset(ncols, 1, pos, k)] += b1;
-                    values[sb + offset(ncols, rt, pos, k)] = st * (t.x * b0 + t.y * b1);
+                    let rb =
+                        SVector::<f64, D>::from_fn(|d, _| values[sb + offset(ncols, d, pos, k)]);
+                    for d in 0..D {
+                        values[sa + offset(ncols, d, pos, k)] += rb[d];
+                    }
+                    for &(rt, st, t) in tangents {
+                        values[sb + offset(ncols, rt, pos, k)] = st * t.dot(&rb);
+                    }
                     values[sb + offset(ncols, rn, pos, k)] = 0.0;
                 }
             }
-            for k in 0..2 {
+            for k in 0..D {
                 values[sb + offset(ncols, rn, diag_b, k)] = sn * s * n[k];
                 values[sb + offset(ncols, rn, diag_a, k)] = -sn * s * n[k];
             }
@@ -407,19 +438,20 @@ impl BodyContact {
         for c in self.pairs.iter().filter(|c| c.closed) {
             let (a, b) = (c.row_a * nf, c.row_b * nf);
             let n = c.normal;
-            let dua = Vector2::new(x[a], x[a + 1]);
-            let dub = Vector2::new(x[b], x[b + 1]);
+            let (dua, dub) = (block::<D>(x, a), block::<D>(x, b));
             let excess = c.gap + n.dot(&(dub - dua));
             let (ma, mb) = (mass(c.node_a), mass(c.node_b));
             let (wa, wb) = (mb / (ma + mb), ma / (ma + mb));
             let (na, nb) = (dua + wa * excess * n, dub - wb * excess * n);
-            (x[a], x[a + 1], x[b], x[b + 1]) = (na.x, na.y, nb.x, nb.y);
+            for d in 0..D {
+                (x[a + d], x[b + d]) = (na[d], nb[d]);
+            }
         }
     }
 
     /// Updates the statuses from a converged solve (`x` the solution, `phys` the physical residual):
-    /// pairs pulling by more than `force_tol` (N per mm thickness) open, open pairs overlapping by more
-    /// than `gap_tol` (mm) close. Returns the number of changes.
+    /// pairs pulling by more than `force_tol` (N per mm thickness; N in 3D) open, open pairs overlapping
+    /// by more than `gap_tol` (mm) close. Returns the number of changes.
     pub fn update(
         &mut self,
         x: &[f64],
@@ -432,9 +464,9 @@ impl BodyContact {
         for c in &mut self.pairs {
             let (a, b) = (c.row_a * nf, c.row_b * nf);
             let next = if c.closed {
-                c.normal.dot(&Vector2::new(phys[b], phys[b + 1])) >= -force_tol
+                c.normal.dot(&block::<D>(phys, b)) >= -force_tol
             } else {
-                let rel = Vector2::new(x[b] - x[a], x[b + 1] - x[a + 1]);
+                let rel = block::<D>(x, b) - block::<D>(x, a);
                 c.gap + c.normal.dot(&rel) < -gap_tol
             };
             if next != c.closed {
@@ -445,12 +477,13 @@ impl BodyContact {
         changes
     }
 
-    /// The largest contact force of the closed pairs (N per mm thickness), the scale of the sign tests.
+    /// The largest contact force of the closed pairs (N per mm thickness; N in 3D), the scale of the
+    /// sign tests.
     pub fn force_scale(&self, phys: &[f64], nf: usize) -> f64 {
         self.pairs
             .iter()
             .filter(|c| c.closed)
-            .map(|c| Vector2::new(phys[c.row_b * nf], phys[c.row_b * nf + 1]).norm())
+            .map(|c| block::<D>(phys, c.row_b * nf).norm())
             .fold(0.0, f64::max)
     }
 }

@@ -118,11 +118,11 @@ pub struct StepReport {
     pub reactions: Vec<(String, Vec<f64>)>,
     /// Mean prescribed displacement of each constraint set, `(name, [u_x, u_y(, u_z)])` (mm).
     pub displacements: Vec<(String, Vec<f64>)>,
-    /// Kinetic energy `sum 1/2 m v^2` (N mm per mm thickness).
+    /// Kinetic energy `sum 1/2 m v^2` (N mm; in 2D per mm thickness).
     pub kinetic_energy: f64,
-    /// Stored energy `sum V^0 Psi` (N mm per mm thickness).
+    /// Stored energy `sum V^0 Psi` (N mm; in 2D per mm thickness).
     pub stored_energy: f64,
-    /// Work of the constraint reactions and body forces so far (N mm per mm thickness).
+    /// Work of the constraint reactions and body forces so far (N mm; in 2D per mm thickness).
     pub external_work: f64,
     /// Wall time of the set-up (shape functions, P2G, pattern), of the SNES solve and in total (s).
     pub wall_setup: f64,
@@ -155,7 +155,8 @@ pub struct StepReport {
     /// See [`StepReport::migrated`].
     #[serde(default)]
     pub ghosts: usize,
-    /// Kinetic energy of the points at t = 0 (N mm per mm thickness): `dissipated = W + E_0 - K - Psi`.
+    /// Kinetic energy of the points at t = 0 (N mm; in 2D per mm thickness):
+    /// `dissipated = W + E_0 - K - Psi`.
     #[serde(default)]
     pub initial_energy: f64,
 }
@@ -229,7 +230,7 @@ struct StepPlan<const D: usize> {
     devices: Vec<Option<DeviceContact>>,
     face_lengths: Vec<f64>,
     /// Contact between the specimen and bodies of other velocity fields.
-    bodies: BodyContact,
+    bodies: BodyContact<D>,
     /// Inertia and applied forces of the step, and the nodes of each load.
     loading: Loading<D>,
     load_nodes: LoadNodes,
@@ -245,7 +246,7 @@ struct Loading<const D: usize> {
     newmark: Option<Newmark>,
     /// The body-force factor of a quasi-static ramp.
     load_factor: f64,
-    /// Applied nodal forces at `t_n+1` (N per mm thickness, one per grid node; empty without loads).
+    /// Applied nodal forces at `t_n+1` (N, in 2D per mm thickness, one per grid node; empty without loads).
     nodal_force: Vec<SVector<f64, D>>,
 }
 
@@ -253,7 +254,7 @@ struct Loading<const D: usize> {
 struct Solved {
     /// SNES statistics over all solves of the step.
     info: SolveInfo,
-    /// Physical residual `f_int + M a - f_ext` at the solution, per unknown (N per mm thickness).
+    /// Physical residual `f_int + M a - f_ext` at the solution, per unknown (N; in 2D per mm thickness).
     phys: Vec<f64>,
     /// Wall time of the solves (s) and of the residual and Jacobian evaluations in them (s).
     solve_time: f64,
@@ -278,7 +279,7 @@ struct StepProblem<'a, 'b, const D: usize> {
     /// The contact devices of the step (closed nodes get constraint rows).
     contact: &'a [Option<DeviceContact>],
     /// Contact between bodies (closed pairs get constraint rows).
-    bodies: &'a BodyContact,
+    bodies: &'a BodyContact<D>,
     /// Scale of the constraint rows (MPa).
     row_scale: f64,
     /// The block rows this process owns.
@@ -673,13 +674,6 @@ pub fn split<const D: usize>(setup: Setup<D>) -> Result<(Model<D>, State<D>), St
         )));
     }
     let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
-    if nfields > 1 && D != 2 {
-        return Err(StepError::Setup(
-            "contact between bodies (a body with its own velocity field) is two-dimensional for now; \
-             in 3D, bond the bodies (one velocity field) or use contact devices"
-                .into(),
-        ));
-    }
     if nfields > 1 && (shape == ShapeKind::Cpdi2 || method == Method::Fem) {
         return Err(StepError::Setup(
             "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
@@ -1449,7 +1443,7 @@ impl<const D: usize> Step<'_, D> {
             // and opposite impulses, so the momentum of the pair is kept.
             let gs = &self.ws.grid_state;
             for c in bodies.pairs.iter().filter(|c| c.closed) {
-                let n = from_xy::<D>(c.normal);
+                let n = c.normal;
                 let normal_velocity = |node: usize, acc: &SVector<f64, D>| {
                     n.dot(
                         &(gs.velocity[node]
@@ -2004,7 +1998,7 @@ impl<const D: usize> Step<'_, D> {
         &mut self,
         devices: &[Option<DeviceContact>],
         dt: f64,
-    ) -> Result<BodyContact, StepError> {
+    ) -> Result<BodyContact<D>, StepError> {
         let s = self.m;
         let fields = s.num_fields();
         self.ws.partners.clear();
@@ -2015,11 +2009,10 @@ impl<const D: usize> Step<'_, D> {
         let (nodes, all, h) = (grid.num_nodes(), s.field_nodes(), grid.cell_size());
         let (p, table, dofs) = (&self.st.particles, &self.ws.table, &self.ws.dofs);
         let nf = dofs.fields();
-        // Contact between bodies is planar (refused in 3D by `split`): the in-plane parts.
-        let mut grad_m = vec![Vector2::zeros(); all];
+        let mut grad_m = vec![SVector::<f64, D>::zeros(); all];
         for q in 0..p.len() {
             for w in table.weights(q) {
-                grad_m[w.node as usize] += p.mass[q] * xy(&w.grad);
+                grad_m[w.node as usize] += p.mass[q] * w.grad;
             }
         }
         // Copies held by a device stay with it.
@@ -2043,11 +2036,12 @@ impl<const D: usize> Step<'_, D> {
             let Some(b) = others.next() else { continue };
             if others.next().is_some() {
                 let x = grid.node_position(i);
+                let at: Vec<String> = x.iter().map(|c| format!("{c:.3}")).collect();
                 return Err(StepError::Setup(format!(
-                    "the grid node at ({:.3}, {:.3}) mm carries the specimen and two other bodies: \
-                     contact is between the specimen and one body per node; keep the other bodies at \
-                     least two cells apart",
-                    x[0], x[1]
+                    "the grid node at ({}) mm carries the specimen and two other bodies: contact is \
+                     between the specimen and one body per node; keep the other bodies at least two \
+                     cells apart",
+                    at.join(", ")
                 )));
             }
             let (Some(row_a), Some(row_b)) = (free(i), free(b)) else {
@@ -2079,7 +2073,7 @@ impl<const D: usize> Step<'_, D> {
                     continue;
                 }
                 let n = pairs[k].normal;
-                let along = p.corners(q).iter().map(|c| n.dot(&xy(c)));
+                let along = p.corners(q).iter().map(|c| n.dot(c));
                 if w.node as usize == pairs[k].node_a {
                     far_a[k] = along.fold(far_a[k], f64::max);
                 } else {
@@ -2090,7 +2084,7 @@ impl<const D: usize> Step<'_, D> {
         self.ws.partners.resize(all, INACTIVE);
         let gs = &self.ws.grid_state;
         let predicted =
-            |node: usize| xy(&(dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node]));
+            |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
         for (k, c) in pairs.iter_mut().enumerate() {
             c.gap = (near_b[k] - far_a[k]).max(0.0);
             let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
