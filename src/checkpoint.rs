@@ -276,12 +276,6 @@ pub fn load<const D: usize>(
     };
     let p = &state.particles;
     let n = p.len();
-    if header.points != n {
-        return Err(unusable(format!(
-            "the checkpoint holds {} material points, the configuration {n}",
-            header.points
-        )));
-    }
     let c = &header.counters;
     if let Some(l) = c
         .accumulated
@@ -292,6 +286,12 @@ pub fn load<const D: usize>(
         return Err(unusable(format!(
             "the checkpoint is of a {}D run, the configuration of a {D}D one",
             l.len()
+        )));
+    }
+    if header.points != n {
+        return Err(unusable(format!(
+            "the checkpoint holds {} material points, the configuration {n}",
+            header.points
         )));
     }
     if header.history_stride != p.history_stride() {

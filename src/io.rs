@@ -120,19 +120,19 @@ pub const FIELDS: [Field; 15] = [
         name: "position",
         kind: Kind::Vector,
         units: "mm",
-        description: "current position of the material point (z = 0)",
+        description: "current position of the material point (z = 0 in 2D)",
     },
     Field {
         name: "displacement",
         kind: Kind::Vector,
         units: "mm",
-        description: "displacement from the position at the start of the run (z = 0)",
+        description: "displacement from the position at the start of the run (z = 0 in 2D)",
     },
     Field {
         name: "velocity",
         kind: Kind::Vector,
         units: "mm/s",
-        description: "velocity of the material point (z = 0)",
+        description: "velocity of the material point (z = 0 in 2D)",
     },
     Field {
         name: "sigma_xx",
@@ -352,7 +352,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
                     .zip(displacement.chunks_exact(width))
                     .map(|(x, u)| x[2] - u[2])
                     .collect();
-                section_layer(&z0, e.section_z.unwrap_or(0.5 * e.thickness)).1
+                section_layer(&z0, e.section_z.unwrap_or_else(|| mid_z(&z0))).1
             }
             None => (0..damage.len()).collect(),
         };
@@ -389,15 +389,32 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
     Ok(states)
 }
 
+/// The middle of the z range of `z0` (mm): the default section of a plate.
+fn mid_z(z0: &[f64]) -> f64 {
+    let (lo, hi) = z0
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| {
+            (a.min(z), b.max(z))
+        });
+    0.5 * (lo + hi)
+}
+
 /// The layer of points seeded nearest the plane `z` (mm), from the points' initial z `z0`: its z and the
 /// points within a quarter of the layer spacing of it (the layers of a seeded plate are a point spacing
 /// apart).
 fn section_layer(z0: &[f64], z: f64) -> (f64, Vec<usize>) {
+    // Of two layers equally near (the mid-plane of an even number of layers), the lower one: "equally"
+    // within 1e-9 mm, so that round-off in the seeded z does not decide.
+    let nearest = z0
+        .iter()
+        .map(|w| (w - z).abs())
+        .fold(f64::INFINITY, f64::min);
     let layer = z0
         .iter()
         .copied()
-        .min_by(|a, b| (a - z).abs().total_cmp(&(b - z).abs()).then(a.total_cmp(b)))
-        .unwrap_or(z);
+        .filter(|w| (w - z).abs() <= nearest + 1e-9)
+        .fold(f64::INFINITY, f64::min);
+    let layer = if layer.is_finite() { layer } else { z };
     let spacing = z0
         .iter()
         .map(|&w| (w - layer).abs())
@@ -566,12 +583,7 @@ impl RunOutput {
             return ((0..n).collect(), None);
         }
         let z0: Vec<f64> = self.initial_position.iter().map(|x| x[2]).collect();
-        let (lo, hi) = z0
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| {
-                (a.min(z), b.max(z))
-            });
-        let (layer, points) = section_layer(&z0, self.section_z.unwrap_or(0.5 * (lo + hi)));
+        let (layer, points) = section_layer(&z0, self.section_z.unwrap_or_else(|| mid_z(&z0)));
         (points, Some(layer))
     }
 
@@ -897,7 +909,7 @@ impl RunOutput {
     }
 
     /// Reaction force against time and against the prescribed displacement, one curve per constraint set
-    /// that moves (y components; N per mm thickness).
+    /// that moves (y components; N per mm thickness in 2D, N of the whole plate in 3D).
     pub fn force_plots(&self) -> Result<(), OutputError> {
         let Some(first) = self.rows.first().filter(|_| self.writes) else {
             return Ok(());
@@ -983,6 +995,23 @@ material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio =
             .and_then(|a| a.read_scalar())
             .unwrap_or_else(|e| panic!("attribute `{name}`: {e}"));
         v.as_str().to_owned()
+    }
+
+    /// The section of a plate: the layer nearest the plane, the lower of two equally near ones whatever
+    /// round-off the seeded z carry, and all of its points (not those of the neighbouring layers).
+    #[test]
+    fn the_section_is_one_layer_the_lower_of_two_equally_near() {
+        let z0: Vec<f64> = (0..40)
+            .map(|k| [1.0, 3.000_000_000_000_000_4, 4.999_999_999_999_999, 7.0][k % 4])
+            .collect();
+        assert_eq!(mid_z(&z0), 4.0);
+        let (layer, points) = section_layer(&z0, mid_z(&z0));
+        assert_eq!(layer, 3.000_000_000_000_000_4);
+        assert_eq!(points, (0..40).filter(|k| k % 4 == 1).collect::<Vec<_>>());
+        let (layer, points) = section_layer(&z0, 6.5);
+        assert_eq!((layer, points.len()), (7.0, 10));
+        // One layer (a plane run's z = 0 everywhere): every point.
+        assert_eq!(section_layer(&[0.0; 5], 0.0).1.len(), 5);
     }
 
     /// Two snapshots of a moved block: the XDMF gives every snapshot a vertex cell per point and

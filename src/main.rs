@@ -773,7 +773,7 @@ fn run_simulation(
             &|plane: Setup| {
                 plane
                     .extrude(thickness)
-                    .map_err(|e| format!("extrusion.thickness: {e}"))
+                    .map_err(|e| format!("[extrusion]: {e}"))
             },
         )?,
     }

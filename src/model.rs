@@ -262,9 +262,9 @@ pub struct State<const D: usize = 2> {
     pub dt: f64,
     /// Steps in a row that converged at their first try (a reduced `dt` grows again after a few).
     pub calm_steps: usize,
-    /// Work of reactions and body forces so far (N mm per mm thickness).
+    /// Work of reactions and body forces so far (N mm; in 2D per mm thickness).
     pub external_work: f64,
-    /// Kinetic energy of the points at t = 0 (N mm per mm thickness; bodies start stress-free): with
+    /// Kinetic energy of the points at t = 0 (N mm, in 2D per mm thickness; bodies start stress-free): with
     /// the external work, the energy the run has been given (`dissipated = W + E_0 - K - Psi`).
     pub initial_energy: f64,
     /// Accumulated prescribed displacement per constraint set and component (mm), in report order.
@@ -409,10 +409,10 @@ pub struct Counters {
     /// Steps in a row that converged at their first try (0 in checkpoints that predate it).
     #[serde(default)]
     pub calm_steps: usize,
-    /// Work of reactions and body forces so far (N mm per mm thickness).
+    /// Work of reactions and body forces so far (N mm; in 2D per mm thickness).
     pub external_work: f64,
-    /// Kinetic energy at t = 0 (N mm per mm thickness; `None` in checkpoints that predate it, which keep
-    /// the value the configuration gives).
+    /// Kinetic energy at t = 0 (N mm, in 2D per mm thickness; `None` in checkpoints that predate it,
+    /// which keep the value the configuration gives).
     #[serde(default)]
     pub initial_energy: Option<f64>,
     /// Accumulated prescribed displacement per constraint set, one value per component (mm).

@@ -218,6 +218,7 @@ fn a_configuration_with_extrusion_runs_in_3d_and_resumes_bit_for_bit() {
     );
     succeeds(&run(&dir, &["crack", "whole"]));
     let remeasured = states(&dir.join("whole"));
+    assert_eq!(remeasured.len(), written.len());
     for (a, b) in written.iter().zip(&remeasured) {
         for key in [
             "time",

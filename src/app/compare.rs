@@ -602,6 +602,20 @@ fn read_dataset(path: &Path, name: &str, n: Option<usize>, vector: bool) -> Resu
 
 impl Snapshot {
     fn load(file: &SnapshotFile) -> Result<Self> {
+        // Point references are plane: a 3D run (a plate) has every (x, y) once per layer of points.
+        let h5 = hdf5_metno::File::open(&file.path).map_err(h5_err(&file.path, "open"))?;
+        let raw: Vec<f64> = h5
+            .dataset("position")
+            .and_then(|d| d.read_raw())
+            .map_err(h5_err(&file.path, "dataset `position`"))?;
+        let n_raw = h5.dataset("damage").map(|d| d.size()).unwrap_or(0);
+        if n_raw > 0 && raw.len() == 3 * n_raw && raw.chunks_exact(3).any(|c| c[2] != 0.0) {
+            return Err(bad(format!(
+                "{}: a 3D run (its points lie off z = 0): point references compare plane runs; \
+                 compare its history (forces are of the whole plate, N)",
+                file.path.display()
+            )));
+        }
         let pos = read_dataset(&file.path, "position", None, true)?;
         let n = pos.len() / 2;
         let disp = read_dataset(&file.path, "displacement", Some(n), true)?;

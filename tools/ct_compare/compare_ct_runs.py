@@ -8,12 +8,14 @@ Reads each run's history.csv and crack.json and writes
     OUT_PREFIX-force.png       opening force of the loading plate against time (N per mm of thickness)
     OUT_PREFIX-width.png       median width of the d >= 0.9 bands against time (mm)
     OUT_PREFIX-table.md        a Markdown table of the final crack metrics, energies and wall time
-Units: mm, s, N, MPa, t; forces and energies per mm of thickness.
+Units: mm, s, N, MPa, t; forces and energies per mm of thickness (a 3D run's, whose config.toml has an
+[extrusion] table, are divided by its thickness).
 """
 
 import csv
 import json
 import sys
+import tomllib
 from pathlib import Path
 
 import matplotlib
@@ -29,6 +31,12 @@ def read_history(run: Path):
     return rows
 
 
+def thickness(run: Path):
+    """The plate thickness (mm) of a 3D run, 1 for a plane one (its values are per mm already)."""
+    config = tomllib.loads((run / "config.toml").read_text())
+    return float(config.get("extrusion", {}).get("thickness", 1.0))
+
+
 def col(rows, name):
     return [float(r[name]) for r in rows if r.get(name) not in (None, "")]
 
@@ -42,7 +50,17 @@ def main(argv):
     for arg in argv[2:]:
         label, _, path = arg.partition("=")
         run = Path(path)
-        runs.append((label, run, read_history(run), json.loads((run / "crack.json").read_text())))
+        rows = read_history(run)
+        per_mm = thickness(run)
+        if per_mm != 1.0:
+            for r in rows:
+                for name in ("loading_plate_fy", "dissipated_energy"):
+                    if r.get(name) not in (None, ""):
+                        r[name] = str(float(r[name]) / per_mm)
+        crack = json.loads((run / "crack.json").read_text())
+        for state in crack["states"]:
+            state["dissipated"] = [d / per_mm for d in state.get("dissipated", [float("nan")] * 2)]
+        runs.append((label, run, rows, crack))
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for label, _, rows, _ in runs:
