@@ -365,7 +365,7 @@ pub struct BodyContact<const D: usize = 2> {
 
 /// The `D` components of block row `first` (e.g. `row * nf`) of `v`.
 fn block<const D: usize>(v: &[f64], first: usize) -> SVector<f64, D> {
-    SVector::from_fn(|d, _| v[first + d])
+    SVector::from_column_slice(&v[first..first + D])
 }
 
 impl<const D: usize> BodyContact<D> {

@@ -15,6 +15,7 @@ use crate::model::{Model, State};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::schema::{file, history};
 use crate::solver::StepReport;
+use crate::space::xy;
 use hdf5_metno::types::VarLenUnicode;
 use nalgebra::{SVector, Vector2};
 use std::fmt::Write as _;
@@ -431,11 +432,6 @@ fn section_layer(z0: &[f64], z: f64) -> (f64, Vec<usize>) {
     (layer, points)
 }
 
-/// The in-plane part (x, y) of a point (mm).
-fn xy<const D: usize>(x: &SVector<f64, D>) -> Vector2<f64> {
-    Vector2::new(x[0], x[1])
-}
-
 /// A point as x, y, z (mm; z = 0 in 2D).
 fn xyz<const D: usize>(x: &SVector<f64, D>) -> [f64; 3] {
     std::array::from_fn(|d| if d < D { x[d] } else { 0.0 })
@@ -711,7 +707,7 @@ impl RunOutput {
             return Ok(());
         }
         self.write_fields(state)?;
-        let (section, _) = self.section(state);
+        let (section, layer) = self.section(state);
         if let Some((tip, criteria)) = &self.crack {
             let p = &state.particles;
             let x: Vec<Vector2<f64>> = section.iter().map(|&k| xy(&p.x[k])).collect();
@@ -742,6 +738,8 @@ impl RunOutput {
         }
         self.damage_map(
             state,
+            &section,
+            layer,
             &self.dir.join(file::numbered(file::DAMAGE_MAP, state.step)),
         )
     }
@@ -867,18 +865,16 @@ impl RunOutput {
         )
     }
 
-    /// Damage map of the current state (in 3D of the section layer).
-    pub fn damage_map<const D: usize>(
+    /// Damage map of the points `section` of the current state (in 3D the layer at z = `layer` mm).
+    fn damage_map<const D: usize>(
         &self,
         state: &State<D>,
+        section: &[usize],
+        layer: Option<f64>,
         path: &Path,
     ) -> Result<(), OutputError> {
-        if !self.writes {
-            return Ok(());
-        }
         let p = &state.particles;
-        let (section, z) = self.section(state);
-        let plane = match z {
+        let plane = match layer {
             Some(z) => format!(", layer z = {z:.1} mm"),
             None => String::new(),
         };
