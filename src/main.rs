@@ -933,7 +933,7 @@ fn simulate<const D: usize>(
     // The output's reference state (initial positions, the step-0 fields) is the model as built, on the
     // process that writes (the others keep the records only).
     let initial = if root {
-        Some(mpm_concrete::solver::split(model()?).map_err(|e| bad(format!("{file}: {e}")))?)
+        Some(mpm_concrete::model::Model::new(model()?).map_err(|e| bad(format!("{file}: {e}")))?)
     } else {
         None
     };

@@ -13,9 +13,9 @@ use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
 use crate::contact::NodeStatus;
 use crate::dofs::FieldLayout;
 use crate::grid::Grid;
-use crate::material::Material;
+use crate::material::{Constitutive, Material};
 use crate::particles::Particles;
-use crate::shape::{ShapeKind, ShapeTable};
+use crate::shape::{ShapeError, ShapeKind, ShapeTable};
 use nalgebra::{Matrix3, SVector};
 
 /// Time integration settings.
@@ -93,7 +93,7 @@ pub enum Method {
 }
 
 /// A run as a scenario builds it: the model's parameters and the bodies at t = 0.
-/// [`Simulation::new`](crate::solver::Simulation::new) splits it into [`Model`] and [`State`].
+/// [`Model::new`] splits it into [`Model`] and [`State`].
 pub struct Setup<const D: usize = 2> {
     /// Background grid.
     pub grid: Grid<D>,
@@ -244,6 +244,158 @@ impl<const D: usize> Model<D> {
             .chain(self.rigid.iter().map(|r| r.name.clone()))
             .chain(self.loads.iter().map(|l| l.name.clone()))
             .collect()
+    }
+}
+
+/// Why a set-up cannot become a model (checked by [`Model::new`]).
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// No material point carries mass.
+    #[error("the model has no material points")]
+    Empty,
+    /// The set-up is inconsistent (a device in contact without prescribed motion, a load off the grid
+    /// lines, FEM with a non-linear interpolator, ...); the message says what and what is allowed.
+    #[error("{0}")]
+    Invalid(String),
+    /// The FEM mode's reference shape functions could not be evaluated (a point outside the grid).
+    #[error(transparent)]
+    Shape(#[from] ShapeError),
+}
+
+impl<const D: usize> Model<D> {
+    /// The model of a scenario's `setup` and the state at t = 0 (virgin material history), after checking
+    /// what the step relies on: material points exist, devices in contact have both motion components
+    /// prescribed, a unit normal and a friction coefficient >= 0, loads lie on grid lines, the FEM mode
+    /// uses the linear interpolator, bodies on their own velocity fields use an interpolator that keeps
+    /// the fields apart.
+    pub fn new(setup: Setup<D>) -> Result<(Self, State<D>), ModelError> {
+        let Setup {
+            grid,
+            mut particles,
+            materials,
+            fields,
+            shape,
+            time,
+            body_force,
+            body_force_ramp,
+            boxes,
+            rigid,
+            rigid_points,
+            loads,
+            method,
+            options_prefix,
+            mass_tolerance,
+            fallback_prefix,
+        } = setup;
+        if particles.is_empty() {
+            return Err(ModelError::Empty);
+        }
+        if rigid_points.len() != rigid.len() {
+            return Err(ModelError::Invalid(format!(
+                "{} rigid bodies but {} sets of rigid-body points",
+                rigid.len(),
+                rigid_points.len()
+            )));
+        }
+        let fields = if fields.is_empty() {
+            vec![0; materials.len()]
+        } else {
+            fields
+        };
+        if fields.len() != materials.len() {
+            return Err(ModelError::Invalid(format!(
+                "{} velocity fields for {} materials (one per body tag)",
+                fields.len(),
+                materials.len()
+            )));
+        }
+        let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
+        if nfields > 1 && (shape == ShapeKind::Cpdi2 || method == Method::Fem) {
+            return Err(ModelError::Invalid(
+            "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
+             GIMP, CPDI1 or B-spline interpolator (CPDI2 moves its corners on one field)"
+                .into(),
+        ));
+        }
+        if let Some(rb) = rigid.iter().find(|r| r.field as usize >= nfields) {
+            return Err(ModelError::Invalid(format!(
+                "rigid body `{}` acts on velocity field {}, but the bodies use {nfields}",
+                rb.name, rb.field
+            )));
+        }
+        let stride = materials.iter().map(|m| m.history_len()).max().unwrap_or(0);
+        particles.resize_history(stride, 0.0);
+        for p in 0..particles.len() {
+            let m = &materials[particles.body[p] as usize];
+            let h = particles.history_mut(p);
+            m.init_history(&mut h[..m.history_len()]);
+        }
+        for rb in &rigid {
+            if let Some(c) = &rb.contact {
+                let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
+                let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
+                if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
+                    return Err(ModelError::Invalid(format!(
+                        "rigid body `{}`: a device in contact needs both motion components prescribed \
+                     (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
+                        rb.name
+                    )));
+                }
+            }
+        }
+        let load_shares = loads
+            .iter()
+            .map(|l| l.shares(&grid))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(ModelError::Invalid)?;
+        let fem = match method {
+            Method::Mpm => None,
+            Method::Fem => {
+                if shape != ShapeKind::Linear {
+                    return Err(ModelError::Invalid(format!(
+                        "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
+                        shape.name()
+                    )));
+                }
+                // The reference configuration is the configuration at construction; the rigid bodies'
+                // nodes are fixed there too.
+                let mut points = ShapeTable::new();
+                points.compute(ShapeKind::Linear, &grid, &particles)?;
+                let rigid = rigid_points
+                    .iter()
+                    .map(|rp| {
+                        let mut t = ShapeTable::new();
+                        t.compute(ShapeKind::Linear, &grid, rp).map(|()| t)
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                Some(FemReference { points, rigid })
+            }
+        };
+        let nsets = boxes.len() + rigid.len() + loads.len();
+        let mut state = State::new(particles, rigid_points, nsets, time.dt);
+        if time.quasi_static {
+            // Without inertia the points' velocities carry no energy (they are zeroed after the first step).
+            state.initial_energy = 0.0;
+        }
+        let model = Self {
+            grid,
+            materials,
+            fields,
+            shape,
+            time,
+            body_force,
+            body_force_ramp,
+            boxes,
+            rigid,
+            loads,
+            method,
+            options_prefix,
+            mass_tolerance,
+            fallback_prefix,
+            load_shares,
+            fem,
+        };
+        Ok((model, state))
     }
 }
 

@@ -1,0 +1,445 @@
+//! First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the loads,
+//! the PETSc objects and the first guess.
+
+use super::*;
+
+/// Per load, its active grid nodes and their shares of the resultant (summing to 1).
+pub(super) type LoadNodes = Vec<Vec<(usize, f64)>>;
+
+/// What `Step::prepare` sets up for one step attempt, owned so that the later phases can borrow
+/// the simulation freely.
+pub(super) struct StepPlan<const D: usize> {
+    /// Time step of the attempt (s) and the time it reaches.
+    pub(super) dt: f64,
+    pub(super) t_new: f64,
+    /// Prescribed increment per constraint set and component (mm), boxes first, then rigid bodies.
+    pub(super) set_du: Vec<[Option<f64>; D]>,
+    /// The constrained unknowns of each set.
+    pub(super) sets: Vec<Vec<usize>>,
+    /// Per rigid body: translation increment (mm), in-plane pin position (mm; `None` without a pin) and
+    /// rotation increment about the pin (rad, in the x-y plane; settled with the contact active set).
+    pub(super) translations: Vec<SVector<f64, D>>,
+    pub(super) pins: Vec<Option<Vector2<f64>>>,
+    pub(super) dtheta: Vec<f64>,
+    /// Per rigid body, its contact with the specimen (`None` without contact) and its face length (mm).
+    pub(super) devices: Vec<Option<DeviceContact>>,
+    pub(super) face_lengths: Vec<f64>,
+    /// Contact between the specimen and bodies of other velocity fields.
+    pub(super) bodies: BodyContact<D>,
+    /// Inertia and applied forces of the step, and the nodes of each load.
+    pub(super) loading: Loading<D>,
+    pub(super) load_nodes: LoadNodes,
+    /// Whether the PETSc objects were built anew for this step.
+    pub(super) new_pattern: bool,
+    /// Wall time of the preparation (s).
+    pub(super) setup_time: f64,
+}
+
+/// Inertia and applied forces of a step: what the assembler needs besides the points and the grid.
+pub(super) struct Loading<const D: usize> {
+    /// Newmark parameters (`None`: quasi-static).
+    pub(super) newmark: Option<Newmark>,
+    /// The body-force factor of a quasi-static ramp.
+    pub(super) load_factor: f64,
+    /// Applied nodal forces at `t_n+1` (N, in 2D per mm thickness, one per grid node; empty without loads).
+    pub(super) nodal_force: Vec<SVector<f64, D>>,
+}
+
+impl<const D: usize> Step<'_, D> {
+    /// First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the
+    /// contact devices and loads at `t_n+1`, the PETSc objects (kept if the pattern is unchanged) and the
+    /// first guess of the solution.
+    pub(super) fn prepare(
+        &mut self,
+        session: &SessionGuard,
+        dt: f64,
+        prefix: Option<&str>,
+    ) -> Result<StepPlan<D>, StepError> {
+        if session.size() > 1 && self.m.num_fields() > 1 {
+            return Err(StepError::Setup(
+                "contact between bodies (a body with its own velocity field) runs on one process: \
+                 its contact rows combine the rows of two node copies, which a process may not both own"
+                    .into(),
+            ));
+        }
+        self.project_to_grid(session)?;
+        // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
+        let set_du =
+            self.constraint_values(|v, rise| prescribed_increment(v, rise, self.st.time, dt));
+        let sets = self.constrain(&set_du)?;
+        // Contact devices: translation from the prescribed motion, rotation about the pin first guessed as
+        // the last step's rate.
+        let nb = self.m.boxes.len();
+        let translations: Vec<SVector<f64, D>> = set_du[nb..]
+            .iter()
+            .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
+            .collect();
+        let pins: Vec<Option<Vector2<f64>>> =
+            (0..self.m.rigid.len()).map(|k| self.pin_of(k)).collect();
+        let dtheta: Vec<f64> = (0..self.m.rigid.len())
+            .map(|k| match pins[k] {
+                Some(_) => self.st.rotation_rates[k] * dt,
+                None => 0.0,
+            })
+            .collect();
+        let (devices, face_lengths) =
+            self.contact_devices(session, &translations, &pins, &dtheta, dt)?;
+        let bodies = self.body_pairs(&devices, dt)?;
+        let t_new = self.st.time + dt;
+        // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
+        let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
+        let eta_bar = self.nodal_eta_bar(session)?;
+        let s = self.m;
+        let newmark = (!s.time.quasi_static).then_some(Newmark {
+            beta: s.time.beta,
+            gamma: s.time.gamma,
+            dt,
+        });
+        let load_factor = if s.time.quasi_static && s.body_force_ramp > 0.0 {
+            (t_new / s.body_force_ramp).min(1.0)
+        } else {
+            1.0
+        };
+        let plan = StepPlan {
+            dt,
+            t_new,
+            set_du,
+            sets,
+            translations,
+            pins,
+            dtheta,
+            devices,
+            face_lengths,
+            bodies,
+            loading: Loading {
+                newmark,
+                load_factor,
+                nodal_force,
+            },
+            load_nodes,
+            new_pattern: false,
+            setup_time: 0.0,
+        };
+        let input = Self::step_input(
+            s,
+            &self.st.particles,
+            &self.ws.table,
+            &self.ws.dofs,
+            &self.ws.grid_state,
+            &plan.loading,
+            &self.ws.partners,
+        );
+        self.ws.assembler.begin_step(&input);
+        // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged (on every
+        // process: with points shared out, each sees the pattern of its own points only).
+        let fits = self
+            .ws
+            .system
+            .as_ref()
+            .is_some_and(|sys| sys.fits(prefix, &self.ws.dofs, &self.ws.assembler));
+        let new_pattern = session.any(!fits);
+        if new_pattern {
+            self.ws.system = None; // free the old objects first
+            let rows = self.own_rows(session);
+            self.ws.system = Some(LinearSystem::new(
+                session,
+                prefix,
+                &s.grid,
+                &self.ws.dofs,
+                &self.ws.assembler,
+                rows,
+            )?);
+        }
+        let LinearSystem {
+            x,
+            snes,
+            tolerances,
+            lag,
+            owned,
+            ..
+        } = self.ws.system.as_mut().expect("linear system just built");
+        // The first solve of an attempt runs with the configured tolerances and lag (the contact
+        // re-solves of an earlier attempt may have changed both) and so starts with a fresh
+        // preconditioner: PETSc rebuilds it at the first Newton iteration of every solve unless the lag
+        // is -1 or persists (`-snes_lag_preconditioner_persists`, a user's choice, left alone).
+        snes.set_tolerances(tolerances)?;
+        if *lag > 1 {
+            snes.set_lag_preconditioner(*lag)?;
+        }
+        // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
+        // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
+        // increments into the body); eta_bar from the particles (mass-weighted projection).
+        let nf = self.ws.dofs.fields();
+        let mut xs = vec![0.0; self.ws.dofs.len()];
+        {
+            for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
+                let node = node as usize;
+                let du = match newmark {
+                    Some(_) => {
+                        dt * self.ws.grid_state.velocity[node]
+                            + 0.5 * dt * dt * self.ws.grid_state.acceleration[node]
+                    }
+                    None => SVector::zeros(),
+                };
+                xs[a * nf..a * nf + D].copy_from_slice(du.as_slice());
+                if let Some(e) = self.ws.dofs.layout().eta_bar() {
+                    xs[a * nf + e] = eta_bar[node];
+                }
+                for c in 0..nf {
+                    if let (Some(v), Some(_)) = (self.ws.dofs.prescribed(a * nf + c), newmark) {
+                        xs[a * nf + c] = v;
+                    }
+                }
+            }
+            for d in plan.devices.iter().flatten() {
+                d.project_guess(&mut xs, nf);
+            }
+            let mass = &self.ws.grid_state.mass;
+            plan.bodies.project_guess(&mut xs, nf, |node| mass[node]);
+        }
+        owned.scatter(&xs, x)?;
+        Ok(StepPlan {
+            new_pattern,
+            ..plan
+        })
+    }
+
+    /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and
+    /// acceleration replace the projected ones) and the numbering of the unknowns, nothing constrained
+    /// yet. MPM on several processes shares the points out first; P2G sums the own points' nodal values
+    /// over the processes, so every process holds the whole grid state.
+    pub(super) fn project_to_grid(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        let s = self.m;
+        if session.size() > 1 && s.fem.is_none() {
+            self.share_points(session)?;
+        }
+        let ps = &self.st.particles;
+        let counted = self.own_point_count();
+        let shared = self.st.distributed;
+        let local = match &s.fem {
+            None => self.ws.table.compute(s.shape, &s.grid, ps),
+            Some(fem) => self.ws.table.push_forward(&fem.points, &ps.f),
+        }
+        .map_err(|e| StepError::from(e.renumbered(&ps.id)))
+        .and_then(|()| match (&self.ws.partition, shared) {
+            (Some(part), true) => part
+                .check_reach(&self.ws.table, ps, counted)
+                .map_err(StepError::Setup),
+            _ => Ok(()),
+        });
+        agreed(session, shared, local)?;
+        let fields = s.num_fields();
+        if fields > 1 {
+            let (nodes, body) = (s.grid.num_nodes(), &ps.body);
+            self.ws
+                .table
+                .offset_fields(nodes, fields, |p| s.fields[body[p] as usize] as usize);
+        }
+        transfer::particles_to_grid_shared(
+            &self.ws.table,
+            ps,
+            counted,
+            &s.grid,
+            s.mass_tolerance,
+            &mut self.ws.grid_state,
+            |sums| match shared {
+                true => session.sum(sums).map_err(|e| e.to_string()),
+                false => Ok(()),
+            },
+        )?;
+        if let Some((v, a)) = &self.st.fem_nodal {
+            // FEM: the nodal state carries over (the same nodes are active in every step).
+            self.ws.grid_state.velocity.copy_from_slice(v);
+            self.ws.grid_state.acceleration.copy_from_slice(a);
+        }
+        let layout = s.layout();
+        self.ws.dofs.rebuild(&self.ws.grid_state.active, layout);
+        Ok(())
+    }
+
+    /// Per constraint set (boxes first, then rigid bodies) and component: `value(v, rise_time)` for a
+    /// component moving with velocity `v`, `None` for a free one.
+    pub(super) fn constraint_values(
+        &self,
+        value: impl Fn(f64, f64) -> f64,
+    ) -> Vec<[Option<f64>; D]> {
+        let s = self.m;
+        s.boxes
+            .iter()
+            .map(|b| (b.motion, b.rise_time))
+            .chain(s.rigid.iter().map(|r| (r.motion, r.rise_time)))
+            .map(|(motion, rise)| {
+                motion.map(|m| match m {
+                    Motion::Free => None,
+                    Motion::Velocity(v) => Some(value(v, rise)),
+                })
+            })
+            .collect()
+    }
+
+    /// Prescribes `values` (one per set, as from `Step::constraint_values`) on the active nodes of
+    /// every constraint set; returns each set's constrained unknowns.
+    pub(super) fn constrain(
+        &mut self,
+        values: &[[Option<f64>; D]],
+    ) -> Result<Vec<Vec<usize>>, StepError> {
+        let s = self.m;
+        let grid = &s.grid;
+        let nf = self.ws.dofs.fields();
+        let mut sets: Vec<Vec<usize>> = Vec::new();
+        for (b, du) in s.boxes.iter().zip(values) {
+            let mut dofs_of_set = Vec::new();
+            // A box holds every body's copy of its nodes.
+            for node in 0..s.field_nodes() {
+                let x = grid.node_position(node);
+                let inside = (0..D).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
+                if let (true, Some(a)) = (inside, self.ws.dofs.active_index(node)) {
+                    for (c, d) in du.iter().enumerate() {
+                        if let Some(d) = d {
+                            self.ws.dofs.constrain(node, c, *d);
+                            dofs_of_set.push(a * nf + c);
+                        }
+                    }
+                }
+            }
+            sets.push(dofs_of_set);
+        }
+        let nrigid = s.rigid.len();
+        self.ws.rigid_tables.resize_with(nrigid, ShapeTable::new);
+        for (k, (rb, du)) in s.rigid.iter().zip(&values[s.boxes.len()..]).enumerate() {
+            if rb.contact.is_some() {
+                // In contact: constrained by the active set of the step, not here.
+                sets.push(Vec::new());
+                continue;
+            }
+            // Glued: the nodes under the body's points (of the reference configuration in FEM mode).
+            let points = &self.st.rigid[k];
+            let rt = match &s.fem {
+                Some(fem) => &fem.rigid[k],
+                None => {
+                    self.ws.rigid_tables[k].compute(s.shape, grid, points)?;
+                    &self.ws.rigid_tables[k]
+                }
+            };
+            let mut dofs_of_set = Vec::new();
+            // The copies of the nodes in the velocity field the body holds.
+            let shift = rb.field as usize * grid.num_nodes();
+            for p in 0..points.len() {
+                for w in rt.weights(p) {
+                    if w.value <= 0.0 {
+                        continue;
+                    }
+                    let node = w.node as usize + shift;
+                    if let Some(a) = self.ws.dofs.active_index(node) {
+                        for (c, d) in du.iter().enumerate() {
+                            if let Some(d) = d {
+                                self.ws.dofs.constrain(node, c, *d);
+                                dofs_of_set.push(a * nf + c);
+                            }
+                        }
+                    }
+                }
+            }
+            dofs_of_set.sort_unstable();
+            dofs_of_set.dedup();
+            sets.push(dofs_of_set);
+        }
+        Ok(sets)
+    }
+
+    /// The loads at time `t` on the active nodes: the nodal forces (one per grid node; empty without
+    /// loads) and, per load, its nodes with their shares renormalised to 1.
+    pub(super) fn nodal_loads(
+        &self,
+        t: f64,
+    ) -> Result<(Vec<SVector<f64, D>>, LoadNodes), StepError> {
+        let s = self.m;
+        let mut nodal_force = Vec::new();
+        let mut load_nodes = Vec::with_capacity(s.loads.len());
+        for (load, shares) in s.loads.iter().zip(&self.m.load_shares) {
+            let active: Vec<(usize, f64)> = shares
+                .iter()
+                .copied()
+                .filter(|&(node, _)| self.ws.grid_state.active[node])
+                .collect();
+            let total: f64 = active.iter().map(|(_, w)| w).sum();
+            if total <= 0.0 {
+                return Err(StepError::Setup(format!(
+                    "load `{}`: no node of its segment carries mass (is the segment on the body's \
+                     boundary?)",
+                    load.name
+                )));
+            }
+            if nodal_force.is_empty() {
+                nodal_force = vec![SVector::zeros(); s.grid.num_nodes()];
+            }
+            let f = load.force * load.factor(t);
+            let active: Vec<(usize, f64)> =
+                active.into_iter().map(|(n, w)| (n, w / total)).collect();
+            for &(node, w) in &active {
+                nodal_force[node] += w * f;
+            }
+            load_nodes.push(active);
+        }
+        Ok((nodal_force, load_nodes))
+    }
+
+    /// The points' `eta_bar` projected to the active nodes (mass-weighted), one per grid node; empty for
+    /// a run without gradient enhancement.
+    pub(super) fn nodal_eta_bar(&self, session: &SessionGuard) -> Result<Vec<f64>, StepError> {
+        if self.ws.dofs.layout().eta_bar().is_none() {
+            return Ok(Vec::new());
+        }
+        let p = &self.st.particles;
+        let mut eb = vec![0.0; self.ws.grid_state.mass.len()];
+        for q in 0..self.own_point_count() {
+            for w in self.ws.table.weights(q) {
+                eb[w.node as usize] += w.value * p.mass[q] * p.eta_bar[q];
+            }
+        }
+        if self.st.distributed {
+            session.sum(&mut eb)?;
+        }
+        for &node in self.ws.dofs.active_nodes() {
+            eb[node as usize] /= self.ws.grid_state.mass[node as usize];
+        }
+        Ok(eb)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    pub(super) fn pushed_forward_gradients_reproduce_the_deformed_configuration() {
+        // FEM mode: with nodes at x_I = F X_I, sum_I x_I (x) grad_{X_n} S_Ip = I.
+        let grid = Grid::new(Vector2::zeros(), 1.0, [4, 4]).unwrap();
+        let mut p = Particles::new();
+        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
+        for x in [Vector2::new(1.3, 2.2), Vector2::new(0.4, 0.7)] {
+            p.push(x, 0.25, 0.25, nalgebra::Matrix2::from_columns(&[r1, r2]), 0);
+        }
+        let mut reference = ShapeTable::new();
+        reference.compute(ShapeKind::Linear, &grid, &p).unwrap();
+        let f = nalgebra::Matrix2::new(1.2, 0.3, -0.1, 0.9);
+        let mut table = ShapeTable::new();
+        table.push_forward(&reference, &[f, f]).unwrap();
+        for q in 0..2 {
+            let mut m = nalgebra::Matrix2::zeros();
+            let mut sum = 0.0;
+            for (w, w0) in table.weights(q).iter().zip(reference.weights(q)) {
+                assert_eq!(w.value, w0.value);
+                m += (f * grid.node_position(w.node as usize)) * w.grad.transpose();
+                sum += w.value;
+            }
+            assert!((m - nalgebra::Matrix2::identity()).norm() < 1e-13, "{m}");
+            assert!((sum - 1.0).abs() < 1e-14);
+        }
+        let inverted = nalgebra::Matrix2::new(-1.0, 0.0, 0.0, 1.0);
+        assert!(matches!(
+            table.push_forward(&reference, &[f, inverted]),
+            Err(ShapeError::InvertedElement { particle: 1, .. })
+        ));
+    }
+}

@@ -1,0 +1,121 @@
+//! The process plumbing of a step: agreement on failures, residual rows completed over the processes,
+//! points shared out with their ghosts and the block rows each process owns.
+
+use super::*;
+
+/// A domain error (an inverted point, a failed material update) on any process, reported on all: SNES
+/// takes domain errors collectively, and with each process evaluating the points of its own rows only
+/// one of them may meet it.
+pub(super) fn agree(
+    session: &SessionGuard,
+    local: Result<(), AssemblyError>,
+) -> Result<(), CallbackError> {
+    let any = session.any(local.is_err());
+    match local {
+        Err(e) => Err(CallbackError::Domain(e.to_string())),
+        Ok(()) if any => Err(CallbackError::Domain(
+            "a point of another process left its domain".into(),
+        )),
+        Ok(()) => Ok(()),
+    }
+}
+
+/// A result of this process's points agreed on by every process before the next collective call: with
+/// the points shared out (`shared`), a point's failure (it left the grid, its domain inverted) is met
+/// only by the processes that hold it. The failing processes keep their error, the others return
+/// [`StepError::OtherProcess`], so that all leave the step together.
+pub(super) fn agreed<T>(
+    session: &SessionGuard,
+    shared: bool,
+    local: Result<T, StepError>,
+) -> Result<T, StepError> {
+    if !shared {
+        return local;
+    }
+    let failed = session.any(local.is_err());
+    match local {
+        Ok(_) if failed => Err(StepError::OtherProcess),
+        r => r,
+    }
+}
+
+/// Completes a residual `r` over all unknowns that this process evaluated from its own points and
+/// ghosts (`shared`): its own block rows `rows` are complete, the others partial; they are zeroed and
+/// the vectors summed over the processes, so that every process holds every row (the same bits on
+/// each). Without shared points every process evaluated every row: nothing to do.
+pub(super) fn complete_rows(
+    session: &SessionGuard,
+    shared: bool,
+    rows: Range<usize>,
+    nf: usize,
+    r: &mut [f64],
+) -> Result<(), StepError> {
+    if !shared {
+        return Ok(());
+    }
+    r[..rows.start * nf].fill(0.0);
+    r[rows.end * nf..].fill(0.0);
+    session.sum(r)?;
+    Ok(())
+}
+
+impl<const D: usize> Step<'_, D> {
+    /// MPM on several processes: the points shared out (at the first step: each process keeps those of
+    /// its band; later: the points that left a band migrate), then the ghosts appended.
+    pub(super) fn share_points(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        let st = &mut *self.st;
+        if self.ws.partition.is_none() {
+            let p = Partition::balanced(session, &self.m.grid, &st.particles, !st.distributed)
+                .map_err(StepError::Setup)?;
+            self.ws.partition = Some(p);
+        }
+        let part = self.ws.partition.as_ref().expect("set above");
+        let migrated = if st.distributed {
+            partition::migrate(session, part, &mut st.particles)?
+        } else {
+            partition::keep_own(part, &mut st.particles);
+            st.distributed = true;
+            0
+        };
+        self.ws.own_points = st.particles.len();
+        let ghosts = partition::add_ghosts(session, part, &mut st.particles)?;
+        let mut moved = [migrated as f64, ghosts as f64];
+        session.sum(&mut moved)?;
+        // Points that migrated in any attempt of the step; the ghosts of the last attempt.
+        self.ws.moved = [self.ws.moved[0] + moved[0] as usize, moved[1] as usize];
+        Ok(())
+    }
+
+    /// This process's own points: the first of the state's (all of them unless shared out).
+    pub(super) fn own_point_count(&self) -> usize {
+        if self.st.distributed {
+            self.ws.own_points
+        } else {
+            self.st.particles.len()
+        }
+    }
+
+    /// Drops the ghosts of the step (the state keeps this process's own points only).
+    pub(super) fn drop_ghosts(&mut self) {
+        if self.st.distributed {
+            self.st.particles.truncate(self.ws.own_points);
+        }
+    }
+
+    /// The block rows this process owns: with the points shared out, the active nodes of its node
+    /// rows ([`Partition::owned_nodes`]); otherwise an equal share of the active nodes.
+    pub(super) fn own_rows(&self, session: &SessionGuard) -> Range<usize> {
+        let active = self.ws.dofs.active_nodes();
+        match (&self.ws.partition, self.st.distributed) {
+            (Some(part), true) => {
+                let nodes = part.owned_nodes();
+                let first = |n: usize| active.partition_point(|&a| (a as usize) < n);
+                first(nodes.start)..first(nodes.end)
+            }
+            _ => {
+                let (rank, size, n) = (session.rank(), session.size(), active.len());
+                n * rank / size..n * (rank + 1) / size
+            }
+        }
+    }
+}

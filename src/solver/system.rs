@@ -1,0 +1,297 @@
+//! The linear system of a step on PETSc: the unknowns' vector, the Jacobian with its block pattern and the
+//! SNES ([`LinearSystem`]), the block rows this process owns ([`OwnedRows`]), the nonlinear problem handed
+//! to SNES and the rigid-body modes for algebraic multigrid.
+
+use super::*;
+
+/// The nonlinear problem of one step, handed to SNES.
+pub(super) struct StepProblem<'a, 'b, const D: usize> {
+    pub(super) input: &'a StepInput<'b, D>,
+    /// PETSc log event of the residual and Jacobian evaluations (shown by `-log_view`).
+    pub(super) event: LogEvent,
+    pub(super) assembler: &'a mut Assembler<D>,
+    /// Wall time spent in residual and Jacobian evaluations (s).
+    pub(super) assembly_time: f64,
+    /// Residual and Jacobian evaluations.
+    pub(super) residuals: usize,
+    pub(super) jacobians: usize,
+    /// The contact devices of the step (closed nodes get constraint rows).
+    pub(super) contact: &'a [Option<DeviceContact>],
+    /// Contact between bodies (closed pairs get constraint rows).
+    pub(super) bodies: &'a BodyContact<D>,
+    /// Scale of the constraint rows (MPa).
+    pub(super) row_scale: f64,
+    /// The block rows this process owns.
+    pub(super) owned: &'a OwnedRows,
+    /// For the processes' agreement on domain errors.
+    pub(super) session: &'a SessionGuard,
+    /// The residual of all unknowns (this process hands PETSc its own rows).
+    pub(super) scratch: Vec<f64>,
+}
+
+impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
+    fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
+        let _event = self.event.begin();
+        let t = Instant::now();
+        let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
+        let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
+        let (contact, s) = (self.contact, self.row_scale);
+        let nf = input.dofs.fields();
+        let r = &mut self.scratch;
+        let xs = owned.gather(x).map_err(fatal)?;
+        // Only this process's rows: the points in their support, the rows themselves.
+        let local = asm.evaluate_owned(input, &xs).and_then(|()| {
+            r.resize(xs.len(), 0.0);
+            asm.residual_rows(input, &xs, r, false, owned.rows.clone())
+        });
+        let result = agree(self.session, local).and_then(|()| {
+            for d in contact.iter().flatten() {
+                d.residual_rows(&xs, r, nf, s);
+            }
+            self.bodies.residual_rows(&xs, r, nf, s);
+            f.write(|out| out.copy_from_slice(&r[owned.scalars()]))
+                .map_err(fatal)
+        });
+        self.assembly_time += t.elapsed().as_secs_f64();
+        self.residuals += 1;
+        result
+    }
+
+    fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
+        let _event = self.event.begin();
+        let t = Instant::now();
+        let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
+        let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
+        let xs = owned.gather(x).map_err(fatal)?;
+        agree(self.session, asm.evaluate_owned(input, &xs))?;
+        let (contact, bodies, s) = (self.contact, self.bodies, self.row_scale);
+        let (pattern, own) = (owned.pattern(), owned.rows.clone());
+        let r = jac
+            .fill_block_rows(&pattern, |values, layout| {
+                asm.jacobian_into(input, own.clone(), values, layout);
+                let nf = input.dofs.fields();
+                let row_of = |a: usize| {
+                    let l = a.checked_sub(own.start).filter(|&l| l < own.len())?;
+                    let (lo, hi) = (pattern.row_ptr[l], pattern.row_ptr[l + 1]);
+                    let diag = pattern.cols[lo..hi]
+                        .binary_search(&(a as u32))
+                        .expect("diagonal block in the pattern");
+                    Some((lo * nf * nf, hi - lo, diag))
+                };
+                for d in contact.iter().flatten() {
+                    d.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
+                        layout.offset(ncols, nf, i, pos, k)
+                    });
+                }
+                bodies.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
+                    layout.offset(ncols, nf, i, pos, k)
+                });
+            })
+            .map_err(fatal);
+        self.assembly_time += t.elapsed().as_secs_f64();
+        self.jacobians += 1;
+        r
+    }
+}
+
+/// The block rows (active nodes, in [`DofMap`] order) of the Jacobian and the unknowns this process
+/// owns: a contiguous range ([`Step::own_rows`]). The process evaluates the points in their support
+/// (its own and the ghosts of MPM on several processes, all points in FEM mode) at the gathered
+/// unknowns and hands PETSc its own rows; PETSc's vectors, matrix and solvers are distributed.
+pub(super) struct OwnedRows {
+    /// Owned block rows.
+    pub(super) rows: Range<usize>,
+    /// Their pattern (row pointers from 0, global block columns).
+    pub(super) row_ptr: Vec<usize>,
+    pub(super) cols: Vec<u32>,
+    /// Unknowns per node.
+    pub(super) nf: usize,
+    /// More than one process: the gather of all unknowns for every evaluation (built once with the
+    /// vector layout).
+    pub(super) gather: Option<GatherAll>,
+}
+
+impl OwnedRows {
+    /// The block rows `rows` (from [`Step::own_rows`]) with their pattern.
+    pub(super) fn new<const D: usize>(asm: &Assembler<D>, rows: Range<usize>, nf: usize) -> Self {
+        let (mut row_ptr, mut cols) = (Vec::new(), Vec::new());
+        asm.block_rows_pattern(rows.clone(), &mut row_ptr, &mut cols);
+        Self {
+            rows,
+            row_ptr,
+            cols,
+            nf,
+            gather: None,
+        }
+    }
+
+    /// The owned part of the pattern.
+    pub(super) fn pattern(&self) -> BlockCsr<'_> {
+        BlockCsr {
+            first: self.rows.start,
+            bs: self.nf,
+            row_ptr: &self.row_ptr,
+            cols: &self.cols,
+        }
+    }
+
+    /// The owned unknowns (indices into the vector of all unknowns).
+    pub(super) fn scalars(&self) -> Range<usize> {
+        self.rows.start * self.nf..self.rows.end * self.nf
+    }
+
+    /// All unknowns of the distributed vector `x`, in [`DofMap`] order, on every process.
+    pub(super) fn gather(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
+        match &self.gather {
+            Some(g) => g.gather(x),
+            None => x.read(|v| v.to_vec()),
+        }
+    }
+
+    /// Writes this process's part of `all` (every unknown) into the distributed `x`.
+    pub(super) fn scatter(&self, all: &[f64], x: &mut Vector) -> Result<(), petsc::PetscError> {
+        x.write(|v| v.copy_from_slice(&all[self.scalars()]))
+    }
+}
+
+/// The PETSc objects of the implicit step: the unknowns, the Jacobian with its block pattern, and the
+/// SNES (with its KSP and PC). They are kept from step to step while the active nodes and the pattern
+/// stay the same (at 1 us steps particles rarely cross a cell boundary), so the matrix structure, the
+/// symbolic factorisation of ILU/LU and the solver set-up are reused; a changed pattern rebuilds them.
+pub(super) struct LinearSystem {
+    /// Options prefix of the SNES.
+    pub(super) prefix: Option<String>,
+    /// Active grid nodes the objects were built for.
+    pub(super) active: Vec<u32>,
+    /// The rows of this process, with the pattern the objects were built for.
+    pub(super) owned: OwnedRows,
+    pub(super) x: Vector,
+    pub(super) jac: Matrix,
+    pub(super) snes: Snes,
+    /// The SNES tolerances from the options database, restored at the start of every step attempt (the
+    /// contact re-solves of a step run with a raised absolute tolerance).
+    pub(super) tolerances: Tolerances,
+    /// The lag of the preconditioner from the options database (`-snes_lag_preconditioner`).
+    pub(super) lag: PetscInt,
+    /// Nonzero entries of the whole Jacobian (over all processes).
+    pub(super) nonzeros: usize,
+}
+
+impl LinearSystem {
+    /// True if the objects fit the step's unknowns and the pattern of this process's rows (the other
+    /// rows of a process holding part of the points are partial; every process decides on its own
+    /// rows, and the objects are rebuilt if any process's no longer fit).
+    pub(super) fn fits<const D: usize>(
+        &self,
+        prefix: Option<&str>,
+        dofs: &DofMap,
+        asm: &Assembler<D>,
+    ) -> bool {
+        if self.prefix.as_deref() != prefix || self.active != dofs.active_nodes() {
+            return false;
+        }
+        let (p, rows) = (asm.block_pattern(), self.owned.rows.clone());
+        let base = p.row_ptr[rows.start];
+        p.row_ptr[rows.start..=rows.end]
+            .iter()
+            .map(|r| r - base)
+            .eq(self.owned.row_ptr.iter().copied())
+            && p.cols[base..p.row_ptr[rows.end]] == self.owned.cols[..]
+    }
+
+    /// New objects for the step's pattern: vector, matrix (exact structure, the rigid-body near-null
+    /// space of the displacement block for algebraic multigrid), SNES configured from the options
+    /// database with the (u, eta_bar) index sets for `-pc_type fieldsplit`.
+    pub(super) fn new<const D: usize>(
+        session: &SessionGuard,
+        prefix: Option<&str>,
+        grid: &Grid<D>,
+        dofs: &DofMap,
+        asm: &Assembler<D>,
+        rows: Range<usize>,
+    ) -> Result<Self, StepError> {
+        let nf = dofs.fields();
+        let mut owned = OwnedRows::new(asm, rows, nf);
+        let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
+        session.sum(&mut nonzeros)?;
+        let n = owned.scalars().len();
+        let x = Vector::new(session, n, nf)?;
+        if session.size() > 1 {
+            owned.gather = Some(GatherAll::new(&x)?);
+        }
+        let first = x.ownership_range()?.start;
+        if first != owned.scalars().start {
+            return Err(StepError::Setup(format!(
+                "PETSc placed this process's unknowns at {first}, not at {}",
+                owned.scalars().start
+            )));
+        }
+        // AIJ with the block size set (inode kernels). `-mat_type baij` makes ILU, triangular solves and
+        // products 1.4-1.8x faster at the paper's size, but its block ILU(0) (no pivot shift) failed in 3
+        // of 1000 steps of the half-resolution CT at 4.3 m/s where point ILU(0) with a nonzero shift passes
+        // (docs/benchmarks.md); GAMG and the field split need AIJ anyway.
+        let mut jac = Matrix::new(session, n, nf)?;
+        jac.set_block_pattern(&owned.pattern())?;
+        // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
+        // 6 in 3D) for algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
+        let rotations = D * (D - 1) / 2;
+        let mut modes = (0..D + rotations)
+            .map(|_| Vector::new(session, n, nf))
+            .collect::<Result<Vec<_>, _>>()?;
+        for (k, mode) in modes.iter_mut().enumerate() {
+            mode.write(|m| {
+                m.fill(0.0);
+                for (a, &node) in dofs.active_nodes()[owned.rows.clone()].iter().enumerate() {
+                    let x = grid.node_position(node as usize);
+                    let u = rigid_mode(k, &x);
+                    m[a * nf..a * nf + D].copy_from_slice(u.as_slice());
+                }
+            })?;
+        }
+        jac.set_near_null_space(&mut modes)?;
+        let mut snes = Snes::new(session, prefix)?;
+        snes.set_from_options()?;
+        if let Some(e) = dofs.layout().eta_bar() {
+            // Field index sets for `-pc_type fieldsplit` (names: `-fieldsplit_u_*`, `-fieldsplit_eta_bar_*`).
+            let (u, eb): (Vec<i32>, Vec<i32>) = (0..n)
+                .map(|i| (first + i) as i32)
+                .partition(|i| (*i as usize - first) % nf != e);
+            let is_u = IndexSet::new(session, &u)?.with_block_size(dofs.layout().dim())?;
+            let is_eb = IndexSet::new(session, &eb)?;
+            snes.set_fieldsplit(&[("u", &is_u), ("eta_bar", &is_eb)])?;
+        }
+        let tolerances = snes.tolerances()?;
+        let lag = snes.lag_preconditioner()?;
+        Ok(Self {
+            prefix: prefix.map(str::to_owned),
+            active: dofs.active_nodes().to_vec(),
+            owned,
+            x,
+            jac,
+            snes,
+            tolerances,
+            lag,
+            nonzeros: nonzeros[0] as usize,
+        })
+    }
+}
+
+/// Rigid-body mode `k` of the displacement at `x` (mm): the translations along the axes (`k < D`), then
+/// the rotations (2D: about z; 3D: about x, y and z).
+pub(super) fn rigid_mode<const D: usize>(k: usize, x: &SVector<f64, D>) -> SVector<f64, D> {
+    let mut u = SVector::zeros();
+    if k < D {
+        u[k] = 1.0;
+        return u;
+    }
+    // Rotation in the plane of axes (i, j): u_i = -x_j, u_j = x_i.
+    let (i, j) = match (D, k - D) {
+        (2, _) => (0, 1),
+        (_, 0) => (1, 2),
+        (_, 1) => (2, 0),
+        _ => (0, 1),
+    };
+    u[i] = -x[j];
+    u[j] = x[i];
+    u
+}
