@@ -236,6 +236,12 @@ impl<const D: usize> Model<D> {
         self.grid.num_nodes() * self.num_fields()
     }
 
+    /// The constraint set of rigid body `k` (index into [`Model::rigid`]): its entry in the per-set lists
+    /// of reactions and displacements (report order: node boxes, rigid bodies, loads).
+    pub fn rigid_set(&self, k: usize) -> usize {
+        self.boxes.len() + k
+    }
+
     /// Names of the constraint sets in report order: node boxes, rigid bodies, loads.
     pub fn set_names(&self) -> Vec<String> {
         self.boxes

@@ -34,6 +34,7 @@ mod solve;
 mod start;
 mod system;
 
+use contacts::ContactSet;
 use prepare::{Loading, StepPlan};
 use processes::{agree, agreed, complete_rows};
 use report::Failure;

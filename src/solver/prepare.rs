@@ -16,16 +16,8 @@ pub(super) struct StepPlan<const D: usize> {
     pub(super) set_du: Vec<[Option<f64>; D]>,
     /// The constrained unknowns of each set.
     pub(super) sets: Vec<Vec<usize>>,
-    /// Per rigid body: translation increment (mm), in-plane pin position (mm; `None` without a pin) and
-    /// rotation increment about the pin (rad, in the x-y plane; settled with the contact active set).
-    pub(super) translations: Vec<SVector<f64, D>>,
-    pub(super) pins: Vec<Option<Vector2<f64>>>,
-    pub(super) dtheta: Vec<f64>,
-    /// Per rigid body, its contact with the specimen (`None` without contact) and its face length (mm).
-    pub(super) devices: Vec<Option<DeviceContact>>,
-    pub(super) face_lengths: Vec<f64>,
-    /// Contact between the specimen and bodies of other velocity fields.
-    pub(super) bodies: BodyContact<D>,
+    /// The contact sets of the step: the devices, then the pairs between bodies.
+    pub(super) contacts: Vec<ContactSet<D>>,
     /// Inertia and applied forces of the step, and the nodes of each load.
     pub(super) loading: Loading<D>,
     pub(super) load_nodes: LoadNodes,
@@ -45,9 +37,22 @@ pub(super) struct Loading<const D: usize> {
     pub(super) nodal_force: Vec<SVector<f64, D>>,
 }
 
+/// The grid at the start of an attempt besides the grid state ([`Step::to_grid`]).
+pub(super) struct OnGrid<const D: usize> {
+    /// Prescribed value per constraint set and component (boxes first, then rigid bodies).
+    pub(super) set_values: Vec<[Option<f64>; D]>,
+    /// The constrained unknowns of each set.
+    pub(super) sets: Vec<Vec<usize>>,
+    /// Applied nodal forces (N, in 2D per mm thickness; empty without loads) and the nodes of each load.
+    pub(super) nodal_force: Vec<SVector<f64, D>>,
+    pub(super) load_nodes: LoadNodes,
+    /// The points' `eta_bar` at the active nodes (empty without gradient enhancement).
+    pub(super) eta_bar: Vec<f64>,
+}
+
 impl<const D: usize> Step<'_, D> {
     /// First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the
-    /// contact devices and loads at `t_n+1`, the PETSc objects (kept if the pattern is unchanged) and the
+    /// loads at `t_n+1`, the contact sets, the PETSc objects (kept if the pattern is unchanged) and the
     /// first guess of the solution.
     pub(super) fn prepare(
         &mut self,
@@ -62,33 +67,11 @@ impl<const D: usize> Step<'_, D> {
                     .into(),
             ));
         }
-        self.project_to_grid(session)?;
-        // Constraints: prescribed du per component and set (boxes first, then rigid bodies).
-        let set_du =
-            self.constraint_values(|v, rise| prescribed_increment(v, rise, self.st.time, dt));
-        let sets = self.constrain(&set_du)?;
-        // Contact devices: translation from the prescribed motion, rotation about the pin first guessed as
-        // the last step's rate.
-        let nb = self.m.boxes.len();
-        let translations: Vec<SVector<f64, D>> = set_du[nb..]
-            .iter()
-            .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
-            .collect();
-        let pins: Vec<Option<Vector2<f64>>> =
-            (0..self.m.rigid.len()).map(|k| self.pin_of(k)).collect();
-        let dtheta: Vec<f64> = (0..self.m.rigid.len())
-            .map(|k| match pins[k] {
-                Some(_) => self.st.rotation_rates[k] * dt,
-                None => 0.0,
-            })
-            .collect();
-        let (devices, face_lengths) =
-            self.contact_devices(session, &translations, &pins, &dtheta, dt)?;
-        let bodies = self.body_pairs(&devices, dt)?;
-        let t_new = self.st.time + dt;
-        // Loads: the resultant at t_n+1 spread over the active nodes of each segment.
-        let (nodal_force, load_nodes) = self.nodal_loads(t_new)?;
-        let eta_bar = self.nodal_eta_bar(session)?;
+        let (t, t_new) = (self.st.time, self.st.time + dt);
+        let g = self.to_grid(session, t_new, |v, rise| {
+            prescribed_increment(v, rise, t, dt)
+        })?;
+        let contacts = self.contact_sets(session, &g.set_values, dt)?;
         let s = self.m;
         let newmark = (!s.time.quasi_static).then_some(Newmark {
             beta: s.time.beta,
@@ -103,20 +86,15 @@ impl<const D: usize> Step<'_, D> {
         let plan = StepPlan {
             dt,
             t_new,
-            set_du,
-            sets,
-            translations,
-            pins,
-            dtheta,
-            devices,
-            face_lengths,
-            bodies,
+            set_du: g.set_values,
+            sets: g.sets,
+            contacts,
             loading: Loading {
                 newmark,
                 load_factor,
-                nodal_force,
+                nodal_force: g.nodal_force,
             },
-            load_nodes,
+            load_nodes: g.load_nodes,
             new_pattern: false,
             setup_time: 0.0,
         };
@@ -130,8 +108,78 @@ impl<const D: usize> Step<'_, D> {
             &self.ws.partners,
         );
         self.ws.assembler.begin_step(&input);
-        // PETSc objects: kept from the last step if the unknowns and the pattern are unchanged (on every
-        // process: with points shared out, each sees the pattern of its own points only).
+        let new_pattern = self.linear_system(session, prefix)?;
+        let xs = self.first_guess(&plan, &g.eta_bar);
+        let sys = self.ws.system.as_mut().expect("linear system just built");
+        sys.owned.scatter(&xs, &mut sys.x)?;
+        Ok(StepPlan {
+            new_pattern,
+            ..plan
+        })
+    }
+
+    /// Shape functions, P2G and the unknowns ([`Step::project_to_grid`]); the constraint sets with the
+    /// prescribed `value(v, rise_time)` of each moving component; the loads at time `t` and the
+    /// points' `eta_bar` on the nodes.
+    pub(super) fn to_grid(
+        &mut self,
+        session: &SessionGuard,
+        t: f64,
+        value: impl Fn(f64, f64) -> f64,
+    ) -> Result<OnGrid<D>, StepError> {
+        self.project_to_grid(session)?;
+        let set_values = self.constraint_values(value);
+        let sets = self.constrain(&set_values)?;
+        // Loads: the resultant at t spread over the active nodes of each segment.
+        let (nodal_force, load_nodes) = self.nodal_loads(t)?;
+        let eta_bar = self.nodal_eta_bar(session)?;
+        Ok(OnGrid {
+            set_values,
+            sets,
+            nodal_force,
+            load_nodes,
+            eta_bar,
+        })
+    }
+
+    /// The contact sets of the attempt: the devices, translating with their prescribed increments
+    /// `set_du` and turning about their pins (first guess: the last step's rate), then the pairs between
+    /// bodies.
+    fn contact_sets(
+        &mut self,
+        session: &SessionGuard,
+        set_du: &[[Option<f64>; D]],
+        dt: f64,
+    ) -> Result<Vec<ContactSet<D>>, StepError> {
+        let translations = self.rigid_values(set_du);
+        let devices = self.contact_devices(session, &translations, true, dt)?;
+        let bodies = self.body_pairs(&devices, dt)?;
+        let mut contacts: Vec<_> = devices.into_iter().map(ContactSet::Device).collect();
+        if self.m.num_fields() > 1 {
+            contacts.push(ContactSet::Bodies(bodies));
+        }
+        Ok(contacts)
+    }
+
+    /// The rigid bodies' entries of the per-set values `set_values` as vectors (free components 0).
+    pub(super) fn rigid_values(&self, set_values: &[[Option<f64>; D]]) -> Vec<SVector<f64, D>> {
+        set_values[self.m.boxes.len()..]
+            .iter()
+            .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
+            .collect()
+    }
+
+    /// The PETSc objects of the step: kept from the last step if the unknowns and the pattern are
+    /// unchanged on every process (with points shared out, each sees the pattern of its own points only),
+    /// else built anew (returns true). The first solve of an attempt runs with the configured tolerances
+    /// and lag (the contact re-solves of an earlier attempt may have changed both) and so starts with a
+    /// fresh preconditioner: PETSc rebuilds it at the first Newton iteration of every solve unless the
+    /// lag is -1 or persists (`-snes_lag_preconditioner_persists`, a user's choice, left alone).
+    fn linear_system(
+        &mut self,
+        session: &SessionGuard,
+        prefix: Option<&str>,
+    ) -> Result<bool, StepError> {
         let fits = self
             .ws
             .system
@@ -144,64 +192,49 @@ impl<const D: usize> Step<'_, D> {
             self.ws.system = Some(LinearSystem::new(
                 session,
                 prefix,
-                &s.grid,
+                &self.m.grid,
                 &self.ws.dofs,
                 &self.ws.assembler,
                 rows,
             )?);
         }
-        let LinearSystem {
-            x,
-            snes,
-            tolerances,
-            lag,
-            owned,
-            ..
-        } = self.ws.system.as_mut().expect("linear system just built");
-        // The first solve of an attempt runs with the configured tolerances and lag (the contact
-        // re-solves of an earlier attempt may have changed both) and so starts with a fresh
-        // preconditioner: PETSc rebuilds it at the first Newton iteration of every solve unless the lag
-        // is -1 or persists (`-snes_lag_preconditioner_persists`, a user's choice, left alone).
-        snes.set_tolerances(tolerances)?;
-        if *lag > 1 {
-            snes.set_lag_preconditioner(*lag)?;
+        let sys = self.ws.system.as_mut().expect("linear system just built");
+        sys.snes.set_tolerances(&sys.tolerances)?;
+        if sys.lag > 1 {
+            sys.snes.set_lag_preconditioner(sys.lag)?;
         }
-        // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
-        // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
-        // increments into the body); eta_bar from the particles (mass-weighted projection).
-        let nf = self.ws.dofs.fields();
-        let mut xs = vec![0.0; self.ws.dofs.len()];
-        {
-            for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
-                let node = node as usize;
-                let du = match newmark {
-                    Some(_) => {
-                        dt * self.ws.grid_state.velocity[node]
-                            + 0.5 * dt * dt * self.ws.grid_state.acceleration[node]
-                    }
-                    None => SVector::zeros(),
-                };
-                xs[a * nf..a * nf + D].copy_from_slice(du.as_slice());
-                if let Some(e) = self.ws.dofs.layout().eta_bar() {
-                    xs[a * nf + e] = eta_bar[node];
-                }
-                for c in 0..nf {
-                    if let (Some(v), Some(_)) = (self.ws.dofs.prescribed(a * nf + c), newmark) {
-                        xs[a * nf + c] = v;
-                    }
+        Ok(new_pattern)
+    }
+
+    /// The first guess of all unknowns: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics;
+    /// zero everywhere quasi-statically (the first Newton step is then the linear predictor that carries
+    /// the prescribed increments into the body); `eta_bar` from the particles (mass-weighted projection);
+    /// projected onto the closed contact constraints.
+    fn first_guess(&self, plan: &StepPlan<D>, eta_bar: &[f64]) -> Vec<f64> {
+        let (dofs, gs, dt) = (&self.ws.dofs, &self.ws.grid_state, plan.dt);
+        let newmark = plan.loading.newmark;
+        let nf = dofs.fields();
+        let mut xs = vec![0.0; dofs.len()];
+        for (a, &node) in dofs.active_nodes().iter().enumerate() {
+            let node = node as usize;
+            let du = match newmark {
+                Some(_) => dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node],
+                None => SVector::zeros(),
+            };
+            xs[a * nf..a * nf + D].copy_from_slice(du.as_slice());
+            if let Some(e) = dofs.layout().eta_bar() {
+                xs[a * nf + e] = eta_bar[node];
+            }
+            for c in 0..nf {
+                if let (Some(v), Some(_)) = (dofs.prescribed(a * nf + c), newmark) {
+                    xs[a * nf + c] = v;
                 }
             }
-            for d in plan.devices.iter().flatten() {
-                d.project_guess(&mut xs, nf);
-            }
-            let mass = &self.ws.grid_state.mass;
-            plan.bodies.project_guess(&mut xs, nf, |node| mass[node]);
         }
-        owned.scatter(&xs, x)?;
-        Ok(StepPlan {
-            new_pattern,
-            ..plan
-        })
+        for c in &plan.contacts {
+            c.project_guess(&mut xs, nf, &gs.mass);
+        }
+        xs
     }
 
     /// Shape functions on the committed configuration, P2G (in FEM mode the carried nodal velocity and

@@ -18,6 +18,133 @@ pub(super) struct Solved {
     pub(super) contact_solves: usize,
 }
 
+/// The solves of one attempt so far: SNES statistics, evaluation counts and the state of the contact
+/// active set.
+#[derive(Default)]
+struct Solves {
+    /// SNES statistics summed over the solves (`None` before the first).
+    info: Option<SolveInfo>,
+    /// Wall time of residual and Jacobian evaluations (s) and their counts.
+    assembly_time: f64,
+    evaluations: [usize; 2],
+    /// SNES solves so far.
+    count: usize,
+    /// The active sets met after each solve, to find cycles; once one repeats the set is frozen.
+    seen: Vec<Vec<NodeStatus>>,
+    frozen: bool,
+}
+
+impl Solves {
+    /// Adds the statistics of one converged solve: the norms of all solves of the step in order (the
+    /// first is the step's initial residual, the last its final one).
+    fn add(&mut self, info: SolveInfo) {
+        self.info = Some(match self.info.take() {
+            None => info,
+            Some(mut t) => {
+                t.iterations += info.iterations;
+                t.linear_iterations += info.linear_iterations;
+                t.residual_norms.extend(info.residual_norms);
+                t
+            }
+        });
+    }
+}
+
+/// The failure of a solve that did not converge: a linear-solver failure (another linear solver may
+/// succeed at the same time step) or Newton's own.
+fn diverged(info: &SolveInfo) -> Failure {
+    let why = info.domain_errors.last().cloned().unwrap_or_default();
+    Failure {
+        reason: format!(
+            "SNES {} after {} iterations {why}",
+            info.reason_name, info.iterations
+        ),
+        linear: matches!(
+            info.reason_name.as_str(),
+            "DIVERGED_LINEAR_SOLVE" | "DIVERGED_LINE_SEARCH"
+        ),
+    }
+}
+
+/// Re-solves after a change of the contact active set are held to the step's own standard,
+/// `|R| <= max(atol, rtol |R_0|)` with `R_0` the residual at the start of the first solve (`first`),
+/// rather than to `rtol` times their own (often tiny) initial residual. Where the preconditioner is lagged
+/// anyway (`lag > 1`, e.g. the multigrid of stiffness-dominated steps), they keep the last one of the
+/// first solve (lag -1: never rebuilt; a lag that persists through solves would carry its count into
+/// later steps): a changed active set changes a few rows, which GMRES absorbs in a few iterations, far
+/// cheaper than a new set-up (docs/theory.md, "Contact with rigid devices").
+fn hold_to_first_solve(sys: &mut LinearSystem, first: &SolveInfo) -> Result<(), StepError> {
+    let r0 = first.residual_norms.first().copied().unwrap_or(0.0);
+    let tol = sys.tolerances;
+    sys.snes.set_tolerances(&Tolerances {
+        atol: tol.atol.max(tol.rtol * r0),
+        ..tol
+    })?;
+    if sys.lag > 1 {
+        sys.snes.set_lag_preconditioner(-1)?;
+    }
+    Ok(())
+}
+
+/// Updates the contact sets at the converged iterate `xs` with the forces `phys` (unless the active set
+/// is frozen), freezing it when it cycles; returns the number of status changes.
+fn update_contacts<const D: usize>(
+    contacts: &mut [ContactSet<D>],
+    solves: &mut Solves,
+    (xs, phys, nf): (&[f64], &[f64], usize),
+    h: f64,
+    step: usize,
+) -> usize {
+    if solves.frozen {
+        return 0;
+    }
+    let force_scale = contacts
+        .iter()
+        .map(|c| c.force_scale(phys, nf))
+        .fold(0.0, f64::max);
+    let (force_tol, gap_tol) = (1e-6 * force_scale.max(1e-300), 1e-6 * h);
+    let mut changes = 0;
+    for c in contacts.iter_mut() {
+        changes += c.update(xs, phys, nf, force_tol, gap_tol);
+    }
+    let mut statuses = Vec::new();
+    for c in contacts.iter() {
+        c.statuses(&mut statuses);
+    }
+    if changes > 0 && solves.seen.contains(&statuses) {
+        // A cycle of sets: keep the current one (only the pin rotations may still change). Logged at
+        // debug level: with pins and steel inserts it happens in a quarter of the steps (nodes at the edge
+        // of a face flipping on round-off), and the summary counts the contact solves.
+        tracing::debug!(
+            "step {}: the contact active set cycles; kept after {} solves",
+            step + 1,
+            solves.count
+        );
+        solves.frozen = true;
+    }
+    solves.seen.push(statuses);
+    changes
+}
+
+/// The physical residual `phys` (`f_int + M a - f_ext`, every row, on every process) at the solution
+/// of `sys`, whose unknowns it returns; the assembler keeps the nodal increments of this evaluation.
+fn physical_residual<const D: usize>(
+    assembler: &mut Assembler<D>,
+    input: &StepInput<'_, D>,
+    sys: &LinearSystem,
+    (session, shared): (&SessionGuard, bool),
+    phys: &mut [f64],
+) -> Result<Vec<f64>, StepError> {
+    let xs = sys.owned.gather(&sys.x)?;
+    let local = assembler
+        .evaluate(input, &xs)
+        .and_then(|()| assembler.residual(input, &xs, phys, true));
+    agreed(session, shared, local.map_err(StepError::from))?;
+    let nf = input.dofs.fields();
+    complete_rows(session, shared, sys.owned.rows.clone(), nf, phys)?;
+    Ok(xs)
+}
+
 impl<const D: usize> Step<'_, D> {
     /// Second phase: SNES from the prepared guess, repeated from the last solution while the contact
     /// active set and the rotation of pinned devices settle (`docs/theory.md`, "Contact with rigid
@@ -29,10 +156,7 @@ impl<const D: usize> Step<'_, D> {
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, Failure>, StepError> {
         let t1 = Instant::now();
-        let step = self.st.step;
-        let s = self.m;
-        let shared = self.st.distributed;
-        let particles = &self.st.particles;
+        let (step, s, shared) = (self.st.step, self.m, self.st.distributed);
         let Workspace {
             table,
             dofs,
@@ -43,41 +167,40 @@ impl<const D: usize> Step<'_, D> {
             ..
         } = &mut *self.ws;
         let StepPlan {
-            devices,
-            bodies,
-            dtheta,
-            pins,
-            translations,
-            face_lengths,
-            loading,
-            ..
+            contacts, loading, ..
         } = plan;
-        let input = Self::step_input(s, particles, table, dofs, grid_state, loading, partners);
-        let grid = &s.grid;
+        let input = Self::step_input(
+            s,
+            &self.st.particles,
+            table,
+            dofs,
+            grid_state,
+            loading,
+            partners,
+        );
         let nf = dofs.fields();
-        let n = dofs.len();
-        let LinearSystem {
-            x,
-            jac,
-            snes,
-            tolerances,
-            lag,
-            owned,
-            ..
-        } = system.as_mut().expect("prepared linear system");
-        let h = grid.cell_size();
-        let mut info_total: Option<SolveInfo> = None;
-        let (mut assembly_time, mut evaluations) = (0.0, [0usize; 2]);
-        let mut contact_iterations = 0;
-        let mut seen: Vec<Vec<NodeStatus>> = Vec::new();
-        let mut frozen = false;
-        let mut secant: Vec<Option<(f64, f64)>> = vec![None; devices.len()];
-        let mut phys = vec![0.0; n];
+        let in_contact = contacts.iter().any(ContactSet::in_play);
+        let mut solves = Solves::default();
+        let mut phys = vec![0.0; dofs.len()];
         // During the solves each process evaluates the points of its own rows; the physical residual
         // after each solve and the commit evaluate them all.
-        assembler.restrict_to_rows(&input, owned.rows.clone());
+        let rows = system
+            .as_ref()
+            .expect("prepared linear system")
+            .owned
+            .rows
+            .clone();
+        assembler.restrict_to_rows(&input, rows);
         loop {
-            contact_iterations += 1;
+            solves.count += 1;
+            let sys = system.as_mut().expect("prepared linear system");
+            let LinearSystem {
+                x,
+                jac,
+                snes,
+                owned,
+                ..
+            } = sys;
             let mut problem = StepProblem {
                 input: &input,
                 event: assembly_event,
@@ -85,8 +208,7 @@ impl<const D: usize> Step<'_, D> {
                 assembly_time: 0.0,
                 residuals: 0,
                 jacobians: 0,
-                contact: devices.as_slice(),
-                bodies,
+                contacts,
                 row_scale: input.row_scale,
                 owned,
                 session,
@@ -105,166 +227,59 @@ impl<const D: usize> Step<'_, D> {
                 }
                 Err(e) => return Err(e.into()),
             };
-            assembly_time += problem.assembly_time;
-            evaluations[0] += problem.residuals;
-            evaluations[1] += problem.jacobians;
+            solves.assembly_time += problem.assembly_time;
+            solves.evaluations[0] += problem.residuals;
+            solves.evaluations[1] += problem.jacobians;
             if !info.converged() {
-                let why = info.domain_errors.last().cloned().unwrap_or_default();
-                return Ok(Err(Failure {
-                    reason: format!(
-                        "SNES {} after {} iterations {why}",
-                        info.reason_name, info.iterations
-                    ),
-                    linear: matches!(
-                        info.reason_name.as_str(),
-                        "DIVERGED_LINEAR_SOLVE" | "DIVERGED_LINE_SEARCH"
-                    ),
-                }));
+                return Ok(Err(diverged(&info)));
             }
-            let in_contact = devices.iter().any(Option::is_some) || !bodies.pairs.is_empty();
-            if info_total.is_none() && in_contact {
-                // Re-solves after a change of the contact active set are held to the step's own standard,
-                // `|R| <= max(atol, rtol |R_0|)` with `R_0` the residual at the start of the first solve,
-                // rather than to `rtol` times their own (often tiny) initial residual. Where the
-                // preconditioner is lagged anyway (`lag > 1`, e.g. the multigrid of stiffness-dominated steps),
-                // they keep the last one of the first solve (lag -1: never rebuilt; a lag that persists
-                // through solves would carry its count into later steps): a changed active set changes a
-                // few rows, which GMRES absorbs in a few iterations, far cheaper than a new set-up
-                // (docs/theory.md, "Contact with rigid devices").
-                let r0 = info.residual_norms.first().copied().unwrap_or(0.0);
-                snes.set_tolerances(&Tolerances {
-                    atol: tolerances.atol.max(tolerances.rtol * r0),
-                    ..*tolerances
-                })?;
-                if *lag > 1 {
-                    snes.set_lag_preconditioner(-1)?;
-                }
+            if solves.info.is_none() && in_contact {
+                hold_to_first_solve(sys, &info)?;
             }
-            info_total = Some(match info_total.take() {
-                None => info,
-                Some(mut t) => {
-                    t.iterations += info.iterations;
-                    t.linear_iterations += info.linear_iterations;
-                    // The norms of all solves of the step in order: the first is the step's initial
-                    // residual, the last its final one.
-                    t.residual_norms.extend(info.residual_norms);
-                    t
-                }
-            });
+            solves.add(info);
             if !in_contact {
                 break;
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
-            let xs = owned.gather(x)?;
-            let local = assembler
-                .evaluate(&input, &xs)
-                .and_then(|()| assembler.residual(&input, &xs, &mut phys, true));
-            agreed(session, shared, local.map_err(StepError::from))?;
-            complete_rows(session, shared, owned.rows.clone(), nf, &mut phys)?;
-            let force_scale = devices
-                .iter()
-                .flatten()
-                .flat_map(|d| d.nodes.iter())
-                .filter(|c| c.status.closed())
-                .map(|c| Vector2::new(phys[c.row * nf], phys[c.row * nf + 1]).norm())
-                .fold(bodies.force_scale(&phys, nf), f64::max);
-            let (force_tol, gap_tol) = (1e-6 * force_scale.max(1e-300), 1e-6 * h);
-            let mut changes = 0;
-            if !frozen {
-                for d in devices.iter_mut().flatten() {
-                    changes += d.update(&xs, &phys, nf, force_tol, gap_tol);
-                }
-                changes += bodies.update(&xs, &phys, nf, force_tol, gap_tol);
-                let statuses: Vec<NodeStatus> = devices
-                    .iter()
-                    .flatten()
-                    .flat_map(|d| d.nodes.iter().map(|c| c.status))
-                    .chain(bodies.pairs.iter().map(|c| match c.closed {
-                        true => NodeStatus::Slide,
-                        false => NodeStatus::Open,
-                    }))
-                    .collect();
-                if changes > 0 && seen.contains(&statuses) {
-                    // A cycle of sets: keep the current one (only the pin rotations may still change).
-                    // Logged at debug level: with pins and steel inserts it happens in a quarter of the
-                    // steps (nodes at the edge of a face flipping on round-off), and the summary counts
-                    // the contact solves.
-                    tracing::debug!(
-                        "step {}: the contact active set cycles; kept after {contact_iterations} solves",
-                        step + 1
-                    );
-                    frozen = true;
-                }
-                seen.push(statuses);
-            }
-            // Pinned devices: the moment of the contact forces about the pin must vanish (secant in dtheta).
+            let mut xs = physical_residual(assembler, &input, sys, (session, shared), &mut phys)?;
+            let h = s.grid.cell_size();
+            let changes = update_contacts(contacts, &mut solves, (&xs, &phys, nf), h, step);
+            // Pinned devices: the moment of the contact forces about the pin must vanish.
             let mut moments_ok = true;
-            for (k, d) in devices.iter_mut().enumerate() {
-                let (Some(d), Some(pin)) = (d.as_mut(), pins[k]) else {
-                    continue;
-                };
-                let (f, m) = d.resultant(&phys, nf, |i| xy(&grid.node_position(i)), pin);
-                // Balanced to 1e-5 of the force times the face length (the resultant within 1e-5 of the
-                // face length from the pin), the force taken at least as `1e-4 s h` (a strain of 1e-4
-                // over one cell): a device that barely touches (a support the wave has not reached, a
-                // plate the arm flies away from) has a moment of round-off, discontinuous in `dtheta`
-                // as nodes open and close, which the secant would chase until the step fails.
-                let tol = 1e-5 * f.norm().max(1e-4 * input.row_scale * h) * face_lengths[k] + 1e-12;
-                if m.abs() <= tol || d.nodes.iter().all(|c| !c.status.closed()) {
-                    continue;
-                }
-                moments_ok = false;
-                let th = dtheta[k];
-                let next = match secant[k] {
-                    Some((th0, m0)) if m != m0 => th - m * (th - th0) / (m - m0),
-                    _ => th + (0.1 * th.abs()).max(1e-9),
-                };
-                secant[k] = Some((th, m));
-                dtheta[k] = next;
-                let r = contact::rotation(next) - nalgebra::Matrix2::identity();
-                let du_t = xy(&translations[k]);
-                for c in &mut d.nodes {
-                    c.du_device = du_t + r * (xy(&grid.node_position(c.node)) - pin);
-                }
+            for c in contacts.iter_mut() {
+                moments_ok &= c.balance(&phys, nf, &s.grid, input.row_scale);
             }
-            if (changes == 0 || frozen) && moments_ok {
+            if (changes == 0 || solves.frozen) && moments_ok {
                 break;
             }
-            if contact_iterations >= MAX_CONTACT_SOLVES {
+            if solves.count >= MAX_CONTACT_SOLVES {
                 return Ok(Err(Failure {
                     reason: format!(
-                        "contact not settled after {contact_iterations} solves ({changes} status \
-                         changes, moment balance {})",
+                        "contact not settled after {} solves ({changes} status changes, moment \
+                         balance {})",
+                        solves.count,
                         if moments_ok { "met" } else { "not met" }
                     ),
                     linear: false,
                 }));
             }
-            let mut xs = owned.gather(x)?;
-            for d in devices.iter().flatten() {
-                d.project_guess(&mut xs, nf);
+            for c in contacts.iter() {
+                c.project_guess(&mut xs, nf, &grid_state.mass);
             }
-            bodies.project_guess(&mut xs, nf, |node| grid_state.mass[node]);
-            owned.scatter(&xs, x)?;
+            sys.owned.scatter(&xs, &mut sys.x)?;
         }
-
-        let info = info_total.expect("at least one solve");
         let solve_time = t1.elapsed().as_secs_f64();
         // Converged: the physical residual (device forces, reactions) at the solution; the assembler keeps
         // the nodal increments of this evaluation for `finish`.
-        let xs = owned.gather(x)?;
-        let local = assembler
-            .evaluate(&input, &xs)
-            .and_then(|()| assembler.residual(&input, &xs, &mut phys, true));
-        agreed(session, shared, local.map_err(StepError::from))?;
-        complete_rows(session, shared, owned.rows.clone(), nf, &mut phys)?;
+        let sys = system.as_ref().expect("prepared linear system");
+        physical_residual(assembler, &input, sys, (session, shared), &mut phys)?;
         Ok(Ok(Solved {
-            info,
+            info: solves.info.expect("at least one solve"),
             phys,
             solve_time,
-            assembly_time,
-            evaluations,
-            contact_solves: contact_iterations,
+            assembly_time: solves.assembly_time,
+            evaluations: solves.evaluations,
+            contact_solves: solves.count,
         }))
     }
 }

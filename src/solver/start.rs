@@ -14,22 +14,47 @@ impl<const D: usize> Step<'_, D> {
         &mut self,
         session: &SessionGuard,
     ) -> Result<(), StepError> {
-        self.project_to_grid(session)?;
         let t = self.st.time;
-        let prescribed = self.constraint_values(|v, rise| prescribed_acceleration(v, rise, t));
-        let sets = self.constrain(&prescribed)?;
-        let (nodal_force, _) = self.nodal_loads(t)?;
-        let eta_bar = self.nodal_eta_bar(session)?;
+        let g = self.to_grid(session, t, |v, rise| prescribed_acceleration(v, rise, t))?;
+        let r = self.unbalanced_force(session, g.nodal_force, &g.eta_bar)?;
         let nf = self.ws.dofs.fields();
-        let s = self.m;
-        // No inertia and the full body force at t = 0.
+        let mut acc = vec![SVector::<f64, D>::zeros(); self.m.field_nodes()];
+        for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
+            let node = node as usize;
+            let m = self.ws.grid_state.mass[node];
+            acc[node] = SVector::from_fn(|c, _| {
+                let d = a * nf + c;
+                self.ws.dofs.prescribed(d).unwrap_or(-r[d] / m)
+            });
+        }
+        let contact_forces = self.push_at_devices(session, &g.set_values, &r, &mut acc)?;
+        self.initial_reactions(&g.sets, &r, &acc, &contact_forces);
+        let table = &self.ws.table;
+        for (p, ap) in self.st.particles.a.iter_mut().enumerate() {
+            *ap = transfer::interpolate(table.weights(p), |i| acc[i]);
+        }
+        if self.m.fem.is_some() {
+            self.st.fem_nodal = Some((self.ws.grid_state.velocity.clone(), acc));
+        }
+        Ok(())
+    }
+
+    /// `R = f_int - f_ext` at `du = 0` without inertia, with the full body force and the applied
+    /// `nodal_force` at t = 0: the unbalanced forces of every row, the constrained ones included.
+    fn unbalanced_force(
+        &mut self,
+        session: &SessionGuard,
+        nodal_force: Vec<SVector<f64, D>>,
+        eta_bar: &[f64],
+    ) -> Result<Vec<f64>, StepError> {
+        let nf = self.ws.dofs.fields();
         let loading = Loading {
             newmark: None,
             load_factor: 1.0,
             nodal_force,
         };
         let input = Self::step_input(
-            s,
+            self.m,
             &self.st.particles,
             &self.ws.table,
             &self.ws.dofs,
@@ -44,7 +69,6 @@ impl<const D: usize> Step<'_, D> {
                 x[a * nf + e] = eta_bar[node as usize];
             }
         }
-        // R = f_int - f_ext at du = 0 (no inertia), unbalanced forces in the constrained rows too.
         let mut r = vec![0.0; x.len()];
         let local = self
             .ws
@@ -54,69 +78,66 @@ impl<const D: usize> Step<'_, D> {
         agreed(session, self.st.distributed, local.map_err(StepError::from))?;
         let rows = self.own_rows(session);
         complete_rows(session, self.st.distributed, rows, nf, &mut r)?;
-        let mut acc = vec![SVector::<f64, D>::zeros(); s.field_nodes()];
-        for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
-            let node = node as usize;
-            let m = self.ws.grid_state.mass[node];
-            acc[node] = SVector::from_fn(|c, _| {
-                let d = a * nf + c;
-                self.ws.dofs.prescribed(d).unwrap_or(-r[d] / m)
-            });
-        }
-        // Devices in contact: a touching node whose free acceleration would carry it into the device takes
-        // the device's normal acceleration (node by node: the lumped mass decouples them; friction is not
-        // applied at t = 0).
-        let nb = s.boxes.len();
-        let device_acc: Vec<SVector<f64, D>> = prescribed[nb..]
-            .iter()
-            .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
-            .collect();
-        let pins: Vec<Option<Vector2<f64>>> = (0..s.rigid.len()).map(|k| self.pin_of(k)).collect();
-        let (devices, _) =
-            self.contact_devices(session, &device_acc, &pins, &vec![0.0; s.rigid.len()], 0.0)?;
-        let mut contact_forces = vec![SVector::<f64, D>::zeros(); devices.len()];
-        for (k, d) in devices.iter().enumerate() {
-            let Some(d) = d else { continue };
-            let n = from_xy::<D>(d.normal);
-            for c in d.nodes.iter().filter(|c| c.status.closed()) {
+        Ok(r)
+    }
+
+    /// Devices in contact: a touching node whose free acceleration `acc` would carry it into the device
+    /// takes the device's normal acceleration (node by node: the lumped mass decouples them; friction is
+    /// not applied at t = 0). Returns the force of each device on the specimen (one per contact device,
+    /// in the order of the rigid bodies, with its rigid body).
+    fn push_at_devices(
+        &self,
+        session: &SessionGuard,
+        prescribed: &[[Option<f64>; D]],
+        r: &[f64],
+        acc: &mut [SVector<f64, D>],
+    ) -> Result<Vec<(usize, SVector<f64, D>)>, StepError> {
+        let nf = self.ws.dofs.fields();
+        let device_acc = self.rigid_values(prescribed);
+        let devices = self.contact_devices(session, &device_acc, false, 0.0)?;
+        let mut forces = Vec::with_capacity(devices.len());
+        for d in &devices {
+            let n = from_xy::<D>(d.contact.normal);
+            let mut force = SVector::<f64, D>::zeros();
+            for c in d.contact.nodes.iter().filter(|c| c.status.closed()) {
                 let push = n.dot(&(from_xy::<D>(c.du_device) - acc[c.node]));
                 if push > 0.0 {
                     acc[c.node] += push * n;
                     let b = c.row * nf;
                     let m = self.ws.grid_state.mass[c.node];
-                    contact_forces[k] +=
-                        SVector::<f64, D>::from_column_slice(&r[b..b + D]) + m * acc[c.node];
+                    force += SVector::<f64, D>::from_column_slice(&r[b..b + D]) + m * acc[c.node];
                 }
             }
+            forces.push((d.body, force));
         }
-        // The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
-        // with the initial inertia in each constrained set, the applied resultant of each load.
-        for (reaction, dofs) in self.st.last_reactions.iter_mut().zip(&sets) {
+        Ok(forces)
+    }
+
+    /// The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
+    /// `r` with the initial inertia in each constrained set, the devices' contact forces, the applied
+    /// resultant of each load.
+    fn initial_reactions(
+        &mut self,
+        sets: &[Vec<usize>],
+        r: &[f64],
+        acc: &[SVector<f64, D>],
+        contact_forces: &[(usize, SVector<f64, D>)],
+    ) {
+        let (s, nf, t) = (self.m, self.ws.dofs.fields(), self.st.time);
+        let last = &mut self.st.last_reactions;
+        for (reaction, dofs) in last.iter_mut().zip(sets) {
             *reaction = [0.0; D];
             for &d in dofs {
                 let (node, c) = (self.ws.dofs.node(d / nf), d % nf);
                 reaction[c] += r[d] + self.ws.grid_state.mass[node] * acc[node][c];
             }
         }
-        for (k, f) in contact_forces.iter().enumerate() {
-            if devices[k].is_some() {
-                self.st.last_reactions[nb + k] = std::array::from_fn(|c| f[c]);
-            }
+        for &(k, f) in contact_forces {
+            last[s.rigid_set(k)] = std::array::from_fn(|c| f[c]);
         }
-        for (reaction, load) in self.st.last_reactions[sets.len()..]
-            .iter_mut()
-            .zip(&s.loads)
-        {
+        for (reaction, load) in last[sets.len()..].iter_mut().zip(&s.loads) {
             let f = load.force * load.factor(t);
             *reaction = std::array::from_fn(|c| f[c]);
         }
-        let table = &self.ws.table;
-        for (p, ap) in self.st.particles.a.iter_mut().enumerate() {
-            *ap = transfer::interpolate(table.weights(p), |i| acc[i]);
-        }
-        if self.m.fem.is_some() {
-            self.st.fem_nodal = Some((self.ws.grid_state.velocity.clone(), acc));
-        }
-        Ok(())
     }
 }

@@ -15,10 +15,8 @@ pub(super) struct StepProblem<'a, 'b, const D: usize> {
     /// Residual and Jacobian evaluations.
     pub(super) residuals: usize,
     pub(super) jacobians: usize,
-    /// The contact devices of the step (closed nodes get constraint rows).
-    pub(super) contact: &'a [Option<DeviceContact>],
-    /// Contact between bodies (closed pairs get constraint rows).
-    pub(super) bodies: &'a BodyContact<D>,
+    /// The contact sets of the step (closed constraints get their own rows).
+    pub(super) contacts: &'a [ContactSet<D>],
     /// Scale of the constraint rows (MPa).
     pub(super) row_scale: f64,
     /// The block rows this process owns.
@@ -35,7 +33,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
-        let (contact, s) = (self.contact, self.row_scale);
+        let (contacts, s) = (self.contacts, self.row_scale);
         let nf = input.dofs.fields();
         let r = &mut self.scratch;
         let xs = owned.gather(x).map_err(fatal)?;
@@ -45,10 +43,9 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
             asm.residual_rows(input, &xs, r, false, owned.rows.clone())
         });
         let result = agree(self.session, local).and_then(|()| {
-            for d in contact.iter().flatten() {
-                d.residual_rows(&xs, r, nf, s);
+            for c in contacts {
+                c.residual_rows(&xs, r, nf, s);
             }
-            self.bodies.residual_rows(&xs, r, nf, s);
             f.write(|out| out.copy_from_slice(&r[owned.scalars()]))
                 .map_err(fatal)
         });
@@ -64,7 +61,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let xs = owned.gather(x).map_err(fatal)?;
         agree(self.session, asm.evaluate_owned(input, &xs))?;
-        let (contact, bodies, s) = (self.contact, self.bodies, self.row_scale);
+        let (contacts, s) = (self.contacts, self.row_scale);
         let (pattern, own) = (owned.pattern(), owned.rows.clone());
         let r = jac
             .fill_block_rows(&pattern, |values, layout| {
@@ -78,14 +75,11 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
                         .expect("diagonal block in the pattern");
                     Some((lo * nf * nf, hi - lo, diag))
                 };
-                for d in contact.iter().flatten() {
-                    d.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
+                for c in contacts {
+                    c.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
                         layout.offset(ncols, nf, i, pos, k)
                     });
                 }
-                bodies.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
-                    layout.offset(ncols, nf, i, pos, k)
-                });
             })
             .map_err(fatal);
         self.assembly_time += t.elapsed().as_secs_f64();
