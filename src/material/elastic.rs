@@ -8,7 +8,8 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    Constitutive, MaterialError, Response, Sym6, check_finite, first_piola_from_pk2, green_lagrange,
+    Constitutive, MaterialError, Response, Sym6, check_finite, check_jacobian,
+    first_piola_from_pk2, green_lagrange,
 };
 
 /// Elastic parameters of the `linear_elastic`, `svk` and `neo_hookean` config sections: give either
@@ -163,10 +164,6 @@ fn clear_nonlocal(out: &mut Response) {
 }
 
 impl Constitutive for LinearElastic {
-    fn history_len(&self) -> usize {
-        0
-    }
-    fn init_history(&self, _h: &mut [f64]) {}
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -197,10 +194,6 @@ impl Constitutive for LinearElastic {
 }
 
 impl Constitutive for StVenantKirchhoff {
-    fn history_len(&self) -> usize {
-        0
-    }
-    fn init_history(&self, _h: &mut [f64]) {}
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -234,10 +227,6 @@ impl Constitutive for StVenantKirchhoff {
 }
 
 impl Constitutive for NeoHookean {
-    fn history_len(&self) -> usize {
-        0
-    }
-    fn init_history(&self, _h: &mut [f64]) {}
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -246,11 +235,7 @@ impl Constitutive for NeoHookean {
         _h_trial: &mut [f64],
         out: &mut Response,
     ) -> Result<(), MaterialError> {
-        check_finite(f, eta_bar)?;
-        let det = f.determinant();
-        if det <= 0.0 {
-            return Err(MaterialError::NonPositiveJacobian { det });
-        }
+        let det = check_jacobian(f, eta_bar)?;
         let fi = f
             .try_inverse()
             .ok_or(MaterialError::NonPositiveJacobian { det })?;

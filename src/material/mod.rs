@@ -138,10 +138,13 @@ pub enum MaterialError {
 
 /// A constitutive law in first-Piola form (see [`Response`]).
 pub trait Constitutive: Send + Sync {
-    /// Number of f64 history slots per material point (microplane: one `gamma` per direction).
-    fn history_len(&self) -> usize;
-    /// Initial (virgin) history.
-    fn init_history(&self, h: &mut [f64]);
+    /// Number of f64 history slots per material point (microplane: one `gamma` per direction); none
+    /// unless the law keeps a history.
+    fn history_len(&self) -> usize {
+        0
+    }
+    /// Initial (virgin) history; nothing unless the law keeps a history.
+    fn init_history(&self, _h: &mut [f64]) {}
     /// Pure in the committed history `h_n`; writes the trial history to `h_trial` (committed by the
     /// caller only after the step converges).
     fn update(
@@ -273,12 +276,7 @@ impl Constitutive for Material {
         out: &mut Response,
     ) -> Result<(), MaterialError> {
         let n = self.law_history_len();
-        let expected = self.history_len();
-        for got in [h_n.len(), h_trial.len()] {
-            if got != expected {
-                return Err(MaterialError::HistoryLength { expected, got });
-            }
-        }
+        check_history_len(self.history_len(), h_n, h_trial)?;
         let (law_n, act_n) = h_n.split_at(n);
         let (law_trial, act_trial) = h_trial.split_at_mut(n);
         match self {
@@ -474,6 +472,32 @@ pub(crate) fn check_finite(f: &Matrix3<f64>, eta_bar: f64) -> Result<(), Materia
     }
     if !eta_bar.is_finite() {
         return Err(MaterialError::NonFiniteInput { what: "eta_bar" });
+    }
+    Ok(())
+}
+
+/// [`check_finite`], then `det F > 0` ([`MaterialError::NonPositiveJacobian`] otherwise): the checks of the
+/// laws that need an invertible `F`. Returns `J = det F`.
+pub(crate) fn check_jacobian(f: &Matrix3<f64>, eta_bar: f64) -> Result<f64, MaterialError> {
+    check_finite(f, eta_bar)?;
+    let det = f.determinant();
+    if det <= 0.0 {
+        return Err(MaterialError::NonPositiveJacobian { det });
+    }
+    Ok(det)
+}
+
+/// Refuses history slices `h_n`, `h_trial` that do not both have `expected` entries
+/// ([`MaterialError::HistoryLength`], naming the first that differs).
+pub(crate) fn check_history_len(
+    expected: usize,
+    h_n: &[f64],
+    h_trial: &[f64],
+) -> Result<(), MaterialError> {
+    for got in [h_n.len(), h_trial.len()] {
+        if got != expected {
+            return Err(MaterialError::HistoryLength { expected, got });
+        }
     }
     Ok(())
 }
