@@ -256,9 +256,9 @@ pub fn viridis(t: f64) -> RGBColor {
 }
 
 impl ScatterField {
-    /// Renders the field with an equal aspect ratio (image height follows the data extent) and a colour bar.
-    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), PlotError> {
-        let path = path.as_ref();
+    /// Checks the data and returns the plotted extent `[x0, x1, y0, y1]` (mm, padded by half a point) and
+    /// the colour range `(v0, v1)`.
+    fn extent(&self) -> Result<([f64; 4], (f64, f64)), PlotError> {
         let invalid = |reason: String| PlotError::InvalidData {
             title: self.title.clone(),
             reason,
@@ -282,7 +282,6 @@ impl ScatterField {
             .ok_or_else(|| invalid("no finite x".into()))?;
         let (y0, y1) = padded_range(self.y.iter().copied(), 0.0)
             .ok_or_else(|| invalid("no finite y".into()))?;
-        let (x0, x1, y0, y1) = (x0 - half, x1 + half, y0 - half, y1 + half);
         let (v0, v1) = match self.range {
             Some((a, b)) if a.is_finite() && b.is_finite() && b > a => (a, b),
             Some((a, b)) => {
@@ -293,6 +292,15 @@ impl ScatterField {
             None => padded_range(self.value.iter().copied(), 0.0)
                 .ok_or_else(|| invalid("no finite values".into()))?,
         };
+        Ok(([x0 - half, x1 + half, y0 - half, y1 + half], (v0, v1)))
+    }
+
+    /// Renders the field with an equal aspect ratio (image height follows the data extent) and a colour bar.
+    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), PlotError> {
+        let path = path.as_ref();
+        let n = self.value.len();
+        let half = 0.5 * self.point_size;
+        let ([x0, x1, y0, y1], (v0, v1)) = self.extent()?;
 
         // Layout (pixels): title band, plot with label areas, colour bar strip on the right.
         const TITLE: u32 = 45;
