@@ -17,13 +17,28 @@ use plotters::prelude::*;
 pub enum PlotError {
     /// The data cannot be plotted (empty, mismatched lengths, no finite values).
     #[error("cannot plot `{title}`: {reason}")]
-    InvalidData { title: String, reason: String },
+    InvalidData {
+        /// The plot's title.
+        title: String,
+        /// What is wrong with the data.
+        reason: String,
+    },
     /// The drawing backend failed (font, encoder).
     #[error("drawing `{path}` failed: {message}")]
-    Draw { path: String, message: String },
+    Draw {
+        /// The image file.
+        path: String,
+        /// The backend's message.
+        message: String,
+    },
     /// Renaming or creating the output file failed.
     #[error("cannot write `{path}`: {message}")]
-    Io { path: String, message: String },
+    Io {
+        /// The image file.
+        path: String,
+        /// The system's message.
+        message: String,
+    },
 }
 
 const FONT: &str = "sans-serif";
@@ -40,17 +55,20 @@ pub struct Series {
 /// x-y line plot with a legend.
 #[derive(Clone, Debug, Default)]
 pub struct LinePlot {
+    /// Title above the plot.
     pub title: String,
     /// x axis label, with unit, e.g. `"strain F11 - 1 [-]"`.
     pub x_label: String,
     /// y axis label, with unit, e.g. `"P11 [MPa]"`.
     pub y_label: String,
+    /// The curves.
     pub series: Vec<Series>,
 }
 
 /// Scalar field over points, drawn as squares of side `point_size` (mm) coloured by `value`.
 #[derive(Clone, Debug, Default)]
 pub struct ScatterField {
+    /// Title above the plot.
     pub title: String,
     /// x coordinates (mm).
     pub x: Vec<f64>,

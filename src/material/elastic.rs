@@ -120,12 +120,14 @@ impl ElasticConfig {
 /// Energy `Psi = lambda/2 tr(eps)^2 + mu eps:eps`.
 #[derive(Clone, Debug)]
 pub struct LinearElastic {
+    /// Bulk and shear modulus (MPa).
     pub moduli: ElasticModuli,
 }
 
 /// St. Venant-Kirchhoff: `S = lambda tr(E) I + 2 mu E`, `P = F S`, `Psi = lambda/2 tr(E)^2 + mu E:E`.
 #[derive(Clone, Debug)]
 pub struct StVenantKirchhoff {
+    /// Bulk and shear modulus (MPa).
     pub moduli: ElasticModuli,
 }
 
@@ -133,20 +135,24 @@ pub struct StVenantKirchhoff {
 /// `Psi = mu/2 (tr C - 3) - mu ln J + lambda/2 (ln J)^2`; `det F <= 0` is an error.
 #[derive(Clone, Debug)]
 pub struct NeoHookean {
+    /// Bulk and shear modulus (MPa).
     pub moduli: ElasticModuli,
 }
 
 impl LinearElastic {
+    /// The law with the moduli `moduli` (MPa).
     pub fn new(moduli: ElasticModuli) -> Self {
         Self { moduli }
     }
 }
 impl StVenantKirchhoff {
+    /// The law with the moduli `moduli` (MPa).
     pub fn new(moduli: ElasticModuli) -> Self {
         Self { moduli }
     }
 }
 impl NeoHookean {
+    /// The law with the moduli `moduli` (MPa).
     pub fn new(moduli: ElasticModuli) -> Self {
         Self { moduli }
     }

@@ -106,14 +106,19 @@ pub enum MaterialError {
     /// A parameter is outside its admissible range.
     #[error("material parameter `{field}` = {value} is invalid: allowed is {allowed}")]
     InvalidParameter {
+        /// The parameter's config key.
         field: &'static str,
+        /// The value given.
         value: f64,
+        /// The admissible range.
         allowed: &'static str,
     },
     /// A parameter is neither given nor provided by a preset.
     #[error("material parameter `{field}` is missing: {hint}")]
     MissingParameter {
+        /// The parameter's config key.
         field: &'static str,
+        /// How to provide it.
         hint: &'static str,
     },
     /// Parameters that exclude each other were given together.
@@ -121,16 +126,32 @@ pub enum MaterialError {
     Conflict(&'static str),
     /// `det F <= 0`: the configuration is inverted (report as a domain error to the solver).
     #[error("non-positive Jacobian det F = {det}")]
-    NonPositiveJacobian { det: f64 },
+    NonPositiveJacobian {
+        /// `J = det F`.
+        det: f64,
+    },
     /// `F` or `eta_bar` contains NaN or infinity.
     #[error("non-finite input to the material update ({what})")]
-    NonFiniteInput { what: &'static str },
+    NonFiniteInput {
+        /// Which input.
+        what: &'static str,
+    },
     /// The history slices do not have [`Constitutive::history_len`] entries.
     #[error("history slice has length {got}, the material needs {expected}")]
-    HistoryLength { expected: usize, got: usize },
+    HistoryLength {
+        /// Entries the material needs.
+        expected: usize,
+        /// Entries given.
+        got: usize,
+    },
     /// The material-point driver's Newton iteration on the free components did not converge.
     #[error("material-point driver: no convergence at step {step} (residual {residual:e} MPa)")]
-    DriverNotConverged { step: usize, residual: f64 },
+    DriverNotConverged {
+        /// The load step.
+        step: usize,
+        /// Largest free stress component at the last iterate (MPa).
+        residual: f64,
+    },
     /// Invalid arguments of a material-point path.
     #[error("material-point driver: {0}")]
     DriverArgument(String),
@@ -160,9 +181,13 @@ pub trait Constitutive: Send + Sync {
 /// The materials of the project (enum dispatch).
 #[derive(Clone, Debug)]
 pub enum Material {
+    /// Geometrically linear Hooke law.
     LinearElastic(LinearElastic),
+    /// St. Venant-Kirchhoff hyperelasticity.
     StVenantKirchhoff(StVenantKirchhoff),
+    /// Compressible neo-Hooke hyperelasticity.
     NeoHookean(NeoHookean),
+    /// The gradient-enhanced microplane damage model of the paper (boxed: its plane tables are large).
     Microplane(Box<Microplane>),
     /// Isotropic gradient-enhanced damage (verification of the Helmholtz field, see [`isotropic`]).
     IsotropicDamage(IsotropicDamage),
