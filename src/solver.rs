@@ -297,7 +297,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let (contact, s) = (self.contact, self.row_scale);
-        let nf = input.dofs.fields();
+        let nf = input.dofs.unknowns_per_node();
         let r = &mut self.scratch;
         let xs = owned.gather(x).map_err(fatal)?;
         // Only this process's rows: the points in their support, the rows themselves.
@@ -330,7 +330,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let r = jac
             .fill_block_rows(&pattern, |values, layout| {
                 asm.jacobian_into(input, own.clone(), values, layout);
-                let nf = input.dofs.fields();
+                let nf = input.dofs.unknowns_per_node();
                 let row_of = |a: usize| {
                     let l = a.checked_sub(own.start).filter(|&l| l < own.len())?;
                     let (lo, hi) = (pattern.row_ptr[l], pattern.row_ptr[l + 1]);
@@ -524,7 +524,7 @@ impl LinearSystem {
         asm: &Assembler<D>,
         rows: Range<usize>,
     ) -> Result<Self, StepError> {
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let mut owned = OwnedRows::new(asm, rows, nf);
         let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
         session.sum(&mut nonzeros)?;
@@ -1047,7 +1047,7 @@ impl<const D: usize> Step<'_, D> {
         // Initial guess: du = dt v_I + dt^2/2 a_I and the prescribed values for dynamics; zero everywhere
         // quasi-statically (the first Newton step is then the linear predictor that carries the prescribed
         // increments into the body); eta_bar from the particles (mass-weighted projection).
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let mut xs = vec![0.0; self.ws.dofs.len()];
         {
             for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
@@ -1117,7 +1117,7 @@ impl<const D: usize> Step<'_, D> {
         } = plan;
         let input = Self::step_input(s, particles, table, dofs, grid_state, loading, partners);
         let grid = &s.grid;
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let n = dofs.len();
         let LinearSystem {
             x,
@@ -1368,7 +1368,7 @@ impl<const D: usize> Step<'_, D> {
             evaluations,
             contact_solves,
         } = solved;
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let n = self.ws.dofs.len();
         let s = self.m;
         let grid = &s.grid;
@@ -1777,7 +1777,7 @@ impl<const D: usize> Step<'_, D> {
     fn constrain(&mut self, values: &[[Option<f64>; D]]) -> Result<Vec<Vec<usize>>, StepError> {
         let s = self.m;
         let grid = &s.grid;
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let mut sets: Vec<Vec<usize>> = Vec::new();
         for (b, du) in s.boxes.iter().zip(values) {
             let mut dofs_of_set = Vec::new();
@@ -1865,7 +1865,7 @@ impl<const D: usize> Step<'_, D> {
         let s = self.m;
         let grid = &s.grid;
         let h = grid.cell_size();
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let mut devices = Vec::with_capacity(s.rigid.len());
         let mut lengths = Vec::with_capacity(s.rigid.len());
         let mut index = vec![usize::MAX; s.field_nodes()];
@@ -2008,7 +2008,7 @@ impl<const D: usize> Step<'_, D> {
         let grid = &s.grid;
         let (nodes, all, h) = (grid.num_nodes(), s.field_nodes(), grid.cell_size());
         let (p, table, dofs) = (&self.st.particles, &self.ws.table, &self.ws.dofs);
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let mut grad_m = vec![SVector::<f64, D>::zeros(); all];
         for q in 0..p.len() {
             for w in table.weights(q) {
@@ -2166,7 +2166,7 @@ impl<const D: usize> Step<'_, D> {
         let sets = self.constrain(&prescribed)?;
         let (nodal_force, _) = self.nodal_loads(t)?;
         let eta_bar = self.nodal_eta_bar(session)?;
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let s = self.m;
         // No inertia and the full body force at t = 0.
         let loading = Loading {
