@@ -254,7 +254,33 @@ impl<const D: usize> Assembler<D> {
         self.layout = dofs.layout();
         let nodes = dofs.node_indices().len();
         let np = particles.len();
-        // Incidence (counting sort by node).
+        self.incidence(table, np, nodes);
+        self.block_pattern_of_step(input);
+        let stride = table.stride();
+        // G = F_n^T g per slot.
+        self.g0.resize(np * stride, SVector::zeros());
+        self.g0
+            .par_chunks_mut(stride.max(1))
+            .enumerate()
+            .for_each(|(p, g)| {
+                let fnt = particles.f[p].transpose();
+                for (k, w) in table.weights(p).iter().enumerate() {
+                    g[k] = fnt * w.grad;
+                }
+            });
+        self.evals.resize(np, PointEval::default());
+        let hs = particles.history_stride();
+        // One slot per particle even for history-free laws, so the parallel zip stays aligned.
+        self.trial_history.resize(np * hs.max(1), 0.0);
+        self.du.resize(nodes, SVector::zeros());
+        self.eb.resize(nodes, 0.0);
+        self.key_valid = false;
+        self.owned_points.clear();
+    }
+
+    /// The incidence node -> (point, slot in the point's weights), by a counting sort over the `np`
+    /// points' supports on `nodes` grid nodes.
+    fn incidence(&mut self, table: &ShapeTable<D>, np: usize, nodes: usize) {
         self.inc_offsets.clear();
         self.inc_offsets.resize(nodes + 1, 0);
         for p in 0..np {
@@ -275,6 +301,12 @@ impl<const D: usize> Assembler<D> {
                 *slot += 1;
             }
         }
+    }
+
+    /// The block pattern of the step (row pointers and block columns per active node) and, for every
+    /// incidence entry, the column position of each support node of its point; from [`Self::incidence`].
+    fn block_pattern_of_step(&mut self, input: &StepInput<'_, D>) {
+        let (table, dofs) = (input.table, input.dofs);
         // Block pattern: per active node, the sorted union of the supports of its particles; and for every
         // incidence entry (node I, particle p) the position in I's row of each support node J of p, so
         // that the Jacobian fill needs no search.
@@ -347,25 +379,6 @@ impl<const D: usize> Assembler<D> {
             let lo = self.inc_offsets[node as usize] * stride;
             self.inc_pos[lo..lo + pos.len()].copy_from_slice(pos);
         }
-        // G = F_n^T g per slot.
-        self.g0.resize(np * stride, SVector::zeros());
-        self.g0
-            .par_chunks_mut(stride.max(1))
-            .enumerate()
-            .for_each(|(p, g)| {
-                let fnt = particles.f[p].transpose();
-                for (k, w) in table.weights(p).iter().enumerate() {
-                    g[k] = fnt * w.grad;
-                }
-            });
-        self.evals.resize(np, PointEval::default());
-        let hs = particles.history_stride();
-        // One slot per particle even for history-free laws, so the parallel zip stays aligned.
-        self.trial_history.resize(np * hs.max(1), 0.0);
-        self.du.resize(nodes, SVector::zeros());
-        self.eb.resize(nodes, 0.0);
-        self.key_valid = false;
-        self.owned_points.clear();
     }
 
     /// Restricts [`Assembler::evaluate_owned`] to the points in the support of the block rows `rows`
@@ -478,8 +491,7 @@ impl<const D: usize> Assembler<D> {
             }
         }
         let (du, eb) = (&self.du, &self.eb);
-        let (table, particles, materials) = (input.table, input.particles, input.materials);
-        let hs = particles.history_stride();
+        let hs = input.particles.history_stride();
         let nonlocal = self.layout.eta_bar().is_some();
         self.evals
             .par_iter_mut()
@@ -489,74 +501,7 @@ impl<const D: usize> Assembler<D> {
                 if mask.get(p) == Some(&false) {
                     return Ok(());
                 }
-                let ws = table.weights(p);
-                let mut grad_du = SMatrix::<f64, D, D>::zeros();
-                let (mut ebp, mut geb) = (0.0, SVector::<f64, D>::zeros());
-                for w in ws {
-                    let n = w.node as usize;
-                    grad_du += du[n] * w.grad.transpose();
-                    ebp += w.value * eb[n];
-                    geb += w.grad * eb[n];
-                }
-                let f_n = particles.f[p];
-                let material = &materials[particles.body[p] as usize];
-                if material.is_eroded(particles.damage[p]) {
-                    // A void that keeps its mass: no stress or stiffness, F frozen (the solver restores
-                    // it after G2P), and in the Helmholtz rows a lumped anchor of the nodal eta_bar to
-                    // `eta_bar_p^n` without diffusion, so the nonlocal field does not spread through the
-                    // crack (see `Assembler::residual`).
-                    h_trial[..hs].copy_from_slice(&particles.history(p)[..hs]);
-                    *ev = PointEval {
-                        eta: if nonlocal { particles.eta_bar[p] } else { 0.0 },
-                        eta_bar: if nonlocal { ebp } else { 0.0 },
-                        grad_eta_bar: geb,
-                        damage: particles.damage[p],
-                        det: det(&f_n),
-                        eroded: true,
-                        ..PointEval::default()
-                    };
-                    return Ok(());
-                }
-                let f = (SMatrix::<f64, D, D>::identity() + grad_du) * f_n;
-                let det = det(&f);
-                if det.is_nan() || det <= 0.0 {
-                    return Err(AssemblyError::Inverted { particle: p, det });
-                }
-                let f3 = lift3(&f);
-                // The point's own law's history: the stride is the longest of all bodies' laws.
-                let hl = material.history_len();
-                let h_n = &particles.history(p)[..hl];
-                let h_trial = &mut h_trial[..hl];
-                let mut r = Response::zeros();
-                let err = |source| AssemblyError::Material {
-                    particle: p,
-                    source,
-                };
-                if nonlocal {
-                    material
-                        .update(&f3, ebp, h_n, h_trial, &mut r)
-                        .map_err(err)?;
-                } else {
-                    local_update(material, &f3, h_n, h_trial, &mut r).map_err(err)?;
-                    ebp = r.eta;
-                }
-                *ev = PointEval {
-                    p: r.p,
-                    a: tangent_blocks(&r),
-                    dp_deb: r.dp_deta_bar.fixed_view::<D, D>(0, 0).into_owned(),
-                    deta_dx: r.deta_df.fixed_view::<D, D>(0, 0) * f_n.transpose(),
-                    eta: r.eta,
-                    eta_bar: ebp,
-                    grad_eta_bar: geb,
-                    energy: r.energy,
-                    damage: r.damage,
-                    det,
-                    dissipation: r.dissipation,
-                    c: r.activity.c,
-                    dc_deta: r.activity.dc_deta,
-                    dc_deb: r.activity.dc_deta_bar,
-                    eroded: false,
-                };
+                *ev = evaluate_point(input, du, eb, nonlocal, p, h_trial)?;
                 Ok(())
             })?;
         self.key.clear();
@@ -750,6 +695,89 @@ struct JacobianRows<'a, const D: usize> {
     input: &'a StepInput<'a, D>,
     nf: usize,
     layout: BlockLayout,
+}
+
+/// Kinematics and constitutive update of point `p` at the iterate scattered to the nodes (`du`: nodal
+/// displacement increments (mm), `eb`: nodal `eta_bar`): `F = (I + grad du) F_n`, the law's `P`, `A` and
+/// nonlocal terms; an eroded point keeps its history and carries no stress. Writes the trial history of
+/// the point into `h_trial` (one history stride).
+fn evaluate_point<const D: usize>(
+    input: &StepInput<'_, D>,
+    du: &[SVector<f64, D>],
+    eb: &[f64],
+    nonlocal: bool,
+    p: usize,
+    h_trial: &mut [f64],
+) -> Result<PointEval<D>, AssemblyError> {
+    let (table, particles, materials) = (input.table, input.particles, input.materials);
+    let hs = particles.history_stride();
+    let ws = table.weights(p);
+    let mut grad_du = SMatrix::<f64, D, D>::zeros();
+    let (mut ebp, mut geb) = (0.0, SVector::<f64, D>::zeros());
+    for w in ws {
+        let n = w.node as usize;
+        grad_du += du[n] * w.grad.transpose();
+        ebp += w.value * eb[n];
+        geb += w.grad * eb[n];
+    }
+    let f_n = particles.f[p];
+    let material = &materials[particles.body[p] as usize];
+    if material.is_eroded(particles.damage[p]) {
+        // A void that keeps its mass: no stress or stiffness, F frozen (the solver restores
+        // it after G2P), and in the Helmholtz rows a lumped anchor of the nodal eta_bar to
+        // `eta_bar_p^n` without diffusion, so the nonlocal field does not spread through the
+        // crack (see `Assembler::residual`).
+        h_trial[..hs].copy_from_slice(&particles.history(p)[..hs]);
+        return Ok(PointEval {
+            eta: if nonlocal { particles.eta_bar[p] } else { 0.0 },
+            eta_bar: if nonlocal { ebp } else { 0.0 },
+            grad_eta_bar: geb,
+            damage: particles.damage[p],
+            det: det(&f_n),
+            eroded: true,
+            ..PointEval::default()
+        });
+    }
+    let f = (SMatrix::<f64, D, D>::identity() + grad_du) * f_n;
+    let det = det(&f);
+    if det.is_nan() || det <= 0.0 {
+        return Err(AssemblyError::Inverted { particle: p, det });
+    }
+    let f3 = lift3(&f);
+    // The point's own law's history: the stride is the longest of all bodies' laws.
+    let hl = material.history_len();
+    let h_n = &particles.history(p)[..hl];
+    let h_trial = &mut h_trial[..hl];
+    let mut r = Response::zeros();
+    let err = |source| AssemblyError::Material {
+        particle: p,
+        source,
+    };
+    if nonlocal {
+        material
+            .update(&f3, ebp, h_n, h_trial, &mut r)
+            .map_err(err)?;
+    } else {
+        local_update(material, &f3, h_n, h_trial, &mut r).map_err(err)?;
+        ebp = r.eta;
+    }
+    Ok(PointEval {
+        p: r.p,
+        a: tangent_blocks(&r),
+        dp_deb: r.dp_deta_bar.fixed_view::<D, D>(0, 0).into_owned(),
+        deta_dx: r.deta_df.fixed_view::<D, D>(0, 0) * f_n.transpose(),
+        eta: r.eta,
+        eta_bar: ebp,
+        grad_eta_bar: geb,
+        energy: r.energy,
+        damage: r.damage,
+        det,
+        dissipation: r.dissipation,
+        c: r.activity.c,
+        dc_deta: r.activity.dc_deta,
+        dc_deb: r.activity.dc_deta_bar,
+        eroded: false,
+    })
 }
 
 /// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the

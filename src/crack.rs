@@ -134,6 +134,54 @@ pub fn measure(
     c: &CrackCriteria,
     time: f64,
 ) -> CrackState {
+    let crack = crack_points(x, damage, notch_tip, h, c);
+    let (mut length, mut tip) = (0.0, notch_tip);
+    for &i in &crack {
+        let d = (x[i] - notch_tip).norm();
+        if d > length {
+            length = d;
+            tip = x[i];
+        }
+    }
+    let (bands, classification) = classify(x, &crack, notch_tip, length, h, c);
+    let crossings = if length < c.min_length {
+        Vec::new()
+    } else {
+        c.width_stations
+            .iter()
+            .flat_map(|f| crossings(x, &crack, notch_tip, f * length, spacing))
+            .collect()
+    };
+    let mut widths: Vec<f64> = crossings.iter().map(|b| b.width).collect();
+    widths.sort_by(f64::total_cmp);
+    let band_width = match widths.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => widths[n / 2],
+        n => 0.5 * (widths[n / 2 - 1] + widths[n / 2]),
+    };
+    CrackState {
+        time,
+        length,
+        tip: [tip.x, tip.y],
+        bands,
+        classification,
+        crossings,
+        band_width,
+        band_width_max: widths.last().copied().unwrap_or(0.0),
+        dissipated: [0.0; 2],
+        nonlocal_points: 0,
+    }
+}
+
+/// The crack: the points with damage `>= damage_threshold` in the cells (size `h`, mm) connected to the
+/// cracked cells within the seed radius of `notch_tip`, by a flood fill over the 8 neighbours of a cell.
+fn crack_points(
+    x: &[Vector2<f64>],
+    damage: &[f64],
+    notch_tip: Vector2<f64>,
+    h: f64,
+    c: &CrackCriteria,
+) -> Vec<usize> {
     let cell = |p: &Vector2<f64>| ((p.x / h).floor() as i64, (p.y / h).floor() as i64);
     let mut cells: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
     for (i, p) in x.iter().enumerate() {
@@ -161,15 +209,20 @@ pub fn measure(
             }
         }
     }
-    let crack: Vec<usize> = seen.iter().flat_map(|k| cells[k].iter().copied()).collect();
-    let (mut length, mut tip) = (0.0, notch_tip);
-    for &i in &crack {
-        let d = (x[i] - notch_tip).norm();
-        if d > length {
-            length = d;
-            tip = x[i];
-        }
-    }
+    seen.iter().flat_map(|k| cells[k].iter().copied()).collect()
+}
+
+/// The bands of the crack points on the ring of radius `ring_fraction length` around `notch_tip` (angles
+/// in degrees grouped at gaps over `gap_degrees`) and the classification (`none`, `straight`, `inclined`,
+/// `branching`).
+fn classify(
+    x: &[Vector2<f64>],
+    crack: &[usize],
+    notch_tip: Vector2<f64>,
+    length: f64,
+    h: f64,
+    c: &CrackCriteria,
+) -> (Vec<Band>, String) {
     let mut bands = Vec::new();
     let classification = if crack.is_empty() || length < c.min_length {
         "none".to_owned()
@@ -204,33 +257,7 @@ pub fn measure(
             _ => "branching".to_owned(),
         }
     };
-    let crossings = if length < c.min_length {
-        Vec::new()
-    } else {
-        c.width_stations
-            .iter()
-            .flat_map(|f| crossings(x, &crack, notch_tip, f * length, spacing))
-            .collect()
-    };
-    let mut widths: Vec<f64> = crossings.iter().map(|b| b.width).collect();
-    widths.sort_by(f64::total_cmp);
-    let band_width = match widths.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => widths[n / 2],
-        n => 0.5 * (widths[n / 2 - 1] + widths[n / 2]),
-    };
-    CrackState {
-        time,
-        length,
-        tip: [tip.x, tip.y],
-        bands,
-        classification,
-        crossings,
-        band_width,
-        band_width_max: widths.last().copied().unwrap_or(0.0),
-        dissipated: [0.0; 2],
-        nonlocal_points: 0,
-    }
+    (bands, classification)
 }
 
 /// The band crossings of the crack points `crack` on the circle of radius `r` around `centre`.

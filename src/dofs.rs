@@ -79,8 +79,9 @@ impl DofMap {
         self.prescribed.resize(self.active.len() * fields, None);
     }
 
-    /// Unknowns per node (2: displacement; 3: displacement and eta_bar).
-    pub fn fields(&self) -> usize {
+    /// Unknowns per node (2: displacement; 3: displacement and eta_bar); not the velocity fields of
+    /// contact.
+    pub fn unknowns_per_node(&self) -> usize {
         self.layout.per_node()
     }
 
@@ -131,7 +132,7 @@ impl DofMap {
     /// for the same component wins.
     pub fn constrain(&mut self, node: usize, comp: usize, value: f64) {
         if let Some(a) = self.active_index(node) {
-            let i = a * self.fields() + comp;
+            let i = a * self.unknowns_per_node() + comp;
             self.prescribed[i] = Some(value);
         }
     }

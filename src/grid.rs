@@ -1,4 +1,4 @@
-//! The fixed Cartesian background grid of the MPM step (spec `01-model.md`, Sec. 1 and 2), in `D = 2` or
+//! The fixed Cartesian background grid of the MPM step (`docs/theory.md`), in `D = 2` or
 //! `D = 3` space dimensions.
 //!
 //! A uniform grid with origin `x_0` (mm), square (cubic) cells of size `h` (mm), `n_1 x .. x n_D` cells and

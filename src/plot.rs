@@ -17,13 +17,28 @@ use plotters::prelude::*;
 pub enum PlotError {
     /// The data cannot be plotted (empty, mismatched lengths, no finite values).
     #[error("cannot plot `{title}`: {reason}")]
-    InvalidData { title: String, reason: String },
+    InvalidData {
+        /// The plot's title.
+        title: String,
+        /// What is wrong with the data.
+        reason: String,
+    },
     /// The drawing backend failed (font, encoder).
     #[error("drawing `{path}` failed: {message}")]
-    Draw { path: String, message: String },
+    Draw {
+        /// The image file.
+        path: String,
+        /// The backend's message.
+        message: String,
+    },
     /// Renaming or creating the output file failed.
     #[error("cannot write `{path}`: {message}")]
-    Io { path: String, message: String },
+    Io {
+        /// The image file.
+        path: String,
+        /// The system's message.
+        message: String,
+    },
 }
 
 const FONT: &str = "sans-serif";
@@ -40,17 +55,20 @@ pub struct Series {
 /// x-y line plot with a legend.
 #[derive(Clone, Debug, Default)]
 pub struct LinePlot {
+    /// Title above the plot.
     pub title: String,
     /// x axis label, with unit, e.g. `"strain F11 - 1 [-]"`.
     pub x_label: String,
     /// y axis label, with unit, e.g. `"P11 [MPa]"`.
     pub y_label: String,
+    /// The curves.
     pub series: Vec<Series>,
 }
 
 /// Scalar field over points, drawn as squares of side `point_size` (mm) coloured by `value`.
 #[derive(Clone, Debug, Default)]
 pub struct ScatterField {
+    /// Title above the plot.
     pub title: String,
     /// x coordinates (mm).
     pub x: Vec<f64>,
@@ -256,9 +274,9 @@ pub fn viridis(t: f64) -> RGBColor {
 }
 
 impl ScatterField {
-    /// Renders the field with an equal aspect ratio (image height follows the data extent) and a colour bar.
-    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), PlotError> {
-        let path = path.as_ref();
+    /// Checks the data and returns the plotted extent `[x0, x1, y0, y1]` (mm, padded by half a point) and
+    /// the colour range `(v0, v1)`.
+    fn extent(&self) -> Result<([f64; 4], (f64, f64)), PlotError> {
         let invalid = |reason: String| PlotError::InvalidData {
             title: self.title.clone(),
             reason,
@@ -282,7 +300,6 @@ impl ScatterField {
             .ok_or_else(|| invalid("no finite x".into()))?;
         let (y0, y1) = padded_range(self.y.iter().copied(), 0.0)
             .ok_or_else(|| invalid("no finite y".into()))?;
-        let (x0, x1, y0, y1) = (x0 - half, x1 + half, y0 - half, y1 + half);
         let (v0, v1) = match self.range {
             Some((a, b)) if a.is_finite() && b.is_finite() && b > a => (a, b),
             Some((a, b)) => {
@@ -293,6 +310,15 @@ impl ScatterField {
             None => padded_range(self.value.iter().copied(), 0.0)
                 .ok_or_else(|| invalid("no finite values".into()))?,
         };
+        Ok(([x0 - half, x1 + half, y0 - half, y1 + half], (v0, v1)))
+    }
+
+    /// Renders the field with an equal aspect ratio (image height follows the data extent) and a colour bar.
+    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), PlotError> {
+        let path = path.as_ref();
+        let n = self.value.len();
+        let half = 0.5 * self.point_size;
+        let ([x0, x1, y0, y1], (v0, v1)) = self.extent()?;
 
         // Layout (pixels): title band, plot with label areas, colour bar strip on the right.
         const TITLE: u32 = 45;

@@ -1,11 +1,11 @@
-//! Particle <-> grid transfers of the MPM step (spec `01-model.md`, Sec. 1, steps 2, 5 and 7).
+//! Particle <-> grid transfers of the MPM step (`docs/theory.md`, "The implicit MPM step", steps 2, 5 and 7).
 //!
 //! * [`particles_to_grid`] (P2G, eq. 1): lumped nodal mass, mass-weighted velocity and acceleration into a
 //!   reusable [`GridState`].
 //! * [`grid_to_particles`] (G2P after a converged step): Newmark particle velocity, positions, deformation
 //!   gradients, CPDI domains and volumes from the nodal displacement increment and new acceleration.
-//! * [`deformation_increment`] and [`interpolate`]: the per-point kinematics, pure functions the assembly also
-//!   calls for every Newton iterate.
+//! * [`deformation_increment`] and [`interpolate`]: the per-point kinematics as pure functions (G2P uses
+//!   the first; the assembly forms `dF` inline for every Newton iterate, together with `eta_bar`).
 //! * [`Scatter`]: the one place where per-point contributions are summed onto nodes in parallel.
 //!
 //! Units: mm, s, t; nodal mass in t, velocities mm/s, accelerations mm/s^2.
@@ -206,11 +206,6 @@ impl<const D: usize> GridState<D> {
     /// Number of active nodes.
     pub fn num_active(&self) -> usize {
         self.active.iter().filter(|&&a| a).count()
-    }
-
-    /// The scatter buffers, for other nodal sums of the step (internal forces, Helmholtz right-hand side).
-    pub fn scatter_mut(&mut self) -> &mut Scatter {
-        &mut self.scatter
     }
 }
 

@@ -2,20 +2,19 @@
 //! every interpolator and every material (the microplane model gradient-enhanced in a damaging state,
 //! and local), on a small pre-deformed block with inertia and constrained nodes, in 2D and in 3D.
 
+mod common;
+
+use common::material;
+
 use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
+use mpm_concrete::material::{Constitutive, Material};
 use mpm_concrete::particles::{BoxBody, Particles, Seeding};
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{self, GridState};
 use nalgebra::{SMatrix, SVector};
-
-fn material(toml_text: &str) -> Material {
-    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
-    cfg.build().expect("valid material")
-}
 
 /// Deterministic pseudo-random numbers in [-1, 1].
 fn noise(i: usize) -> f64 {

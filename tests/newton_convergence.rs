@@ -3,20 +3,18 @@
 //!
 //! Units: mm, s, N, MPa, t.
 
+mod common;
+
+use common::material;
+
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
-
-fn material(toml_text: &str) -> Material {
-    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
-    cfg.build().expect("valid material")
-}
 
 /// Neo-Hookean block 20 x 20 mm (E = 1000 MPa, nu = 0.3, rho = 1e-6 t/mm^3), 10 x 10 cells, 2 x 2 points
 /// per cell, base clamped, loaded in one quasi-static step by a body force b = (load/2, -load) E/(rho H):

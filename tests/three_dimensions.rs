@@ -5,21 +5,18 @@
 //!
 //! Units: mm, s, N, MPa, t.
 
+mod common;
+
+use common::material;
+
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{BoxBody, Particles, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;
 use nalgebra::SVector;
-
-/// A constitutive law from its TOML section.
-fn material(toml_text: &str) -> Material {
-    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
-    cfg.build().expect("valid material")
-}
 
 /// Nodes with `lo <= x_d <= hi` in direction `d` (and anything in the others), moving as `motion`.
 fn slab<const D: usize>(name: &str, d: usize, lo: f64, hi: f64, motion: [Motion; D]) -> NodeBox<D> {

@@ -3,20 +3,18 @@
 //!
 //! Units: mm, s, N, MPa, t (density t/mm^3, velocity mm/s).
 
+mod common;
+
+use common::material;
+
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Setup, TimeIntegration};
 use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
-
-fn material(toml_text: &str) -> Material {
-    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
-    cfg.build().expect("valid material")
-}
 
 const FAR: f64 = 1e6;
 

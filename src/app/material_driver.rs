@@ -27,10 +27,20 @@ pub enum DriverError {
     Argument(String),
     /// Reading a configuration file failed.
     #[error("cannot read material config `{path}`: {message}")]
-    Config { path: String, message: String },
+    Config {
+        /// The config file.
+        path: String,
+        /// Why it failed.
+        message: String,
+    },
     /// Writing output failed.
     #[error("cannot write `{path}`: {message}")]
-    Io { path: String, message: String },
+    Io {
+        /// The output file.
+        path: String,
+        /// Why it failed.
+        message: String,
+    },
     /// Plotting failed.
     #[error(transparent)]
     Plot(#[from] PlotError),
@@ -151,8 +161,11 @@ pub struct DriverArgs {
 /// What [`run_driver`] did and measured.
 #[derive(Clone, Debug)]
 pub struct DriverSummary {
+    /// The path driven.
     pub path: PathKind,
+    /// The CSV written (one row per load step).
     pub csv: PathBuf,
+    /// The stress-strain plot written.
     pub png: PathBuf,
     /// Peak magnitude of the controlled stress component along the path (MPa).
     pub peak_stress: f64,

@@ -289,12 +289,22 @@ fn read_result(
     r
 }
 
+/// Writes the study's report (Markdown), `study.csv` and the per-step plots into `dir`.
 fn write_report(
     dir: &Path,
     config: &Path,
     steps: usize,
     results: &[SetResult],
 ) -> Result<(), String> {
+    let (md, csv) = report_tables(config, steps, results);
+    let io = |e: crate::io::OutputError| e.to_string();
+    write_atomic(&dir.join(REPORT), md.as_bytes()).map_err(io)?;
+    write_atomic(&dir.join("study.csv"), csv.as_bytes()).map_err(io)?;
+    write_plots(dir, results)
+}
+
+/// The report's Markdown (a table of the sets and their options) and the same figures as CSV.
+fn report_tables(config: &Path, steps: usize, results: &[SetResult]) -> (String, String) {
     let mut md = format!(
         "# Solver study: `{}`, {steps} steps\n\nWall times in s, memory in MB (peak resident set of the run's process). \
          PETSc's profile of each set: `<set>/log_view.txt`.\n\n",
@@ -357,9 +367,11 @@ fn write_report(
                 .unwrap_or_default()
         );
     }
-    let io = |e: crate::io::OutputError| e.to_string();
-    write_atomic(&dir.join(REPORT), md.as_bytes()).map_err(io)?;
-    write_atomic(&dir.join("study.csv"), csv.as_bytes()).map_err(io)?;
+    (md, csv)
+}
+
+/// Newton iterations and wall time per step of every set that ran, as line plots in `dir`.
+fn write_plots(dir: &Path, results: &[SetResult]) -> Result<(), String> {
     let series = |f: &dyn Fn(&SetResult) -> &Vec<f64>| -> Vec<Series> {
         results
             .iter()

@@ -128,7 +128,10 @@ pub enum EtaBarPath {
     /// Local model: `eta_bar = eta(F)`.
     Local,
     /// `eta_bar = max |eps| / max_strain`, independent of `F`.
-    Prescribed { max: f64 },
+    Prescribed {
+        /// `eta_bar` at the largest strain of the path.
+        max: f64,
+    },
 }
 
 /// One converged state of the path.

@@ -8,7 +8,8 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    Constitutive, MaterialError, Response, Sym6, check_finite, first_piola_from_pk2, green_lagrange,
+    Constitutive, MaterialError, Response, Sym6, check_finite, check_jacobian,
+    first_piola_from_pk2, green_lagrange,
 };
 
 /// Elastic parameters of the `linear_elastic`, `svk` and `neo_hookean` config sections: give either
@@ -119,12 +120,14 @@ impl ElasticConfig {
 /// Energy `Psi = lambda/2 tr(eps)^2 + mu eps:eps`.
 #[derive(Clone, Debug)]
 pub struct LinearElastic {
+    /// Bulk and shear modulus (MPa).
     pub moduli: ElasticModuli,
 }
 
 /// St. Venant-Kirchhoff: `S = lambda tr(E) I + 2 mu E`, `P = F S`, `Psi = lambda/2 tr(E)^2 + mu E:E`.
 #[derive(Clone, Debug)]
 pub struct StVenantKirchhoff {
+    /// Bulk and shear modulus (MPa).
     pub moduli: ElasticModuli,
 }
 
@@ -132,20 +135,24 @@ pub struct StVenantKirchhoff {
 /// `Psi = mu/2 (tr C - 3) - mu ln J + lambda/2 (ln J)^2`; `det F <= 0` is an error.
 #[derive(Clone, Debug)]
 pub struct NeoHookean {
+    /// Bulk and shear modulus (MPa).
     pub moduli: ElasticModuli,
 }
 
 impl LinearElastic {
+    /// The law with the moduli `moduli` (MPa).
     pub fn new(moduli: ElasticModuli) -> Self {
         Self { moduli }
     }
 }
 impl StVenantKirchhoff {
+    /// The law with the moduli `moduli` (MPa).
     pub fn new(moduli: ElasticModuli) -> Self {
         Self { moduli }
     }
 }
 impl NeoHookean {
+    /// The law with the moduli `moduli` (MPa).
     pub fn new(moduli: ElasticModuli) -> Self {
         Self { moduli }
     }
@@ -163,10 +170,6 @@ fn clear_nonlocal(out: &mut Response) {
 }
 
 impl Constitutive for LinearElastic {
-    fn history_len(&self) -> usize {
-        0
-    }
-    fn init_history(&self, _h: &mut [f64]) {}
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -197,10 +200,6 @@ impl Constitutive for LinearElastic {
 }
 
 impl Constitutive for StVenantKirchhoff {
-    fn history_len(&self) -> usize {
-        0
-    }
-    fn init_history(&self, _h: &mut [f64]) {}
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -234,10 +233,6 @@ impl Constitutive for StVenantKirchhoff {
 }
 
 impl Constitutive for NeoHookean {
-    fn history_len(&self) -> usize {
-        0
-    }
-    fn init_history(&self, _h: &mut [f64]) {}
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -246,11 +241,7 @@ impl Constitutive for NeoHookean {
         _h_trial: &mut [f64],
         out: &mut Response,
     ) -> Result<(), MaterialError> {
-        check_finite(f, eta_bar)?;
-        let det = f.determinant();
-        if det <= 0.0 {
-            return Err(MaterialError::NonPositiveJacobian { det });
-        }
+        let det = check_jacobian(f, eta_bar)?;
         let fi = f
             .try_inverse()
             .ok_or(MaterialError::NonPositiveJacobian { det })?;

@@ -1,5 +1,5 @@
 //! Isotropic (scalar) gradient-enhanced damage: a verification material for the implicit gradient
-//! enhancement (spec 01-model Sec. 4, benchmark V4 of 02-benchmarks).
+//! enhancement (`docs/gradient-enhancement.md`, section 1; benchmark V4, `tests/peerlings_bar.rs`).
 //!
 //! **Stress.** `P = (1 - d(gamma)) P_0(F)` (MPa) with, selected by `kinematics`,
 //! - `"finite"` (default): the St. Venant-Kirchhoff stress `P_0 = F S_0`, `S_0 = lambda tr(E) I + 2 mu E`,
@@ -36,8 +36,8 @@ use serde::{Deserialize, Serialize};
 use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::{
-    Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, Response, Sym6, check_finite,
-    first_piola_from_pk2, green_lagrange, sym_to_matrix,
+    Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, Response, Sym6,
+    check_history_len, check_jacobian, first_piola_from_pk2, green_lagrange, sym_to_matrix,
 };
 
 /// Definition of the local equivalent strain `eta`.
@@ -217,16 +217,8 @@ impl Constitutive for IsotropicDamage {
         h_trial: &mut [f64],
         out: &mut Response,
     ) -> Result<(), MaterialError> {
-        for got in [h_n.len(), h_trial.len()] {
-            if got != 1 {
-                return Err(MaterialError::HistoryLength { expected: 1, got });
-            }
-        }
-        check_finite(f, eta_bar)?;
-        let det = f.determinant();
-        if det <= 0.0 {
-            return Err(MaterialError::NonPositiveJacobian { det });
-        }
+        check_history_len(1, h_n, h_trial)?;
+        check_jacobian(f, eta_bar)?;
         let (lam, mu) = (self.moduli.lambda(), self.moduli.shear);
         let gamma_0 = self.config.gamma_0;
         let small = self.config.kinematics == Kinematics::Small;

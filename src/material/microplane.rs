@@ -49,8 +49,8 @@ use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::quadrature::Quadrature;
 use super::{
-    Constitutive, MaterialError, PAIRS, Response, Sym6, check_finite, first_piola_from_pk2,
-    green_lagrange,
+    Constitutive, MaterialError, PAIRS, Response, Sym6, check_history_len, check_jacobian,
+    first_piola_from_pk2, green_lagrange,
 };
 
 /// Below this macroscopic `eta` the ratio `eta_bar/eta` of eq. 13 is replaced by `eta_bar_mic = eta_bar`.
@@ -617,17 +617,8 @@ impl Constitutive for Microplane {
         h_trial: &mut [f64],
         out: &mut Response,
     ) -> Result<(), MaterialError> {
-        let nd = self.planes.count();
-        for got in [h_n.len(), h_trial.len()] {
-            if got != nd {
-                return Err(MaterialError::HistoryLength { expected: nd, got });
-            }
-        }
-        check_finite(f, eta_bar)?;
-        let det = f.determinant();
-        if det <= 0.0 {
-            return Err(MaterialError::NonPositiveJacobian { det });
-        }
+        check_history_len(self.planes.count(), h_n, h_trial)?;
+        check_jacobian(f, eta_bar)?;
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the processor supports AVX2 (checked on the line above).

@@ -106,14 +106,19 @@ pub enum MaterialError {
     /// A parameter is outside its admissible range.
     #[error("material parameter `{field}` = {value} is invalid: allowed is {allowed}")]
     InvalidParameter {
+        /// The parameter's config key.
         field: &'static str,
+        /// The value given.
         value: f64,
+        /// The admissible range.
         allowed: &'static str,
     },
     /// A parameter is neither given nor provided by a preset.
     #[error("material parameter `{field}` is missing: {hint}")]
     MissingParameter {
+        /// The parameter's config key.
         field: &'static str,
+        /// How to provide it.
         hint: &'static str,
     },
     /// Parameters that exclude each other were given together.
@@ -121,16 +126,32 @@ pub enum MaterialError {
     Conflict(&'static str),
     /// `det F <= 0`: the configuration is inverted (report as a domain error to the solver).
     #[error("non-positive Jacobian det F = {det}")]
-    NonPositiveJacobian { det: f64 },
+    NonPositiveJacobian {
+        /// `J = det F`.
+        det: f64,
+    },
     /// `F` or `eta_bar` contains NaN or infinity.
     #[error("non-finite input to the material update ({what})")]
-    NonFiniteInput { what: &'static str },
+    NonFiniteInput {
+        /// Which input.
+        what: &'static str,
+    },
     /// The history slices do not have [`Constitutive::history_len`] entries.
     #[error("history slice has length {got}, the material needs {expected}")]
-    HistoryLength { expected: usize, got: usize },
+    HistoryLength {
+        /// Entries the material needs.
+        expected: usize,
+        /// Entries given.
+        got: usize,
+    },
     /// The material-point driver's Newton iteration on the free components did not converge.
     #[error("material-point driver: no convergence at step {step} (residual {residual:e} MPa)")]
-    DriverNotConverged { step: usize, residual: f64 },
+    DriverNotConverged {
+        /// The load step.
+        step: usize,
+        /// Largest free stress component at the last iterate (MPa).
+        residual: f64,
+    },
     /// Invalid arguments of a material-point path.
     #[error("material-point driver: {0}")]
     DriverArgument(String),
@@ -138,10 +159,13 @@ pub enum MaterialError {
 
 /// A constitutive law in first-Piola form (see [`Response`]).
 pub trait Constitutive: Send + Sync {
-    /// Number of f64 history slots per material point (microplane: one `gamma` per direction).
-    fn history_len(&self) -> usize;
-    /// Initial (virgin) history.
-    fn init_history(&self, h: &mut [f64]);
+    /// Number of f64 history slots per material point (microplane: one `gamma` per direction); none
+    /// unless the law keeps a history.
+    fn history_len(&self) -> usize {
+        0
+    }
+    /// Initial (virgin) history; nothing unless the law keeps a history.
+    fn init_history(&self, _h: &mut [f64]) {}
     /// Pure in the committed history `h_n`; writes the trial history to `h_trial` (committed by the
     /// caller only after the step converges).
     fn update(
@@ -157,9 +181,13 @@ pub trait Constitutive: Send + Sync {
 /// The materials of the project (enum dispatch).
 #[derive(Clone, Debug)]
 pub enum Material {
+    /// Geometrically linear Hooke law.
     LinearElastic(LinearElastic),
+    /// St. Venant-Kirchhoff hyperelasticity.
     StVenantKirchhoff(StVenantKirchhoff),
+    /// Compressible neo-Hooke hyperelasticity.
     NeoHookean(NeoHookean),
+    /// The gradient-enhanced microplane damage model of the paper (boxed: its plane tables are large).
     Microplane(Box<Microplane>),
     /// Isotropic gradient-enhanced damage (verification of the Helmholtz field, see [`isotropic`]).
     IsotropicDamage(IsotropicDamage),
@@ -273,12 +301,7 @@ impl Constitutive for Material {
         out: &mut Response,
     ) -> Result<(), MaterialError> {
         let n = self.law_history_len();
-        let expected = self.history_len();
-        for got in [h_n.len(), h_trial.len()] {
-            if got != expected {
-                return Err(MaterialError::HistoryLength { expected, got });
-            }
-        }
+        check_history_len(self.history_len(), h_n, h_trial)?;
         let (law_n, act_n) = h_n.split_at(n);
         let (law_trial, act_trial) = h_trial.split_at_mut(n);
         match self {
@@ -474,6 +497,32 @@ pub(crate) fn check_finite(f: &Matrix3<f64>, eta_bar: f64) -> Result<(), Materia
     }
     if !eta_bar.is_finite() {
         return Err(MaterialError::NonFiniteInput { what: "eta_bar" });
+    }
+    Ok(())
+}
+
+/// [`check_finite`], then `det F > 0` ([`MaterialError::NonPositiveJacobian`] otherwise): the checks of the
+/// laws that need an invertible `F`. Returns `J = det F`.
+pub(crate) fn check_jacobian(f: &Matrix3<f64>, eta_bar: f64) -> Result<f64, MaterialError> {
+    check_finite(f, eta_bar)?;
+    let det = f.determinant();
+    if det <= 0.0 {
+        return Err(MaterialError::NonPositiveJacobian { det });
+    }
+    Ok(det)
+}
+
+/// Refuses history slices `h_n`, `h_trial` that do not both have `expected` entries
+/// ([`MaterialError::HistoryLength`], naming the first that differs).
+pub(crate) fn check_history_len(
+    expected: usize,
+    h_n: &[f64],
+    h_trial: &[f64],
+) -> Result<(), MaterialError> {
+    for got in [h_n.len(), h_trial.len()] {
+        if got != expected {
+            return Err(MaterialError::HistoryLength { expected, got });
+        }
     }
     Ok(())
 }

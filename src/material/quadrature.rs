@@ -4,7 +4,7 @@
 //! `n_I` with weights `w_I`, `sum_I w_I = 1/2`, and the normalised sphere integral of eq. 9 becomes
 //! `(3/(4 pi)) int_Omega f dOmega = 6 sum_I w_I f(n_I)`.
 //!
-//! Tables (copied from the project's `data/microplane-quadrature/*.csv`):
+//! Tables (below, as printed in the sources):
 //! - `bo21`: Bazant & Oh (1986), 21 directions, degree 9 (the default);
 //! - `bo28`: 28 directions (Bazant & Oh);
 //! - `bo33`: 33 directions, degree 11;

@@ -10,9 +10,7 @@
 //! C1-continuous, no cell-crossing noise; the support spans `3^D` nodes, so the body needs at least one empty
 //! cell of grid margin around it (uniform splines, no boundary-modified knots).
 
-use super::{Interpolator, ShapeError, Weight, tensor_product_weights};
-use crate::grid::Grid;
-use crate::particles::Particles;
+use super::{At, Interpolator, ShapeError, Weight, tensor_product_weights};
 
 /// Quadratic B-spline interpolator.
 #[derive(Debug, Clone, Copy, Default)]
@@ -34,13 +32,8 @@ fn quadratic(d: f64) -> (f64, f64) {
 impl<const D: usize> Interpolator<D> for Bspline2 {
     const MAX_SUPPORT: usize = 3_usize.pow(D as u32);
 
-    fn weights(
-        &self,
-        grid: &Grid<D>,
-        particles: &Particles<D>,
-        p: usize,
-        out: &mut [Weight<D>],
-    ) -> Result<usize, ShapeError> {
+    fn weights(&self, at: At<'_, D>, out: &mut [Weight<D>]) -> Result<usize, ShapeError> {
+        let At { grid, particles, p } = at;
         tensor_product_weights(grid, p, particles.x[p], |d, _| quadratic(d), out)
     }
 }

@@ -35,9 +35,9 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::{Interpolator, ShapeError, Weight, add_merged, outside};
+use super::{At, Interpolator, ShapeError, Weight, add_merged, outside};
 use crate::grid::{Grid, Locus, MAX_CELL_NODES, axis, cell_node_offset};
-use crate::particles::{Particles, corner_signs, domain_corner};
+use crate::particles::{corner_signs, domain_corner};
 use crate::space::{cofactor, det};
 
 /// CPDI1 interpolator (parallelogram or parallelepiped domain from `x_p` and `r_p`).
@@ -173,13 +173,8 @@ fn check_area(p: usize, area: f64) -> Result<(), ShapeError> {
 impl<const D: usize> Interpolator<D> for Cpdi1 {
     const MAX_SUPPORT: usize = 4_usize.pow(D as u32);
 
-    fn weights(
-        &self,
-        grid: &Grid<D>,
-        particles: &Particles<D>,
-        p: usize,
-        out: &mut [Weight<D>],
-    ) -> Result<usize, ShapeError> {
+    fn weights(&self, at: At<'_, D>, out: &mut [Weight<D>]) -> Result<usize, ShapeError> {
+        let At { grid, particles, p } = at;
         let r = &particles.r[p];
         let nc = Grid::<D>::CELL_NODES;
         let det_r = det(r);
@@ -199,13 +194,8 @@ impl<const D: usize> Interpolator<D> for Cpdi1 {
 impl<const D: usize> Interpolator<D> for Cpdi2<D> {
     const MAX_SUPPORT: usize = 4_usize.pow(D as u32);
 
-    fn weights(
-        &self,
-        grid: &Grid<D>,
-        particles: &Particles<D>,
-        p: usize,
-        out: &mut [Weight<D>],
-    ) -> Result<usize, ShapeError> {
+    fn weights(&self, at: At<'_, D>, out: &mut [Weight<D>]) -> Result<usize, ShapeError> {
+        let At { grid, particles, p } = at;
         let corners = particles.corners(p);
         let nc = corners.len();
         let mut vol = 0.0;

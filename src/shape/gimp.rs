@@ -15,9 +15,7 @@
 
 use nalgebra::SVector;
 
-use super::{Interpolator, ShapeError, Weight, tensor_product_weights};
-use crate::grid::Grid;
-use crate::particles::Particles;
+use super::{At, Interpolator, ShapeError, Weight, tensor_product_weights};
 
 /// uGIMP interpolator with the particle square (cube) of sides `2 |r_d^0|`.
 #[derive(Debug, Clone, Copy, Default)]
@@ -41,13 +39,8 @@ fn gimp_1d(d: f64, l: f64) -> (f64, f64) {
 impl<const D: usize> Interpolator<D> for Gimp {
     const MAX_SUPPORT: usize = 3_usize.pow(D as u32);
 
-    fn weights(
-        &self,
-        grid: &Grid<D>,
-        particles: &Particles<D>,
-        p: usize,
-        out: &mut [Weight<D>],
-    ) -> Result<usize, ShapeError> {
+    fn weights(&self, at: At<'_, D>, out: &mut [Weight<D>]) -> Result<usize, ShapeError> {
+        let At { grid, particles, p } = at;
         let h = grid.cell_size();
         let r0 = &particles.r0[p];
         let half = SVector::<f64, D>::from_fn(|d, _| r0.column(d).norm());

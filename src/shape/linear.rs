@@ -1,9 +1,8 @@
 //! Standard MPM: `S_Ip = N_I(x_p)`, `grad S_Ip = grad N_I(x_p)` (multilinear hat functions of the owning
 //! cell).
 
-use super::{Interpolator, ShapeError, Weight, outside};
+use super::{At, Interpolator, ShapeError, Weight, outside};
 use crate::grid::{Grid, Locus};
-use crate::particles::Particles;
 
 /// Linear (bilinear, trilinear) interpolation at the material point; suffers cell-crossing noise.
 #[derive(Debug, Clone, Copy, Default)]
@@ -12,13 +11,8 @@ pub struct Linear;
 impl<const D: usize> Interpolator<D> for Linear {
     const MAX_SUPPORT: usize = 1 << D;
 
-    fn weights(
-        &self,
-        grid: &Grid<D>,
-        particles: &Particles<D>,
-        p: usize,
-        out: &mut [Weight<D>],
-    ) -> Result<usize, ShapeError> {
+    fn weights(&self, at: At<'_, D>, out: &mut [Weight<D>]) -> Result<usize, ShapeError> {
+        let At { grid, particles, p } = at;
         let x = particles.x[p];
         let cell = grid
             .cell_weights(x)

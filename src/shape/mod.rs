@@ -1,4 +1,4 @@
-//! Shape functions `S_Ip` and gradients `grad_{X_n} S_Ip` of the material points (spec `01-model.md`, Sec. 2),
+//! Shape functions `S_Ip` and gradients `grad_{X_n} S_Ip` of the material points (`docs/shape-functions.md`),
 //! evaluated once per step in the converged configuration at `t_n` and stored in a [`ShapeTable`].
 //!
 //! Five interpolators share the [`Interpolator`] interface, all built on the bilinear hat functions `N_I` of
@@ -193,6 +193,17 @@ pub(crate) fn outside<const D: usize>(
     ShapeError::Grid(GridError::outside(particle, locus, &x))
 }
 
+/// Material point `p` of `particles` on `grid`: what an interpolator reads to weight one point.
+#[derive(Clone, Copy)]
+pub struct At<'a, const D: usize> {
+    /// The background grid.
+    pub grid: &'a Grid<D>,
+    /// The material points.
+    pub particles: &'a Particles<D>,
+    /// Index of the point.
+    pub p: usize,
+}
+
 /// An interpolator in `D` dimensions: writes the compact weight list of one material point.
 pub trait Interpolator<const D: usize>: Sync {
     /// Maximum number of support nodes of one point.
@@ -200,13 +211,7 @@ pub trait Interpolator<const D: usize>: Sync {
 
     /// Writes the weights of point `p` into `out[..n]` (`out.len() == MAX_SUPPORT`), each node at most once,
     /// and returns `n`.
-    fn weights(
-        &self,
-        grid: &Grid<D>,
-        particles: &Particles<D>,
-        p: usize,
-        out: &mut [Weight<D>],
-    ) -> Result<usize, ShapeError>;
+    fn weights(&self, at: At<'_, D>, out: &mut [Weight<D>]) -> Result<usize, ShapeError>;
 }
 
 /// Adds `(value, grad)` to the entry of `node` in `out[..*count]`, appending it if absent.
@@ -466,7 +471,12 @@ impl<const D: usize> ShapeTable<D> {
                     .zip(counts.iter_mut())
                     .enumerate()
                 {
-                    *count = interp.weights(grid, particles, chunk * CHUNK + k, out)? as u8;
+                    let at = At {
+                        grid,
+                        particles,
+                        p: chunk * CHUNK + k,
+                    };
+                    *count = interp.weights(at, out)? as u8;
                 }
                 Ok(())
             })

@@ -380,7 +380,7 @@ impl<const D: usize> Step<'_, D> {
         index: &mut [usize],
     ) -> Vec<ContactNode> {
         let grid = &self.m.grid;
-        let (h, nf) = (grid.cell_size(), self.ws.dofs.fields());
+        let (h, nf) = (grid.cell_size(), self.ws.dofs.unknowns_per_node());
         let (n, t) = (face.n, face.t);
         let mut nodes = Vec::new();
         for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
@@ -513,7 +513,7 @@ impl<const D: usize> Step<'_, D> {
         let grid = &s.grid;
         let (nodes, all, h) = (grid.num_nodes(), s.field_nodes(), grid.cell_size());
         let (p, table, dofs) = (&self.st.particles, &self.ws.table, &self.ws.dofs);
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let mut grad_m = vec![SVector::<f64, D>::zeros(); all];
         for q in 0..p.len() {
             for w in table.weights(q) {

@@ -49,7 +49,7 @@ impl<const D: usize> Step<'_, D> {
     /// displacement increments, and the new nodal accelerations (Newmark, with the inelastic-impact
     /// correction of the closed contact constraints, whose impulse the devices' reactions include).
     fn outcome(&self, plan: &StepPlan<D>, phys: &[f64]) -> Outcome<D> {
-        let (s, nf) = (self.m, self.ws.dofs.fields());
+        let (s, nf) = (self.m, self.ws.dofs.unknowns_per_node());
         let mut reactions: Vec<[f64; D]> = plan
             .sets
             .iter()

@@ -213,7 +213,7 @@ impl<const D: usize> Step<'_, D> {
     fn first_guess(&self, plan: &StepPlan<D>, eta_bar: &[f64]) -> Vec<f64> {
         let (dofs, gs, dt) = (&self.ws.dofs, &self.ws.grid_state, plan.dt);
         let newmark = plan.loading.newmark;
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let mut xs = vec![0.0; dofs.len()];
         for (a, &node) in dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
@@ -318,7 +318,7 @@ impl<const D: usize> Step<'_, D> {
     ) -> Result<Vec<Vec<usize>>, StepError> {
         let s = self.m;
         let grid = &s.grid;
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let mut sets: Vec<Vec<usize>> = Vec::new();
         for (b, du) in s.boxes.iter().zip(values) {
             let mut dofs_of_set = Vec::new();

@@ -140,7 +140,7 @@ fn physical_residual<const D: usize>(
         .evaluate(input, &xs)
         .and_then(|()| assembler.residual(input, &xs, phys, true));
     agreed(session, shared, local.map_err(StepError::from))?;
-    let nf = input.dofs.fields();
+    let nf = input.dofs.unknowns_per_node();
     complete_rows(session, shared, sys.owned.rows.clone(), nf, phys)?;
     Ok(xs)
 }
@@ -178,7 +178,7 @@ impl<const D: usize> Step<'_, D> {
             loading,
             partners,
         );
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let in_contact = contacts.iter().any(ContactSet::in_play);
         let mut solves = Solves::default();
         let mut phys = vec![0.0; dofs.len()];

@@ -17,7 +17,7 @@ impl<const D: usize> Step<'_, D> {
         let t = self.st.time;
         let g = self.to_grid(session, t, |v, rise| prescribed_acceleration(v, rise, t))?;
         let r = self.unbalanced_force(session, g.nodal_force, &g.eta_bar)?;
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let mut acc = vec![SVector::<f64, D>::zeros(); self.m.field_nodes()];
         for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
@@ -47,7 +47,7 @@ impl<const D: usize> Step<'_, D> {
         nodal_force: Vec<SVector<f64, D>>,
         eta_bar: &[f64],
     ) -> Result<Vec<f64>, StepError> {
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let loading = Loading {
             newmark: None,
             load_factor: 1.0,
@@ -92,7 +92,7 @@ impl<const D: usize> Step<'_, D> {
         r: &[f64],
         acc: &mut [SVector<f64, D>],
     ) -> Result<Vec<(usize, SVector<f64, D>)>, StepError> {
-        let nf = self.ws.dofs.fields();
+        let nf = self.ws.dofs.unknowns_per_node();
         let device_acc = self.rigid_values(prescribed);
         let devices = self.contact_devices(session, &device_acc, false, 0.0)?;
         let mut forces = Vec::with_capacity(devices.len());
@@ -123,7 +123,7 @@ impl<const D: usize> Step<'_, D> {
         acc: &[SVector<f64, D>],
         contact_forces: &[(usize, SVector<f64, D>)],
     ) {
-        let (s, nf, t) = (self.m, self.ws.dofs.fields(), self.st.time);
+        let (s, nf, t) = (self.m, self.ws.dofs.unknowns_per_node(), self.st.time);
         let last = &mut self.st.last_reactions;
         for (reaction, dofs) in last.iter_mut().zip(sets) {
             *reaction = [0.0; D];

@@ -34,7 +34,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
         let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
         let (contacts, s) = (self.contacts, self.row_scale);
-        let nf = input.dofs.fields();
+        let nf = input.dofs.unknowns_per_node();
         let r = &mut self.scratch;
         let xs = owned.gather(x).map_err(fatal)?;
         // Only this process's rows: the points in their support, the rows themselves.
@@ -66,7 +66,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let r = jac
             .fill_block_rows(&pattern, |values, layout| {
                 asm.jacobian_into(input, own.clone(), values, layout);
-                let nf = input.dofs.fields();
+                let nf = input.dofs.unknowns_per_node();
                 let row_of = |a: usize| {
                     let l = a.checked_sub(own.start).filter(|&l| l < own.len())?;
                     let (lo, hi) = (pattern.row_ptr[l], pattern.row_ptr[l + 1]);
@@ -204,7 +204,7 @@ impl LinearSystem {
         asm: &Assembler<D>,
         rows: Range<usize>,
     ) -> Result<Self, StepError> {
-        let nf = dofs.fields();
+        let nf = dofs.unknowns_per_node();
         let mut owned = OwnedRows::new(asm, rows, nf);
         let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
         session.sum(&mut nonzeros)?;

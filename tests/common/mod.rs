@@ -1,8 +1,11 @@
-//! Set-ups shared by the verification tests: the material helper and the one-cell-wide elastic column of
+//! Set-ups shared by the integration tests: the material helper and the one-cell-wide elastic column of
 //! V2 (quasi-static self-weight, `verification_static.rs`) and of the suddenly loaded column
 //! (`verification_dynamics.rs`).
 //!
 //! Units: mm, s, N, MPa, t (density t/mm^3, gravity mm/s^2).
+
+// Each test crate compiles this module and uses a part of it.
+#![allow(dead_code)]
 
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::grid::Grid;
