@@ -274,7 +274,16 @@ impl<const D: usize> Model<D> {
     /// prescribed, a unit normal and a friction coefficient >= 0, loads lie on grid lines, the FEM mode
     /// uses the linear interpolator, bodies on their own velocity fields use an interpolator that keeps
     /// the fields apart.
-    pub fn new(setup: Setup<D>) -> Result<(Self, State<D>), ModelError> {
+    pub fn new(mut setup: Setup<D>) -> Result<(Self, State<D>), ModelError> {
+        setup.fields = setup.checked_fields()?;
+        setup.check_devices()?;
+        let load_shares = setup
+            .loads
+            .iter()
+            .map(|l| l.shares(&setup.grid))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(ModelError::Invalid)?;
+        let fem = setup.fem_reference()?;
         let Setup {
             grid,
             mut particles,
@@ -293,42 +302,6 @@ impl<const D: usize> Model<D> {
             mass_tolerance,
             fallback_prefix,
         } = setup;
-        if particles.is_empty() {
-            return Err(ModelError::Empty);
-        }
-        if rigid_points.len() != rigid.len() {
-            return Err(ModelError::Invalid(format!(
-                "{} rigid bodies but {} sets of rigid-body points",
-                rigid.len(),
-                rigid_points.len()
-            )));
-        }
-        let fields = if fields.is_empty() {
-            vec![0; materials.len()]
-        } else {
-            fields
-        };
-        if fields.len() != materials.len() {
-            return Err(ModelError::Invalid(format!(
-                "{} velocity fields for {} materials (one per body tag)",
-                fields.len(),
-                materials.len()
-            )));
-        }
-        let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
-        if nfields > 1 && (shape == ShapeKind::Cpdi2 || method == Method::Fem) {
-            return Err(ModelError::Invalid(
-            "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
-             GIMP, CPDI1 or B-spline interpolator (CPDI2 moves its corners on one field)"
-                .into(),
-        ));
-        }
-        if let Some(rb) = rigid.iter().find(|r| r.field as usize >= nfields) {
-            return Err(ModelError::Invalid(format!(
-                "rigid body `{}` acts on velocity field {}, but the bodies use {nfields}",
-                rb.name, rb.field
-            )));
-        }
         let stride = materials.iter().map(|m| m.history_len()).max().unwrap_or(0);
         particles.resize_history(stride, 0.0);
         for p in 0..particles.len() {
@@ -336,47 +309,6 @@ impl<const D: usize> Model<D> {
             let h = particles.history_mut(p);
             m.init_history(&mut h[..m.history_len()]);
         }
-        for rb in &rigid {
-            if let Some(c) = &rb.contact {
-                let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
-                let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
-                if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
-                    return Err(ModelError::Invalid(format!(
-                        "rigid body `{}`: a device in contact needs both motion components prescribed \
-                     (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
-                        rb.name
-                    )));
-                }
-            }
-        }
-        let load_shares = loads
-            .iter()
-            .map(|l| l.shares(&grid))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(ModelError::Invalid)?;
-        let fem = match method {
-            Method::Mpm => None,
-            Method::Fem => {
-                if shape != ShapeKind::Linear {
-                    return Err(ModelError::Invalid(format!(
-                        "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
-                        shape.name()
-                    )));
-                }
-                // The reference configuration is the configuration at construction; the rigid bodies'
-                // nodes are fixed there too.
-                let mut points = ShapeTable::new();
-                points.compute(ShapeKind::Linear, &grid, &particles)?;
-                let rigid = rigid_points
-                    .iter()
-                    .map(|rp| {
-                        let mut t = ShapeTable::new();
-                        t.compute(ShapeKind::Linear, &grid, rp).map(|()| t)
-                    })
-                    .collect::<Result<Vec<_>, _>>()?;
-                Some(FemReference { points, rigid })
-            }
-        };
         let nsets = boxes.len() + rigid.len() + loads.len();
         let mut state = State::new(particles, rigid_points, nsets, time.dt);
         if time.quasi_static {
@@ -402,6 +334,95 @@ impl<const D: usize> Model<D> {
             fem,
         };
         Ok((model, state))
+    }
+}
+
+impl<const D: usize> Setup<D> {
+    /// The velocity field of each body tag (all on field 0 if none are given), after checking that there
+    /// are points, one set of points per rigid body, one field per material, an interpolator that keeps
+    /// several fields apart and rigid bodies on existing fields.
+    fn checked_fields(&self) -> Result<Vec<u16>, ModelError> {
+        if self.particles.is_empty() {
+            return Err(ModelError::Empty);
+        }
+        let (rigid, materials) = (&self.rigid, &self.materials);
+        if self.rigid_points.len() != rigid.len() {
+            return Err(ModelError::Invalid(format!(
+                "{} rigid bodies but {} sets of rigid-body points",
+                rigid.len(),
+                self.rigid_points.len()
+            )));
+        }
+        let fields = match self.fields.is_empty() {
+            true => vec![0; materials.len()],
+            false => self.fields.clone(),
+        };
+        if fields.len() != materials.len() {
+            return Err(ModelError::Invalid(format!(
+                "{} velocity fields for {} materials (one per body tag)",
+                fields.len(),
+                materials.len()
+            )));
+        }
+        let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
+        if nfields > 1 && (self.shape == ShapeKind::Cpdi2 || self.method == Method::Fem) {
+            return Err(ModelError::Invalid(
+                "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
+                 GIMP, CPDI1 or B-spline interpolator (CPDI2 moves its corners on one field)"
+                    .into(),
+            ));
+        }
+        if let Some(rb) = rigid.iter().find(|r| r.field as usize >= nfields) {
+            return Err(ModelError::Invalid(format!(
+                "rigid body `{}` acts on velocity field {}, but the bodies use {nfields}",
+                rb.name, rb.field
+            )));
+        }
+        Ok(fields)
+    }
+
+    /// Devices in contact need both motion components prescribed, a unit normal and a friction
+    /// coefficient >= 0.
+    fn check_devices(&self) -> Result<(), ModelError> {
+        for rb in &self.rigid {
+            if let Some(c) = &rb.contact {
+                let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
+                let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
+                if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
+                    return Err(ModelError::Invalid(format!(
+                        "rigid body `{}`: a device in contact needs both motion components prescribed \
+                         (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
+                        rb.name
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The FEM mode's reference shape functions (of the configuration at construction; the rigid bodies'
+    /// nodes are fixed there too); `None` in MPM mode. FEM needs the linear interpolator.
+    fn fem_reference(&self) -> Result<Option<FemReference<D>>, ModelError> {
+        if self.method == Method::Mpm {
+            return Ok(None);
+        }
+        if self.shape != ShapeKind::Linear {
+            return Err(ModelError::Invalid(format!(
+                "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
+                self.shape.name()
+            )));
+        }
+        let table = |points: &Particles<D>| {
+            let mut t = ShapeTable::new();
+            t.compute(ShapeKind::Linear, &self.grid, points).map(|()| t)
+        };
+        let points = table(&self.particles)?;
+        let rigid = self
+            .rigid_points
+            .iter()
+            .map(table)
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Some(FemReference { points, rigid }))
     }
 }
 

@@ -311,9 +311,9 @@ impl<const D: usize> Step<'_, D> {
     /// Current pin (mm) of rigid body `k`: its pin at t = 0 moved with the accumulated translation;
     /// `None` without a pin.
     pub(super) fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
-        let s = self.m;
-        let pin = s.rigid[k].contact.as_ref()?.pin?;
-        let acc = self.st.accumulated[s.boxes.len() + k];
+        let model = self.model;
+        let pin = model.rigid[k].contact.as_ref()?.pin?;
+        let acc = self.state.accumulated[model.boxes.len() + k];
         Some(pin + Vector2::new(acc[0], acc[1]))
     }
 
@@ -330,18 +330,18 @@ impl<const D: usize> Step<'_, D> {
         rotate: bool,
         dt: f64,
     ) -> Result<Vec<Device>, StepError> {
-        let mut index = vec![usize::MAX; self.m.field_nodes()];
+        let mut index = vec![usize::MAX; self.model.field_nodes()];
         let mut devices = Vec::new();
-        for (k, rb) in self.m.rigid.iter().enumerate() {
+        for (k, rb) in self.model.rigid.iter().enumerate() {
             let Some(c) = &rb.contact else { continue };
             let pin = self.pin_of(k);
             let dtheta = match pin {
-                Some(_) if rotate => self.st.rotation_rates[k] * dt,
+                Some(_) if rotate => self.state.rotation_rates[k] * dt,
                 _ => 0.0,
             };
             let face = Face::of(
-                contact::rotation(self.st.rotations[k]) * c.normal,
-                &self.st.rigid[k],
+                contact::rotation(self.state.rotations[k]) * c.normal,
+                &self.state.rigid[k],
             );
             let translation = xy(&translations[k]);
             let r = contact::rotation(dtheta) - Matrix2::identity();
@@ -356,7 +356,7 @@ impl<const D: usize> Step<'_, D> {
                 friction: c.friction,
                 nodes,
             };
-            self.first_statuses(&mut device, &self.st.contact_statuses[k], dt, &mut index);
+            self.first_statuses(&mut device, &self.state.contact_statuses[k], dt, &mut index);
             devices.push(Device {
                 body: k,
                 contact: device,
@@ -379,11 +379,11 @@ impl<const D: usize> Step<'_, D> {
         motion: impl Fn(Vector2<f64>) -> Vector2<f64>,
         index: &mut [usize],
     ) -> Vec<ContactNode> {
-        let grid = &self.m.grid;
-        let (h, nf) = (grid.cell_size(), self.ws.dofs.unknowns_per_node());
+        let grid = &self.model.grid;
+        let (h, nf) = (grid.cell_size(), self.work.dofs.unknowns_per_node());
         let (n, t) = (face.n, face.t);
         let mut nodes = Vec::new();
-        for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
+        for (a, &node) in self.work.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
             let x = xy(&grid.node_position(node));
             let tx = t.dot(&x);
@@ -391,7 +391,7 @@ impl<const D: usize> Step<'_, D> {
                 || (n.dot(&x) - face.plane()).abs() > 0.5 * h + 1e-9
                 || tx < face.lo[1] - 1e-9
                 || tx > face.hi[1] + 1e-9
-                || (0..D).any(|c| self.ws.dofs.is_constrained(a * nf + c))
+                || (0..D).any(|c| self.work.dofs.is_constrained(a * nf + c))
             {
                 continue;
             }
@@ -418,7 +418,7 @@ impl<const D: usize> Step<'_, D> {
         index: &[usize],
     ) -> Result<(), StepError> {
         let (n, cf, depth) = (face.n, face.plane(), face.depth());
-        let p = &self.st.particles;
+        let p = &self.state.particles;
         for q in 0..p.len() {
             if n.dot(&xy(&p.x[q])) < cf - depth {
                 continue;
@@ -428,14 +428,14 @@ impl<const D: usize> Step<'_, D> {
                 .iter()
                 .map(|c| n.dot(&xy(c)))
                 .fold(f64::INFINITY, f64::min);
-            for w in self.ws.table.weights(q) {
+            for w in self.work.table.weights(q) {
                 let i = index[w.node as usize];
                 if w.value > 1e-12 && i != usize::MAX {
                     nodes[i].gap = nodes[i].gap.min(near - cf);
                 }
             }
         }
-        if self.st.distributed {
+        if self.state.distributed {
             let mut gaps: Vec<f64> = nodes.iter().map(|c| c.gap).collect();
             session.min(&mut gaps)?;
             for (c, g) in nodes.iter_mut().zip(gaps) {
@@ -462,14 +462,14 @@ impl<const D: usize> Step<'_, D> {
         dt: f64,
         index: &mut [usize],
     ) {
-        let h = self.m.grid.cell_size();
+        let h = self.model.grid.cell_size();
         let t = device.tangent();
         let closed = device.closed_status();
         for c in &mut device.nodes {
             index[c.node] = usize::MAX;
             let (v, a) = (
-                self.ws.grid_state.velocity[c.node],
-                self.ws.grid_state.acceleration[c.node],
+                self.work.grid_state.velocity[c.node],
+                self.work.grid_state.acceleration[c.node],
             );
             let slide = t.dot(&(xy(&(dt * v + 0.5 * dt * dt * a)) - c.du_device));
             let fresh = if closed == NodeStatus::Stick && slide.abs() > 1e-9 * h {
@@ -504,15 +504,41 @@ impl<const D: usize> Step<'_, D> {
         devices: &[Device],
         dt: f64,
     ) -> Result<BodyContact<D>, StepError> {
-        let s = self.m;
-        let fields = s.num_fields();
-        self.ws.partners.clear();
-        if fields == 1 {
+        let all = self.model.field_nodes();
+        self.work.partners.clear();
+        if self.model.num_fields() == 1 {
             return Ok(BodyContact::default());
         }
-        let grid = &s.grid;
-        let (nodes, all, h) = (grid.num_nodes(), s.field_nodes(), grid.cell_size());
-        let (p, table, dofs) = (&self.st.particles, &self.ws.table, &self.ws.dofs);
+        let mut pairs = self.node_pairs(devices)?;
+        let (far_a, near_b) = self.pair_extents(&pairs, all);
+        self.work.partners.resize(all, INACTIVE);
+        let h = self.model.grid.cell_size();
+        let gs = &self.work.grid_state;
+        let predicted =
+            |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
+        for (k, c) in pairs.iter_mut().enumerate() {
+            c.gap = (near_b[k] - far_a[k]).max(0.0);
+            let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
+            let was_closed = self.state.closed_pairs.binary_search(&c.node_b).is_ok();
+            c.closed = overlap < -1e-9 * h || (c.gap <= 1e-9 * h && was_closed);
+            self.work.partners[c.node_a] = c.node_b as u32;
+            self.work.partners[c.node_b] = c.node_a as u32;
+        }
+        Ok(BodyContact { pairs })
+    }
+
+    /// The node pairs of the step without gaps or statuses: grid nodes whose copies in field 0 and in
+    /// one other field are active and free (not constrained, not held by one of the `devices`), with the
+    /// normal along the difference of the fields' nodal mass gradients.
+    fn node_pairs(&self, devices: &[Device]) -> Result<Vec<NodePair<D>>, StepError> {
+        let (model, p, table, dofs) = (
+            self.model,
+            &self.state.particles,
+            &self.work.table,
+            &self.work.dofs,
+        );
+        let (grid, fields, all) = (&model.grid, model.num_fields(), model.field_nodes());
+        let nodes = grid.num_nodes();
         let nf = dofs.unknowns_per_node();
         let mut grad_m = vec![SVector::<f64, D>::zeros(); all];
         for q in 0..p.len() {
@@ -530,7 +556,6 @@ impl<const D: usize> Step<'_, D> {
                 .filter(|&a| !taken[node] && (0..D).all(|c| !dofs.is_constrained(a * nf + c)))
         };
         let mut pairs = Vec::new();
-        let mut pair_of = vec![usize::MAX; all];
         for i in 0..nodes {
             if dofs.active_index(i).is_none() {
                 continue;
@@ -540,8 +565,11 @@ impl<const D: usize> Step<'_, D> {
                 .filter(|&b| dofs.active_index(b).is_some());
             let Some(b) = others.next() else { continue };
             if others.next().is_some() {
-                let x = grid.node_position(i);
-                let at: Vec<String> = x.iter().map(|c| format!("{c:.3}")).collect();
+                let at: Vec<String> = grid
+                    .node_position(i)
+                    .iter()
+                    .map(|c| format!("{c:.3}"))
+                    .collect();
                 return Err(StepError::Setup(format!(
                     "the grid node at ({}) mm carries the specimen and two other bodies: contact is \
                      between the specimen and one body per node; keep the other bodies at least two \
@@ -557,8 +585,6 @@ impl<const D: usize> Step<'_, D> {
             if g.norm() == 0.0 {
                 continue;
             }
-            pair_of[i] = pairs.len();
-            pair_of[b] = pairs.len();
             pairs.push(NodePair {
                 node_a: i,
                 node_b: b,
@@ -568,6 +594,18 @@ impl<const D: usize> Step<'_, D> {
                 gap: 0.0,
                 closed: false,
             });
+        }
+        Ok(pairs)
+    }
+
+    /// Per pair, the farthest corner of the specimen's points and the nearest corner of the other body's
+    /// points along the pair's normal (mm), over the points that interpolate to the pair's copies.
+    fn pair_extents(&self, pairs: &[NodePair<D>], all: usize) -> (Vec<f64>, Vec<f64>) {
+        let (p, table) = (&self.state.particles, &self.work.table);
+        let mut pair_of = vec![usize::MAX; all];
+        for (k, c) in pairs.iter().enumerate() {
+            pair_of[c.node_a] = k;
+            pair_of[c.node_b] = k;
         }
         let mut far_a = vec![f64::NEG_INFINITY; pairs.len()];
         let mut near_b = vec![f64::INFINITY; pairs.len()];
@@ -586,18 +624,6 @@ impl<const D: usize> Step<'_, D> {
                 }
             }
         }
-        self.ws.partners.resize(all, INACTIVE);
-        let gs = &self.ws.grid_state;
-        let predicted =
-            |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
-        for (k, c) in pairs.iter_mut().enumerate() {
-            c.gap = (near_b[k] - far_a[k]).max(0.0);
-            let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
-            let was_closed = self.st.closed_pairs.binary_search(&c.node_b).is_ok();
-            c.closed = overlap < -1e-9 * h || (c.gap <= 1e-9 * h && was_closed);
-            self.ws.partners[c.node_a] = c.node_b as u32;
-            self.ws.partners[c.node_b] = c.node_a as u32;
-        }
-        Ok(BodyContact { pairs })
+        (far_a, near_b)
     }
 }

@@ -28,7 +28,7 @@ impl<const D: usize> Step<'_, D> {
         let counted = self.own_point_count();
         let stored = self.move_points(session, &plan, &out, counted)?;
         self.move_rigid_bodies(&plan, &out);
-        let st = &mut *self.st;
+        let st = &mut *self.state;
         for (acc, du) in st.accumulated.iter_mut().zip(&out.displacements) {
             for c in 0..D {
                 acc[c] += du[c];
@@ -39,7 +39,7 @@ impl<const D: usize> Step<'_, D> {
         st.time = plan.t_new;
         st.step += 1;
         let mut energies = [self.kinetic_energy(counted), stored];
-        if self.st.distributed {
+        if self.state.distributed {
             session.sum(&mut energies)?;
         }
         Ok(self.report(&plan, solved, &out, energies, t0))
@@ -49,7 +49,7 @@ impl<const D: usize> Step<'_, D> {
     /// displacement increments, and the new nodal accelerations (Newmark, with the inelastic-impact
     /// correction of the closed contact constraints, whose impulse the devices' reactions include).
     fn outcome(&self, plan: &StepPlan<D>, phys: &[f64]) -> Outcome<D> {
-        let (s, nf) = (self.m, self.ws.dofs.unknowns_per_node());
+        let (model, nf) = (self.model, self.work.dofs.unknowns_per_node());
         let mut reactions: Vec<[f64; D]> = plan
             .sets
             .iter()
@@ -63,23 +63,23 @@ impl<const D: usize> Step<'_, D> {
             .collect();
         for d in plan.contacts.iter().filter_map(ContactSet::device) {
             let pin = d.pin.unwrap_or_else(Vector2::zeros);
-            let grid_x = |i| xy(&s.grid.node_position(i));
+            let grid_x = |i| xy(&model.grid.node_position(i));
             let (f, _) = d.contact.resultant(phys, nf, grid_x, pin);
-            let r = &mut reactions[s.rigid_set(d.body)];
+            let r = &mut reactions[model.rigid_set(d.body)];
             r[0] = f.x;
             r[1] = f.y;
         }
-        let du_nodes = self.ws.assembler.nodal_du().to_vec();
-        let mut acc_nodes = vec![SVector::<f64, D>::zeros(); s.field_nodes()];
+        let du_nodes = self.work.assembler.nodal_du().to_vec();
+        let mut acc_nodes = vec![SVector::<f64, D>::zeros(); model.field_nodes()];
         if let Some(nm) = plan.loading.newmark {
-            let gs = &self.ws.grid_state;
-            for &node in self.ws.dofs.active_nodes() {
+            let gs = &self.work.grid_state;
+            for &node in self.work.dofs.active_nodes() {
                 let node = node as usize;
                 acc_nodes[node] =
                     nm.acceleration(du_nodes[node], gs.velocity[node], gs.acceleration[node]);
             }
             for c in &plan.contacts {
-                c.impact(s, &nm, gs, &mut acc_nodes, &mut reactions);
+                c.impact(model, &nm, gs, &mut acc_nodes, &mut reactions);
             }
         }
         let mut displacements: Vec<[f64; D]> = plan
@@ -87,7 +87,7 @@ impl<const D: usize> Step<'_, D> {
             .iter()
             .map(|d| d.map(|v| v.unwrap_or(0.0)))
             .collect();
-        for (load, nodes) in s.loads.iter().zip(&plan.load_nodes) {
+        for (load, nodes) in model.loads.iter().zip(&plan.load_nodes) {
             // A load reports its resultant and the share-weighted mean displacement of its nodes.
             let f = load.force * load.factor(plan.t_new);
             let du: SVector<f64, D> = nodes.iter().map(|&(n, w)| w * du_nodes[n]).sum();
@@ -107,14 +107,14 @@ impl<const D: usize> Step<'_, D> {
     /// same prescribed du).
     fn work(&self, plan: &StepPlan<D>, out: &Outcome<D>) -> f64 {
         let mut work = 0.0;
-        let bf = self.m.body_force * plan.loading.load_factor;
-        for &node in self.ws.dofs.active_nodes() {
+        let bf = self.model.body_force * plan.loading.load_factor;
+        for &node in self.work.dofs.active_nodes() {
             let node = node as usize;
-            work += self.ws.grid_state.mass[node] * bf.dot(&out.du_nodes[node]);
+            work += self.work.grid_state.mass[node] * bf.dot(&out.du_nodes[node]);
         }
         for (k, (r, du)) in out.reactions.iter().zip(&out.displacements).enumerate() {
             for c in 0..D {
-                work += 0.5 * (r[c] + self.st.last_reactions[k][c]) * du[c];
+                work += 0.5 * (r[c] + self.state.last_reactions[k][c]) * du[c];
             }
         }
         work
@@ -130,19 +130,23 @@ impl<const D: usize> Step<'_, D> {
         out: &Outcome<D>,
         counted: usize,
     ) -> Result<f64, StepError> {
-        let s = self.m;
+        let model = self.model;
         let newmark = plan.loading.newmark;
         let sol = StepSolution {
             du: &out.du_nodes,
             acceleration: &out.acc_nodes,
-            gamma: if newmark.is_some() { s.time.gamma } else { 0.0 },
+            gamma: if newmark.is_some() {
+                model.time.gamma
+            } else {
+                0.0
+            },
             dt: plan.dt,
         };
-        let ps = &mut self.st.particles;
+        let ps = &mut self.state.particles;
         // Eroded points (material `erosion_damage`) move with the grid but keep their deformation
         // gradient, volume and domain: a void does not deform, so it never inverts.
         let frozen: Vec<_> = (0..ps.len())
-            .filter(|&p| s.materials[ps.body[p] as usize].is_eroded(ps.damage[p]))
+            .filter(|&p| model.materials[ps.body[p] as usize].is_eroded(ps.damage[p]))
             .map(|p| {
                 (
                     p,
@@ -154,8 +158,12 @@ impl<const D: usize> Step<'_, D> {
                 )
             })
             .collect();
-        let g2p = transfer::grid_to_particles(&self.ws.table, &s.grid, &sol, ps);
-        agreed(session, self.st.distributed, g2p.map_err(StepError::from))?;
+        let g2p = transfer::grid_to_particles(&self.work.table, &model.grid, &sol, ps);
+        agreed(
+            session,
+            self.state.distributed,
+            g2p.map_err(StepError::from),
+        )?;
         for (p, x, f, r, vol, corners) in frozen {
             let shift = ps.x[p] - x;
             ps.f[p] = f;
@@ -165,15 +173,15 @@ impl<const D: usize> Step<'_, D> {
                 *c = c0 + shift;
             }
         }
-        if s.fem.is_some() {
-            self.st.fem_nodal = Some(self.fem_nodal_state(newmark, &out.acc_nodes));
+        if model.fem.is_some() {
+            self.state.fem_nodal = Some(self.fem_nodal_state(newmark, &out.acc_nodes));
         }
-        let ps = &mut self.st.particles;
-        if s.time.quasi_static {
+        let ps = &mut self.state.particles;
+        if model.time.quasi_static {
             ps.v.iter_mut().for_each(|v| *v = SVector::zeros());
             ps.a.iter_mut().for_each(|a| *a = SVector::zeros());
         }
-        Ok(self.ws.assembler.commit(ps, &s.materials, counted))
+        Ok(self.work.assembler.commit(ps, &model.materials, counted))
     }
 
     /// The FEM mode's nodal velocity and acceleration after the step (velocities by the trapezoidal rule
@@ -183,10 +191,10 @@ impl<const D: usize> Step<'_, D> {
         newmark: Option<Newmark>,
         acc: &[SVector<f64, D>],
     ) -> (Vec<SVector<f64, D>>, Vec<SVector<f64, D>>) {
-        let gs = &self.ws.grid_state;
+        let gs = &self.work.grid_state;
         let (mut v, a) = (gs.velocity.clone(), acc.to_vec());
         if let Some(nm) = newmark {
-            for &node in self.ws.dofs.active_nodes() {
+            for &node in self.work.dofs.active_nodes() {
                 let node = node as usize;
                 v[node] += nm.dt * ((1.0 - nm.gamma) * gs.acceleration[node] + nm.gamma * a[node]);
             }
@@ -199,10 +207,10 @@ impl<const D: usize> Step<'_, D> {
     /// The rigid bodies move with their sets' increments and turn about their pins; the contact sets
     /// keep their final statuses for the next step.
     fn move_rigid_bodies(&mut self, plan: &StepPlan<D>, out: &Outcome<D>) {
-        let (s, dt) = (self.m, plan.dt);
-        let st = &mut *self.st;
+        let (model, dt) = (self.model, plan.dt);
+        let st = &mut *self.state;
         for (k, rb) in st.rigid.iter_mut().enumerate() {
-            let du = out.displacements[s.rigid_set(k)];
+            let du = out.displacements[model.rigid_set(k)];
             let device = plan
                 .contacts
                 .iter()
@@ -229,16 +237,18 @@ impl<const D: usize> Step<'_, D> {
     /// Kinetic energy of the `counted` own points in MPM (the grid is discarded); of the lumped nodal
     /// masses in FEM mode, the energy the Newmark scheme conserves there (N mm; in 2D per mm thickness).
     fn kinetic_energy(&self, counted: usize) -> f64 {
-        match &self.st.fem_nodal {
+        match &self.state.fem_nodal {
             Some((v, _)) => self
-                .ws
+                .work
                 .dofs
                 .active_nodes()
                 .iter()
-                .map(|&n| 0.5 * self.ws.grid_state.mass[n as usize] * v[n as usize].norm_squared())
+                .map(|&n| {
+                    0.5 * self.work.grid_state.mass[n as usize] * v[n as usize].norm_squared()
+                })
                 .sum(),
             None => {
-                let ps = &self.st.particles;
+                let ps = &self.state.particles;
                 (0..counted)
                     .map(|p| 0.5 * ps.mass[p] * ps.v[p].norm_squared())
                     .sum()
@@ -255,20 +265,20 @@ impl<const D: usize> Step<'_, D> {
         [kinetic, stored]: [f64; 2],
         t0: Instant,
     ) -> StepReport {
-        let (s, st) = (self.m, &*self.st);
-        let names = s.set_names();
+        let (model, st) = (self.model, &*self.state);
+        let names = model.set_names();
         StepReport {
             step: st.step,
             time: st.time,
             dt: plan.dt,
             attempts: 1,
             solve: solved.info,
-            unknowns: self.ws.dofs.len(),
+            unknowns: self.work.dofs.len(),
             nonzeros: self
-                .ws
+                .work
                 .system
                 .as_ref()
-                .map_or_else(|| self.ws.assembler.nonzeros(), |sys| sys.nonzeros),
+                .map_or_else(|| self.work.assembler.nonzeros(), |sys| sys.nonzeros),
             reactions: names
                 .iter()
                 .cloned()
@@ -288,7 +298,7 @@ impl<const D: usize> Step<'_, D> {
             evaluations: solved.evaluations,
             wall_total: t0.elapsed().as_secs_f64(),
             new_pattern: plan.new_pattern,
-            rotations: s
+            rotations: model
                 .rigid
                 .iter()
                 .enumerate()
@@ -296,8 +306,8 @@ impl<const D: usize> Step<'_, D> {
                 .map(|(k, r)| (r.name.clone(), st.rotations[k]))
                 .collect(),
             contact_solves: solved.contact_solves,
-            migrated: self.ws.moved[0],
-            ghosts: self.ws.moved[1],
+            migrated: self.work.moved[0],
+            ghosts: self.work.moved[1],
         }
     }
 }

@@ -139,28 +139,31 @@ pub fn advance<const D: usize>(
     session: &SessionGuard,
 ) -> Result<StepReport, StepError> {
     Step {
-        m: model,
-        st: state,
-        ws: workspace,
+        model,
+        state,
+        work: workspace,
     }
     .advance(session)
 }
 
 /// One step in progress: the model, the state it advances and the workspace it uses.
 struct Step<'a, const D: usize> {
-    m: &'a Model<D>,
-    st: &'a mut State<D>,
-    ws: &'a mut Workspace<D>,
+    /// What defines the run.
+    model: &'a Model<D>,
+    /// The committed state, changed only when an attempt converges.
+    state: &'a mut State<D>,
+    /// The step's scratch.
+    work: &'a mut Workspace<D>,
 }
 
 impl<const D: usize> Step<'_, D> {
-    /// Advances one step of (at most) `self.st.dt` (the rules of [`advance`]). The first step of a
+    /// Advances one step of (at most) `self.state.dt` (the rules of [`advance`]). The first step of a
     /// dynamic run starts with the consistent initial acceleration unless `initial_acceleration` is
     /// [`InitialAcceleration::Zero`].
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
         // Before the first step only: a resumed run continues with its checkpointed accelerations.
-        let time = &self.m.time;
-        if self.st.step == 0
+        let time = &self.model.time;
+        if self.state.step == 0
             && !time.quasi_static
             && time.initial_acceleration == InitialAcceleration::Consistent
         {
@@ -169,12 +172,12 @@ impl<const D: usize> Step<'_, D> {
             r?;
         }
         let started = Instant::now();
-        let mut dt = self.st.dt;
+        let mut dt = self.state.dt;
         let mut attempts = 0;
-        self.ws.moved = [0; 2];
+        self.work.moved = [0; 2];
         // The main solver first; after a linear-solver failure the fallback solver (if any) at the same
         // dt, then halving.
-        let mut prefix = self.m.options_prefix.clone();
+        let mut prefix = self.model.options_prefix.clone();
         loop {
             attempts += 1;
             let attempt = self.try_step(session, dt, prefix.as_deref());
@@ -185,42 +188,42 @@ impl<const D: usize> Step<'_, D> {
                     report.wall_total = started.elapsed().as_secs_f64();
                     // A reduced step is kept until GROW_AFTER steps in a row converged at the first try,
                     // then doubled (up to the nominal dt).
-                    let st = &mut *self.st;
+                    let st = &mut *self.state;
                     st.calm_steps = if attempts == 1 { st.calm_steps + 1 } else { 0 };
                     st.dt = dt;
-                    if dt < self.m.time.dt && st.calm_steps >= GROW_AFTER {
-                        st.dt = (dt * 2.0).min(self.m.time.dt);
+                    if dt < self.model.time.dt && st.calm_steps >= GROW_AFTER {
+                        st.dt = (dt * 2.0).min(self.model.time.dt);
                         st.calm_steps = 0;
                     }
                     return Ok(report);
                 }
                 Err(Failure { reason, linear }) => {
-                    if let Some(fb) = &self.m.fallback_prefix
+                    if let Some(fb) = &self.model.fallback_prefix
                         && linear
                         && prefix.as_deref() != Some(fb.as_str())
                     {
                         tracing::warn!(
                             "step {} at t = {:.6e} s: {reason}; retrying with the fallback solver (-{fb}*)",
-                            self.st.step + 1,
-                            self.st.time
+                            self.state.step + 1,
+                            self.state.time
                         );
                         prefix = Some(fb.clone());
                         continue;
                     }
                     let next = dt / 2.0;
-                    if next < self.m.time.dt_min {
+                    if next < self.model.time.dt_min {
                         return Err(StepError::Diverged {
-                            step: self.st.step + 1,
-                            time: self.st.time,
+                            step: self.state.step + 1,
+                            time: self.state.time,
                             dt,
-                            dt_min: self.m.time.dt_min,
+                            dt_min: self.model.time.dt_min,
                             reason,
                         });
                     }
                     tracing::warn!(
                         "step {} at t = {:.6e} s: {reason}; retrying with dt = {next:.3e} s",
-                        self.st.step + 1,
-                        self.st.time
+                        self.state.step + 1,
+                        self.state.time
                     );
                     dt = next;
                 }
@@ -240,14 +243,14 @@ impl<const D: usize> Step<'_, D> {
         prefix: Option<&str>,
     ) -> Result<Result<StepReport, Failure>, StepError> {
         let t0 = Instant::now();
-        let events = match self.ws.events {
+        let events = match self.work.events {
             Some(e) => e,
             None => {
                 let e = [
                     LogEvent::register(session, "MPMSetup")?,
                     LogEvent::register(session, "MPMAssembly")?,
                 ];
-                *self.ws.events.insert(e)
+                *self.work.events.insert(e)
             }
         };
         let setup_guard = events[0].begin();

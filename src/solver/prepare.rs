@@ -60,26 +60,26 @@ impl<const D: usize> Step<'_, D> {
         dt: f64,
         prefix: Option<&str>,
     ) -> Result<StepPlan<D>, StepError> {
-        if session.size() > 1 && self.m.num_fields() > 1 {
+        if session.size() > 1 && self.model.num_fields() > 1 {
             return Err(StepError::Setup(
                 "contact between bodies (a body with its own velocity field) runs on one process: \
                  its contact rows combine the rows of two node copies, which a process may not both own"
                     .into(),
             ));
         }
-        let (t, t_new) = (self.st.time, self.st.time + dt);
+        let (t, t_new) = (self.state.time, self.state.time + dt);
         let g = self.to_grid(session, t_new, |v, rise| {
             prescribed_increment(v, rise, t, dt)
         })?;
         let contacts = self.contact_sets(session, &g.set_values, dt)?;
-        let s = self.m;
-        let newmark = (!s.time.quasi_static).then_some(Newmark {
-            beta: s.time.beta,
-            gamma: s.time.gamma,
+        let model = self.model;
+        let newmark = (!model.time.quasi_static).then_some(Newmark {
+            beta: model.time.beta,
+            gamma: model.time.gamma,
             dt,
         });
-        let load_factor = if s.time.quasi_static && s.body_force_ramp > 0.0 {
-            (t_new / s.body_force_ramp).min(1.0)
+        let load_factor = if model.time.quasi_static && model.body_force_ramp > 0.0 {
+            (t_new / model.body_force_ramp).min(1.0)
         } else {
             1.0
         };
@@ -99,18 +99,18 @@ impl<const D: usize> Step<'_, D> {
             setup_time: 0.0,
         };
         let input = Self::step_input(
-            s,
-            &self.st.particles,
-            &self.ws.table,
-            &self.ws.dofs,
-            &self.ws.grid_state,
+            model,
+            &self.state.particles,
+            &self.work.table,
+            &self.work.dofs,
+            &self.work.grid_state,
             &plan.loading,
-            &self.ws.partners,
+            &self.work.partners,
         );
-        self.ws.assembler.begin_step(&input);
+        self.work.assembler.begin_step(&input);
         let new_pattern = self.linear_system(session, prefix)?;
         let xs = self.first_guess(&plan, &g.eta_bar);
-        let sys = self.ws.system.as_mut().expect("linear system just built");
+        let sys = self.work.system.as_mut().expect("linear system just built");
         sys.owned.scatter(&xs, &mut sys.x)?;
         Ok(StepPlan {
             new_pattern,
@@ -155,7 +155,7 @@ impl<const D: usize> Step<'_, D> {
         let devices = self.contact_devices(session, &translations, true, dt)?;
         let bodies = self.body_pairs(&devices, dt)?;
         let mut contacts: Vec<_> = devices.into_iter().map(ContactSet::Device).collect();
-        if self.m.num_fields() > 1 {
+        if self.model.num_fields() > 1 {
             contacts.push(ContactSet::Bodies(bodies));
         }
         Ok(contacts)
@@ -163,7 +163,7 @@ impl<const D: usize> Step<'_, D> {
 
     /// The rigid bodies' entries of the per-set values `set_values` as vectors (free components 0).
     pub(super) fn rigid_values(&self, set_values: &[[Option<f64>; D]]) -> Vec<SVector<f64, D>> {
-        set_values[self.m.boxes.len()..]
+        set_values[self.model.boxes.len()..]
             .iter()
             .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
             .collect()
@@ -181,24 +181,24 @@ impl<const D: usize> Step<'_, D> {
         prefix: Option<&str>,
     ) -> Result<bool, StepError> {
         let fits = self
-            .ws
+            .work
             .system
             .as_ref()
-            .is_some_and(|sys| sys.fits(prefix, &self.ws.dofs, &self.ws.assembler));
+            .is_some_and(|sys| sys.fits(prefix, &self.work.dofs, &self.work.assembler));
         let new_pattern = session.any(!fits);
         if new_pattern {
-            self.ws.system = None; // free the old objects first
+            self.work.system = None; // free the old objects first
             let rows = self.own_rows(session);
-            self.ws.system = Some(LinearSystem::new(
+            self.work.system = Some(LinearSystem::new(
                 session,
                 prefix,
-                &self.m.grid,
-                &self.ws.dofs,
-                &self.ws.assembler,
+                &self.model.grid,
+                &self.work.dofs,
+                &self.work.assembler,
                 rows,
             )?);
         }
-        let sys = self.ws.system.as_mut().expect("linear system just built");
+        let sys = self.work.system.as_mut().expect("linear system just built");
         sys.snes.set_tolerances(&sys.tolerances)?;
         if sys.lag > 1 {
             sys.snes.set_lag_preconditioner(sys.lag)?;
@@ -211,7 +211,7 @@ impl<const D: usize> Step<'_, D> {
     /// the prescribed increments into the body); `eta_bar` from the particles (mass-weighted projection);
     /// projected onto the closed contact constraints.
     fn first_guess(&self, plan: &StepPlan<D>, eta_bar: &[f64]) -> Vec<f64> {
-        let (dofs, gs, dt) = (&self.ws.dofs, &self.ws.grid_state, plan.dt);
+        let (dofs, gs, dt) = (&self.work.dofs, &self.work.grid_state, plan.dt);
         let newmark = plan.loading.newmark;
         let nf = dofs.unknowns_per_node();
         let mut xs = vec![0.0; dofs.len()];
@@ -242,51 +242,51 @@ impl<const D: usize> Step<'_, D> {
     /// yet. MPM on several processes shares the points out first; P2G sums the own points' nodal values
     /// over the processes, so every process holds the whole grid state.
     pub(super) fn project_to_grid(&mut self, session: &SessionGuard) -> Result<(), StepError> {
-        let s = self.m;
-        if session.size() > 1 && s.fem.is_none() {
+        let model = self.model;
+        if session.size() > 1 && model.fem.is_none() {
             self.share_points(session)?;
         }
-        let ps = &self.st.particles;
+        let ps = &self.state.particles;
         let counted = self.own_point_count();
-        let shared = self.st.distributed;
-        let local = match &s.fem {
-            None => self.ws.table.compute(s.shape, &s.grid, ps),
-            Some(fem) => self.ws.table.push_forward(&fem.points, &ps.f),
+        let shared = self.state.distributed;
+        let local = match &model.fem {
+            None => self.work.table.compute(model.shape, &model.grid, ps),
+            Some(fem) => self.work.table.push_forward(&fem.points, &ps.f),
         }
         .map_err(|e| StepError::from(e.renumbered(&ps.id)))
-        .and_then(|()| match (&self.ws.partition, shared) {
+        .and_then(|()| match (&self.work.partition, shared) {
             (Some(part), true) => part
-                .check_reach(&self.ws.table, ps, counted)
+                .check_reach(&self.work.table, ps, counted)
                 .map_err(StepError::Setup),
             _ => Ok(()),
         });
         agreed(session, shared, local)?;
-        let fields = s.num_fields();
+        let fields = model.num_fields();
         if fields > 1 {
-            let (nodes, body) = (s.grid.num_nodes(), &ps.body);
-            self.ws
+            let (nodes, body) = (model.grid.num_nodes(), &ps.body);
+            self.work
                 .table
-                .offset_fields(nodes, fields, |p| s.fields[body[p] as usize] as usize);
+                .offset_fields(nodes, fields, |p| model.fields[body[p] as usize] as usize);
         }
         transfer::particles_to_grid_shared(
-            &self.ws.table,
+            &self.work.table,
             ps,
             counted,
-            &s.grid,
-            s.mass_tolerance,
-            &mut self.ws.grid_state,
+            &model.grid,
+            model.mass_tolerance,
+            &mut self.work.grid_state,
             |sums| match shared {
                 true => session.sum(sums).map_err(|e| e.to_string()),
                 false => Ok(()),
             },
         )?;
-        if let Some((v, a)) = &self.st.fem_nodal {
+        if let Some((v, a)) = &self.state.fem_nodal {
             // FEM: the nodal state carries over (the same nodes are active in every step).
-            self.ws.grid_state.velocity.copy_from_slice(v);
-            self.ws.grid_state.acceleration.copy_from_slice(a);
+            self.work.grid_state.velocity.copy_from_slice(v);
+            self.work.grid_state.acceleration.copy_from_slice(a);
         }
-        let layout = s.layout();
-        self.ws.dofs.rebuild(&self.ws.grid_state.active, layout);
+        let layout = model.layout();
+        self.work.dofs.rebuild(&self.work.grid_state.active, layout);
         Ok(())
     }
 
@@ -296,11 +296,12 @@ impl<const D: usize> Step<'_, D> {
         &self,
         value: impl Fn(f64, f64) -> f64,
     ) -> Vec<[Option<f64>; D]> {
-        let s = self.m;
-        s.boxes
+        let model = self.model;
+        model
+            .boxes
             .iter()
             .map(|b| (b.motion, b.rise_time))
-            .chain(s.rigid.iter().map(|r| (r.motion, r.rise_time)))
+            .chain(model.rigid.iter().map(|r| (r.motion, r.rise_time)))
             .map(|(motion, rise)| {
                 motion.map(|m| match m {
                     Motion::Free => None,
@@ -316,20 +317,20 @@ impl<const D: usize> Step<'_, D> {
         &mut self,
         values: &[[Option<f64>; D]],
     ) -> Result<Vec<Vec<usize>>, StepError> {
-        let s = self.m;
-        let grid = &s.grid;
-        let nf = self.ws.dofs.unknowns_per_node();
+        let model = self.model;
+        let grid = &model.grid;
+        let nf = self.work.dofs.unknowns_per_node();
         let mut sets: Vec<Vec<usize>> = Vec::new();
-        for (b, du) in s.boxes.iter().zip(values) {
+        for (b, du) in model.boxes.iter().zip(values) {
             let mut dofs_of_set = Vec::new();
             // A box holds every body's copy of its nodes.
-            for node in 0..s.field_nodes() {
+            for node in 0..model.field_nodes() {
                 let x = grid.node_position(node);
                 let inside = (0..D).all(|k| x[k] >= b.min[k] - 1e-9 && x[k] <= b.max[k] + 1e-9);
-                if let (true, Some(a)) = (inside, self.ws.dofs.active_index(node)) {
+                if let (true, Some(a)) = (inside, self.work.dofs.active_index(node)) {
                     for (c, d) in du.iter().enumerate() {
                         if let Some(d) = d {
-                            self.ws.dofs.constrain(node, c, *d);
+                            self.work.dofs.constrain(node, c, *d);
                             dofs_of_set.push(a * nf + c);
                         }
                     }
@@ -337,21 +338,26 @@ impl<const D: usize> Step<'_, D> {
             }
             sets.push(dofs_of_set);
         }
-        let nrigid = s.rigid.len();
-        self.ws.rigid_tables.resize_with(nrigid, ShapeTable::new);
-        for (k, (rb, du)) in s.rigid.iter().zip(&values[s.boxes.len()..]).enumerate() {
+        let nrigid = model.rigid.len();
+        self.work.rigid_tables.resize_with(nrigid, ShapeTable::new);
+        for (k, (rb, du)) in model
+            .rigid
+            .iter()
+            .zip(&values[model.boxes.len()..])
+            .enumerate()
+        {
             if rb.contact.is_some() {
                 // In contact: constrained by the active set of the step, not here.
                 sets.push(Vec::new());
                 continue;
             }
             // Glued: the nodes under the body's points (of the reference configuration in FEM mode).
-            let points = &self.st.rigid[k];
-            let rt = match &s.fem {
+            let points = &self.state.rigid[k];
+            let rt = match &model.fem {
                 Some(fem) => &fem.rigid[k],
                 None => {
-                    self.ws.rigid_tables[k].compute(s.shape, grid, points)?;
-                    &self.ws.rigid_tables[k]
+                    self.work.rigid_tables[k].compute(model.shape, grid, points)?;
+                    &self.work.rigid_tables[k]
                 }
             };
             let mut dofs_of_set = Vec::new();
@@ -363,10 +369,10 @@ impl<const D: usize> Step<'_, D> {
                         continue;
                     }
                     let node = w.node as usize + shift;
-                    if let Some(a) = self.ws.dofs.active_index(node) {
+                    if let Some(a) = self.work.dofs.active_index(node) {
                         for (c, d) in du.iter().enumerate() {
                             if let Some(d) = d {
-                                self.ws.dofs.constrain(node, c, *d);
+                                self.work.dofs.constrain(node, c, *d);
                                 dofs_of_set.push(a * nf + c);
                             }
                         }
@@ -386,14 +392,14 @@ impl<const D: usize> Step<'_, D> {
         &self,
         t: f64,
     ) -> Result<(Vec<SVector<f64, D>>, LoadNodes), StepError> {
-        let s = self.m;
+        let model = self.model;
         let mut nodal_force = Vec::new();
-        let mut load_nodes = Vec::with_capacity(s.loads.len());
-        for (load, shares) in s.loads.iter().zip(&self.m.load_shares) {
+        let mut load_nodes = Vec::with_capacity(model.loads.len());
+        for (load, shares) in model.loads.iter().zip(&self.model.load_shares) {
             let active: Vec<(usize, f64)> = shares
                 .iter()
                 .copied()
-                .filter(|&(node, _)| self.ws.grid_state.active[node])
+                .filter(|&(node, _)| self.work.grid_state.active[node])
                 .collect();
             let total: f64 = active.iter().map(|(_, w)| w).sum();
             if total <= 0.0 {
@@ -404,7 +410,7 @@ impl<const D: usize> Step<'_, D> {
                 )));
             }
             if nodal_force.is_empty() {
-                nodal_force = vec![SVector::zeros(); s.grid.num_nodes()];
+                nodal_force = vec![SVector::zeros(); model.grid.num_nodes()];
             }
             let f = load.force * load.factor(t);
             let active: Vec<(usize, f64)> =
@@ -420,21 +426,21 @@ impl<const D: usize> Step<'_, D> {
     /// The points' `eta_bar` projected to the active nodes (mass-weighted), one per grid node; empty for
     /// a run without gradient enhancement.
     pub(super) fn nodal_eta_bar(&self, session: &SessionGuard) -> Result<Vec<f64>, StepError> {
-        if self.ws.dofs.layout().eta_bar().is_none() {
+        if self.work.dofs.layout().eta_bar().is_none() {
             return Ok(Vec::new());
         }
-        let p = &self.st.particles;
-        let mut eb = vec![0.0; self.ws.grid_state.mass.len()];
+        let p = &self.state.particles;
+        let mut eb = vec![0.0; self.work.grid_state.mass.len()];
         for q in 0..self.own_point_count() {
-            for w in self.ws.table.weights(q) {
+            for w in self.work.table.weights(q) {
                 eb[w.node as usize] += w.value * p.mass[q] * p.eta_bar[q];
             }
         }
-        if self.st.distributed {
+        if self.state.distributed {
             session.sum(&mut eb)?;
         }
-        for &node in self.ws.dofs.active_nodes() {
-            eb[node as usize] /= self.ws.grid_state.mass[node as usize];
+        for &node in self.work.dofs.active_nodes() {
+            eb[node as usize] /= self.work.grid_state.mass[node as usize];
         }
         Ok(eb)
     }

@@ -63,13 +63,13 @@ impl<const D: usize> Step<'_, D> {
     /// MPM on several processes: the points shared out (at the first step: each process keeps those of
     /// its band; later: the points that left a band migrate), then the ghosts appended.
     pub(super) fn share_points(&mut self, session: &SessionGuard) -> Result<(), StepError> {
-        let st = &mut *self.st;
-        if self.ws.partition.is_none() {
-            let p = Partition::balanced(session, &self.m.grid, &st.particles, !st.distributed)
+        let st = &mut *self.state;
+        if self.work.partition.is_none() {
+            let p = Partition::balanced(session, &self.model.grid, &st.particles, !st.distributed)
                 .map_err(StepError::Setup)?;
-            self.ws.partition = Some(p);
+            self.work.partition = Some(p);
         }
-        let part = self.ws.partition.as_ref().expect("set above");
+        let part = self.work.partition.as_ref().expect("set above");
         let migrated = if st.distributed {
             partition::migrate(session, part, &mut st.particles)?
         } else {
@@ -77,36 +77,36 @@ impl<const D: usize> Step<'_, D> {
             st.distributed = true;
             0
         };
-        self.ws.own_points = st.particles.len();
+        self.work.own_points = st.particles.len();
         let ghosts = partition::add_ghosts(session, part, &mut st.particles)?;
         let mut moved = [migrated as f64, ghosts as f64];
         session.sum(&mut moved)?;
         // Points that migrated in any attempt of the step; the ghosts of the last attempt.
-        self.ws.moved = [self.ws.moved[0] + moved[0] as usize, moved[1] as usize];
+        self.work.moved = [self.work.moved[0] + moved[0] as usize, moved[1] as usize];
         Ok(())
     }
 
     /// This process's own points: the first of the state's (all of them unless shared out).
     pub(super) fn own_point_count(&self) -> usize {
-        if self.st.distributed {
-            self.ws.own_points
+        if self.state.distributed {
+            self.work.own_points
         } else {
-            self.st.particles.len()
+            self.state.particles.len()
         }
     }
 
     /// Drops the ghosts of the step (the state keeps this process's own points only).
     pub(super) fn drop_ghosts(&mut self) {
-        if self.st.distributed {
-            self.st.particles.truncate(self.ws.own_points);
+        if self.state.distributed {
+            self.state.particles.truncate(self.work.own_points);
         }
     }
 
     /// The block rows this process owns: with the points shared out, the active nodes of its node
     /// rows ([`Partition::owned_nodes`]); otherwise an equal share of the active nodes.
     pub(super) fn own_rows(&self, session: &SessionGuard) -> Range<usize> {
-        let active = self.ws.dofs.active_nodes();
-        match (&self.ws.partition, self.st.distributed) {
+        let active = self.work.dofs.active_nodes();
+        match (&self.work.partition, self.state.distributed) {
             (Some(part), true) => {
                 let nodes = part.owned_nodes();
                 let first = |n: usize| active.partition_point(|&a| (a as usize) < n);

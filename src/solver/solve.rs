@@ -126,6 +126,40 @@ fn update_contacts<const D: usize>(
     changes
 }
 
+/// After a converged solve with the contact sets in play: updates the active set at the solution `xs`
+/// with the forces `phys` and balances the moments of the pinned devices. `Ok(true)`: settled (no
+/// change, or a frozen cycle, and the moments balanced); `Ok(false)`: solve again; a failure after
+/// [`MAX_CONTACT_SOLVES`] solves.
+fn settle<const D: usize>(
+    contacts: &mut [ContactSet<D>],
+    solves: &mut Solves,
+    (xs, phys, nf): (&[f64], &[f64], usize),
+    grid: &Grid<D>,
+    row_scale: f64,
+    step: usize,
+) -> Result<bool, Failure> {
+    let changes = update_contacts(contacts, solves, (xs, phys, nf), grid.cell_size(), step);
+    // Pinned devices: the moment of the contact forces about the pin must vanish.
+    let mut moments_ok = true;
+    for c in contacts.iter_mut() {
+        moments_ok &= c.balance(phys, nf, grid, row_scale);
+    }
+    if (changes == 0 || solves.frozen) && moments_ok {
+        return Ok(true);
+    }
+    if solves.count >= MAX_CONTACT_SOLVES {
+        return Err(Failure {
+            reason: format!(
+                "contact not settled after {} solves ({changes} status changes, moment balance {})",
+                solves.count,
+                if moments_ok { "met" } else { "not met" }
+            ),
+            linear: false,
+        });
+    }
+    Ok(false)
+}
+
 /// The physical residual `phys` (`f_int + M a - f_ext`, every row, on every process) at the solution
 /// of `sys`, whose unknowns it returns; the assembler keeps the nodal increments of this evaluation.
 fn physical_residual<const D: usize>(
@@ -156,7 +190,7 @@ impl<const D: usize> Step<'_, D> {
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, Failure>, StepError> {
         let t1 = Instant::now();
-        let (step, s, shared) = (self.st.step, self.m, self.st.distributed);
+        let (step, model, shared) = (self.state.step, self.model, self.state.distributed);
         let Workspace {
             table,
             dofs,
@@ -165,13 +199,13 @@ impl<const D: usize> Step<'_, D> {
             system,
             partners,
             ..
-        } = &mut *self.ws;
+        } = &mut *self.work;
         let StepPlan {
             contacts, loading, ..
         } = plan;
         let input = Self::step_input(
-            s,
-            &self.st.particles,
+            model,
+            &self.state.particles,
             table,
             dofs,
             grid_state,
@@ -201,19 +235,8 @@ impl<const D: usize> Step<'_, D> {
                 owned,
                 ..
             } = sys;
-            let mut problem = StepProblem {
-                input: &input,
-                event: assembly_event,
-                assembler: &mut *assembler,
-                assembly_time: 0.0,
-                residuals: 0,
-                jacobians: 0,
-                contacts,
-                row_scale: input.row_scale,
-                owned,
-                session,
-                scratch: Vec::new(),
-            };
+            let mut problem =
+                StepProblem::new(&input, assembly_event, assembler, contacts, owned, session);
             let info = match snes.solve(&mut problem, x, jac) {
                 Ok(info) => info,
                 // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails
@@ -242,26 +265,17 @@ impl<const D: usize> Step<'_, D> {
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
             let mut xs = physical_residual(assembler, &input, sys, (session, shared), &mut phys)?;
-            let h = s.grid.cell_size();
-            let changes = update_contacts(contacts, &mut solves, (&xs, &phys, nf), h, step);
-            // Pinned devices: the moment of the contact forces about the pin must vanish.
-            let mut moments_ok = true;
-            for c in contacts.iter_mut() {
-                moments_ok &= c.balance(&phys, nf, &s.grid, input.row_scale);
-            }
-            if (changes == 0 || solves.frozen) && moments_ok {
-                break;
-            }
-            if solves.count >= MAX_CONTACT_SOLVES {
-                return Ok(Err(Failure {
-                    reason: format!(
-                        "contact not settled after {} solves ({changes} status changes, moment \
-                         balance {})",
-                        solves.count,
-                        if moments_ok { "met" } else { "not met" }
-                    ),
-                    linear: false,
-                }));
+            match settle(
+                contacts,
+                &mut solves,
+                (&xs, &phys, nf),
+                &model.grid,
+                input.row_scale,
+                step,
+            ) {
+                Ok(true) => break,
+                Ok(false) => {}
+                Err(failure) => return Ok(Err(failure)),
             }
             for c in contacts.iter() {
                 c.project_guess(&mut xs, nf, &grid_state.mass);

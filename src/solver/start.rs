@@ -14,27 +14,27 @@ impl<const D: usize> Step<'_, D> {
         &mut self,
         session: &SessionGuard,
     ) -> Result<(), StepError> {
-        let t = self.st.time;
+        let t = self.state.time;
         let g = self.to_grid(session, t, |v, rise| prescribed_acceleration(v, rise, t))?;
         let r = self.unbalanced_force(session, g.nodal_force, &g.eta_bar)?;
-        let nf = self.ws.dofs.unknowns_per_node();
-        let mut acc = vec![SVector::<f64, D>::zeros(); self.m.field_nodes()];
-        for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
+        let nf = self.work.dofs.unknowns_per_node();
+        let mut acc = vec![SVector::<f64, D>::zeros(); self.model.field_nodes()];
+        for (a, &node) in self.work.dofs.active_nodes().iter().enumerate() {
             let node = node as usize;
-            let m = self.ws.grid_state.mass[node];
+            let m = self.work.grid_state.mass[node];
             acc[node] = SVector::from_fn(|c, _| {
                 let d = a * nf + c;
-                self.ws.dofs.prescribed(d).unwrap_or(-r[d] / m)
+                self.work.dofs.prescribed(d).unwrap_or(-r[d] / m)
             });
         }
         let contact_forces = self.push_at_devices(session, &g.set_values, &r, &mut acc)?;
         self.initial_reactions(&g.sets, &r, &acc, &contact_forces);
-        let table = &self.ws.table;
-        for (p, ap) in self.st.particles.a.iter_mut().enumerate() {
+        let table = &self.work.table;
+        for (p, ap) in self.state.particles.a.iter_mut().enumerate() {
             *ap = transfer::interpolate(table.weights(p), |i| acc[i]);
         }
-        if self.m.fem.is_some() {
-            self.st.fem_nodal = Some((self.ws.grid_state.velocity.clone(), acc));
+        if self.model.fem.is_some() {
+            self.state.fem_nodal = Some((self.work.grid_state.velocity.clone(), acc));
         }
         Ok(())
     }
@@ -47,37 +47,41 @@ impl<const D: usize> Step<'_, D> {
         nodal_force: Vec<SVector<f64, D>>,
         eta_bar: &[f64],
     ) -> Result<Vec<f64>, StepError> {
-        let nf = self.ws.dofs.unknowns_per_node();
+        let nf = self.work.dofs.unknowns_per_node();
         let loading = Loading {
             newmark: None,
             load_factor: 1.0,
             nodal_force,
         };
         let input = Self::step_input(
-            self.m,
-            &self.st.particles,
-            &self.ws.table,
-            &self.ws.dofs,
-            &self.ws.grid_state,
+            self.model,
+            &self.state.particles,
+            &self.work.table,
+            &self.work.dofs,
+            &self.work.grid_state,
             &loading,
             &[],
         );
-        self.ws.assembler.begin_step(&input);
-        let mut x = vec![0.0; self.ws.dofs.len()];
-        if let Some(e) = self.ws.dofs.layout().eta_bar() {
-            for (a, &node) in self.ws.dofs.active_nodes().iter().enumerate() {
+        self.work.assembler.begin_step(&input);
+        let mut x = vec![0.0; self.work.dofs.len()];
+        if let Some(e) = self.work.dofs.layout().eta_bar() {
+            for (a, &node) in self.work.dofs.active_nodes().iter().enumerate() {
                 x[a * nf + e] = eta_bar[node as usize];
             }
         }
         let mut r = vec![0.0; x.len()];
         let local = self
-            .ws
+            .work
             .assembler
             .evaluate(&input, &x)
-            .and_then(|()| self.ws.assembler.residual(&input, &x, &mut r, true));
-        agreed(session, self.st.distributed, local.map_err(StepError::from))?;
+            .and_then(|()| self.work.assembler.residual(&input, &x, &mut r, true));
+        agreed(
+            session,
+            self.state.distributed,
+            local.map_err(StepError::from),
+        )?;
         let rows = self.own_rows(session);
-        complete_rows(session, self.st.distributed, rows, nf, &mut r)?;
+        complete_rows(session, self.state.distributed, rows, nf, &mut r)?;
         Ok(r)
     }
 
@@ -92,7 +96,7 @@ impl<const D: usize> Step<'_, D> {
         r: &[f64],
         acc: &mut [SVector<f64, D>],
     ) -> Result<Vec<(usize, SVector<f64, D>)>, StepError> {
-        let nf = self.ws.dofs.unknowns_per_node();
+        let nf = self.work.dofs.unknowns_per_node();
         let device_acc = self.rigid_values(prescribed);
         let devices = self.contact_devices(session, &device_acc, false, 0.0)?;
         let mut forces = Vec::with_capacity(devices.len());
@@ -104,7 +108,7 @@ impl<const D: usize> Step<'_, D> {
                 if push > 0.0 {
                     acc[c.node] += push * n;
                     let b = c.row * nf;
-                    let m = self.ws.grid_state.mass[c.node];
+                    let m = self.work.grid_state.mass[c.node];
                     force += SVector::<f64, D>::from_column_slice(&r[b..b + D]) + m * acc[c.node];
                 }
             }
@@ -123,19 +127,23 @@ impl<const D: usize> Step<'_, D> {
         acc: &[SVector<f64, D>],
         contact_forces: &[(usize, SVector<f64, D>)],
     ) {
-        let (s, nf, t) = (self.m, self.ws.dofs.unknowns_per_node(), self.st.time);
-        let last = &mut self.st.last_reactions;
+        let (model, nf, t) = (
+            self.model,
+            self.work.dofs.unknowns_per_node(),
+            self.state.time,
+        );
+        let last = &mut self.state.last_reactions;
         for (reaction, dofs) in last.iter_mut().zip(sets) {
             *reaction = [0.0; D];
             for &d in dofs {
-                let (node, c) = (self.ws.dofs.node(d / nf), d % nf);
-                reaction[c] += r[d] + self.ws.grid_state.mass[node] * acc[node][c];
+                let (node, c) = (self.work.dofs.node(d / nf), d % nf);
+                reaction[c] += r[d] + self.work.grid_state.mass[node] * acc[node][c];
             }
         }
         for &(k, f) in contact_forces {
-            last[s.rigid_set(k)] = std::array::from_fn(|c| f[c]);
+            last[model.rigid_set(k)] = std::array::from_fn(|c| f[c]);
         }
-        for (reaction, load) in last[sets.len()..].iter_mut().zip(&s.loads) {
+        for (reaction, load) in last[sets.len()..].iter_mut().zip(&model.loads) {
             let f = load.force * load.factor(t);
             *reaction = std::array::from_fn(|c| f[c]);
         }

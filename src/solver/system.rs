@@ -27,6 +27,33 @@ pub(super) struct StepProblem<'a, 'b, const D: usize> {
     pub(super) scratch: Vec<f64>,
 }
 
+impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
+    /// The problem of the step `input` with its `contacts`, evaluated by `assembler` on the rows
+    /// `owned` by this process (residual and Jacobian evaluations timed under `event`).
+    pub(super) fn new(
+        input: &'a StepInput<'b, D>,
+        event: LogEvent,
+        assembler: &'a mut Assembler<D>,
+        contacts: &'a [ContactSet<D>],
+        owned: &'a OwnedRows,
+        session: &'a SessionGuard,
+    ) -> Self {
+        Self {
+            input,
+            event,
+            assembler,
+            assembly_time: 0.0,
+            residuals: 0,
+            jacobians: 0,
+            contacts,
+            row_scale: input.row_scale,
+            owned,
+            session,
+            scratch: Vec::new(),
+        }
+    }
+}
+
 impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
     fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
         let _event = self.event.begin();
