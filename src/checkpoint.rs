@@ -247,89 +247,13 @@ pub fn load<const D: usize>(
 ) -> Result<Header, CheckpointError> {
     let (f, header, path) = open(dir)?;
     let shown = path.display().to_string();
-    let corrupt = |detail: String| CheckpointError::Corrupt {
-        path: shown.clone(),
-        detail,
-    };
-    let mut data: HashMap<&str, Vec<f64>> = HashMap::new();
-    for name in &header.datasets {
-        let ds = f
-            .dataset(name)
-            .map_err(|e| corrupt(format!("dataset `{name}`: {e}")))?;
-        let values: Vec<f64> = ds
-            .read_raw()
-            .map_err(|e| corrupt(format!("dataset `{name}`: {e}")))?;
-        let crc = ds
-            .attr("crc32")
-            .and_then(|a| a.read_scalar::<u32>())
-            .map_err(|e| corrupt(format!("dataset `{name}`: checksum unreadable: {e}")))?;
-        if crc_f64(&values) != crc {
-            return Err(corrupt(format!(
-                "dataset `{name}` does not match its checksum"
-            )));
-        }
-        data.insert(name, values);
-    }
+    let mut data = read_verified(&f, &header, &shown)?;
     let unusable = |detail: String| CheckpointError::Unusable {
         path: shown.clone(),
         detail,
     };
-    let p = &state.particles;
-    let n = p.len();
-    let c = &header.counters;
-    if let Some(l) = c
-        .accumulated
-        .iter()
-        .chain(&c.last_reactions)
-        .find(|l| l.len() != D)
-    {
-        return Err(unusable(format!(
-            "the checkpoint is of a {}D run, the configuration of a {D}D one",
-            l.len()
-        )));
-    }
-    if header.points != n {
-        return Err(unusable(format!(
-            "the checkpoint holds {} material points, the configuration {n}",
-            header.points
-        )));
-    }
-    if header.history_stride != p.history_stride() {
-        return Err(unusable(
-            "the checkpoint's material history has a different layout than the configuration"
-                .into(),
-        ));
-    }
-    let mut expected: Vec<(String, usize)> = p
-        .state_columns()
-        .into_iter()
-        .map(|(name, per)| (name.to_owned(), per * n))
-        .collect();
-    for (k, rb) in state.rigid.iter().enumerate() {
-        for (name, per) in rb.state_columns() {
-            if RIGID_COLUMNS.contains(&name) {
-                expected.push((format!("rigid{k}_{name}"), per * rb.len()));
-            }
-        }
-    }
     let fem = model.method == Method::Fem && data.contains_key("fem_nodal_velocity");
-    if fem {
-        let nodes = model.grid.num_nodes();
-        expected.push(("fem_nodal_velocity".into(), D * nodes));
-        expected.push(("fem_nodal_acceleration".into(), D * nodes));
-    }
-    for (name, len) in &expected {
-        match data.get(name.as_str()) {
-            Some(v) if v.len() == *len => {}
-            Some(v) => {
-                return Err(unusable(format!(
-                    "dataset `{name}` has {} values, the configuration needs {len}",
-                    v.len()
-                )));
-            }
-            None => return Err(unusable(format!("dataset `{name}` is missing"))),
-        }
-    }
+    check_fits(&header, &data, model, state, fem).map_err(&unusable)?;
     let mut take = |name: &str| data.remove(name).unwrap_or_default();
     let p = &mut state.particles;
     for (name, _) in p.state_columns() {
@@ -351,4 +275,103 @@ pub fn load<const D: usize>(
         .set_counters(header.counters.clone())
         .map_err(&unusable)?;
     Ok(header)
+}
+
+/// Every dataset the header lists, read and checked against its CRC-32 (`shown`: the file, for errors).
+fn read_verified<'h>(
+    f: &hdf5_metno::File,
+    header: &'h Header,
+    shown: &str,
+) -> Result<HashMap<&'h str, Vec<f64>>, CheckpointError> {
+    let corrupt = |detail: String| CheckpointError::Corrupt {
+        path: shown.to_owned(),
+        detail,
+    };
+    let mut data = HashMap::new();
+    for name in &header.datasets {
+        let ds = f
+            .dataset(name)
+            .map_err(|e| corrupt(format!("dataset `{name}`: {e}")))?;
+        let values: Vec<f64> = ds
+            .read_raw()
+            .map_err(|e| corrupt(format!("dataset `{name}`: {e}")))?;
+        let crc = ds
+            .attr("crc32")
+            .and_then(|a| a.read_scalar::<u32>())
+            .map_err(|e| corrupt(format!("dataset `{name}`: checksum unreadable: {e}")))?;
+        if crc_f64(&values) != crc {
+            return Err(corrupt(format!(
+                "dataset `{name}` does not match its checksum"
+            )));
+        }
+        data.insert(name.as_str(), values);
+    }
+    Ok(data)
+}
+
+/// Whether the checkpoint's counters, points and datasets fit the configuration's `model` and `state`
+/// (the FEM mode's nodal state too if `fem`); the error says what does not.
+fn check_fits<const D: usize>(
+    header: &Header,
+    data: &HashMap<&str, Vec<f64>>,
+    model: &Model<D>,
+    state: &State<D>,
+    fem: bool,
+) -> Result<(), String> {
+    let p = &state.particles;
+    let n = p.len();
+    let c = &header.counters;
+    if let Some(l) = c
+        .accumulated
+        .iter()
+        .chain(&c.last_reactions)
+        .find(|l| l.len() != D)
+    {
+        return Err(format!(
+            "the checkpoint is of a {}D run, the configuration of a {D}D one",
+            l.len()
+        ));
+    }
+    if header.points != n {
+        return Err(format!(
+            "the checkpoint holds {} material points, the configuration {n}",
+            header.points
+        ));
+    }
+    if header.history_stride != p.history_stride() {
+        return Err(
+            "the checkpoint's material history has a different layout than the configuration"
+                .into(),
+        );
+    }
+    let mut expected: Vec<(String, usize)> = p
+        .state_columns()
+        .into_iter()
+        .map(|(name, per)| (name.to_owned(), per * n))
+        .collect();
+    for (k, rb) in state.rigid.iter().enumerate() {
+        for (name, per) in rb.state_columns() {
+            if RIGID_COLUMNS.contains(&name) {
+                expected.push((format!("rigid{k}_{name}"), per * rb.len()));
+            }
+        }
+    }
+    if fem {
+        let nodes = model.grid.num_nodes();
+        expected.push(("fem_nodal_velocity".into(), D * nodes));
+        expected.push(("fem_nodal_acceleration".into(), D * nodes));
+    }
+    for (name, len) in &expected {
+        match data.get(name.as_str()) {
+            Some(v) if v.len() == *len => {}
+            Some(v) => {
+                return Err(format!(
+                    "dataset `{name}` has {} values, the configuration needs {len}",
+                    v.len()
+                ));
+            }
+            None => return Err(format!("dataset `{name}` is missing")),
+        }
+    }
+    Ok(())
 }

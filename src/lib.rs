@@ -16,6 +16,9 @@
 //! and only `assembly`, `solver`, `solver_defaults` (and the PETSc smoke problem, `app::smoke`) talk to
 //! [`petsc`], the one module with `unsafe` FFI.
 
+#![warn(missing_docs)]
+#![deny(unsafe_op_in_unsafe_fn)]
+
 pub mod app;
 pub mod assembly;
 pub mod boundary;

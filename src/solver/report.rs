@@ -13,6 +13,7 @@ pub(super) struct Failure {
     pub(super) linear: bool,
 }
 
+/// Failure of a step or a run.
 #[derive(Debug, thiserror::Error)]
 pub enum StepError {
     /// Shape functions could not be evaluated (a particle or corner left the grid).
