@@ -37,7 +37,7 @@ pub(super) struct Loading<const D: usize> {
     pub(super) nodal_force: Vec<SVector<f64, D>>,
 }
 
-/// The grid at the start of an attempt besides the grid state ([`Step::to_grid`]).
+/// The grid at the start of an attempt besides the grid state ([`Step::grid_phase`]).
 pub(super) struct OnGrid<const D: usize> {
     /// Prescribed value per constraint set and component (boxes first, then rigid bodies).
     pub(super) set_values: Vec<[Option<f64>; D]>,
@@ -68,7 +68,7 @@ impl<const D: usize> Step<'_, D> {
             ));
         }
         let (t, t_new) = (self.state.time, self.state.time + dt);
-        let g = self.to_grid(session, t_new, |v, rise| {
+        let g = self.grid_phase(session, t_new, |v, rise| {
             prescribed_increment(v, rise, t, dt)
         })?;
         let contacts = self.contact_sets(session, &g.set_values, dt)?;
@@ -121,7 +121,7 @@ impl<const D: usize> Step<'_, D> {
     /// Shape functions, P2G and the unknowns ([`Step::project_to_grid`]); the constraint sets with the
     /// prescribed `value(v, rise_time)` of each moving component; the loads at time `t` and the
     /// points' `eta_bar` on the nodes.
-    pub(super) fn to_grid(
+    pub(super) fn grid_phase(
         &mut self,
         session: &SessionGuard,
         t: f64,
@@ -449,9 +449,10 @@ impl<const D: usize> Step<'_, D> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::shape::ShapeKind;
 
     #[test]
-    pub(super) fn pushed_forward_gradients_reproduce_the_deformed_configuration() {
+    fn pushed_forward_gradients_reproduce_the_deformed_configuration() {
         // FEM mode: with nodes at x_I = F X_I, sum_I x_I (x) grad_{X_n} S_Ip = I.
         let grid = Grid::new(Vector2::zeros(), 1.0, [4, 4]).unwrap();
         let mut p = Particles::new();

@@ -15,7 +15,7 @@ impl<const D: usize> Step<'_, D> {
         session: &SessionGuard,
     ) -> Result<(), StepError> {
         let t = self.state.time;
-        let g = self.to_grid(session, t, |v, rise| prescribed_acceleration(v, rise, t))?;
+        let g = self.grid_phase(session, t, |v, rise| prescribed_acceleration(v, rise, t))?;
         let r = self.unbalanced_force(session, g.nodal_force, &g.eta_bar)?;
         let nf = self.work.dofs.unknowns_per_node();
         let mut acc = vec![SVector::<f64, D>::zeros(); self.model.field_nodes()];
