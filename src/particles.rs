@@ -963,7 +963,7 @@ fn cell_lattice<const D: usize, B: Body<D>>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use nalgebra::Matrix2;
 
@@ -1076,6 +1076,19 @@ mod tests {
         .unwrap()
     }
 
+    /// The rectangle `[min, max]` (mm).
+    pub(crate) fn rect(min: [f64; 2], max: [f64; 2]) -> Region {
+        Region::Rect { min, max }
+    }
+
+    /// The geometry of the one rectangle `[min, max]` (mm).
+    pub(crate) fn rect_geometry(min: [f64; 2], max: [f64; 2]) -> Geometry {
+        Geometry {
+            include: vec![rect(min, max)],
+            exclude: vec![],
+        }
+    }
+
     fn seeding(h: f64, n: usize) -> Seeding {
         Seeding {
             h,
@@ -1165,26 +1178,14 @@ mod tests {
         assert_eq!(p.len(), 10);
         // A thin exclude strip whose boundary passes through point centres removes nothing on its boundary.
         let strip = Geometry {
-            include: vec![Region::Rect {
-                min: [0.0, 0.0],
-                max: [4.0, 4.0],
-            }],
-            exclude: vec![Region::Rect {
-                min: [0.5, 0.0],
-                max: [1.5, 4.0],
-            }],
+            include: vec![rect([0.0, 0.0], [4.0, 4.0])],
+            exclude: vec![rect([0.5, 0.0], [1.5, 4.0])],
         };
         let p = Particles::seed(&strip, &seeding(1.0, 1)).unwrap();
         assert_eq!(p.len(), 16);
         let strip = Geometry {
-            include: vec![Region::Rect {
-                min: [0.0, 0.0],
-                max: [4.0, 4.0],
-            }],
-            exclude: vec![Region::Rect {
-                min: [0.4, 0.0],
-                max: [1.6, 4.0],
-            }],
+            include: vec![rect([0.0, 0.0], [4.0, 4.0])],
+            exclude: vec![rect([0.4, 0.0], [1.6, 4.0])],
         };
         assert_eq!(Particles::seed(&strip, &seeding(1.0, 1)).unwrap().len(), 8);
     }
@@ -1200,26 +1201,14 @@ mod tests {
             Err(ParticleError::EmptyGeometry)
         );
         let all_cut = Geometry {
-            include: vec![Region::Rect {
-                min: [0.0, 0.0],
-                max: [2.0, 2.0],
-            }],
-            exclude: vec![Region::Rect {
-                min: [-1.0, -1.0],
-                max: [3.0, 3.0],
-            }],
+            include: vec![rect([0.0, 0.0], [2.0, 2.0])],
+            exclude: vec![rect([-1.0, -1.0], [3.0, 3.0])],
         };
         assert_eq!(
             Particles::seed(&all_cut, &seeding(1.0, 2)),
             Err(ParticleError::NoPoints)
         );
-        let bad_rect = Geometry {
-            include: vec![Region::Rect {
-                min: [0.0, 0.0],
-                max: [0.0, 2.0],
-            }],
-            exclude: vec![],
-        };
+        let bad_rect = rect_geometry([0.0, 0.0], [0.0, 2.0]);
         assert!(matches!(
             Particles::seed(&bad_rect, &seeding(1.0, 2)),
             Err(ParticleError::InvalidRegion {
@@ -1229,10 +1218,7 @@ mod tests {
             })
         ));
         let bad_poly = Geometry {
-            include: vec![Region::Rect {
-                min: [0.0, 0.0],
-                max: [1.0, 1.0],
-            }],
+            include: vec![rect([0.0, 0.0], [1.0, 1.0])],
             exclude: vec![Region::Polygon {
                 vertices: vec![[0.0, 0.0], [1.0, 1.0]],
             }],
@@ -1280,13 +1266,7 @@ mod tests {
     fn particles_append_and_history() {
         let g = ct_geometry();
         let mut concrete = Particles::seed(&g, &seeding(2.0, 1)).unwrap();
-        let plate_geom = Geometry {
-            include: vec![Region::Rect {
-                min: [0.0, 90.0],
-                max: [30.0, 95.0],
-            }],
-            exclude: vec![],
-        };
+        let plate_geom = rect_geometry([0.0, 90.0], [30.0, 95.0]);
         let plate = Particles::seed(
             &plate_geom,
             &Seeding {

@@ -432,7 +432,8 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     use super::*;
-    use crate::particles::{Geometry, Region, Seeding};
+    use crate::particles::Seeding;
+    use crate::particles::tests::rect_geometry;
 
     /// A 6 x 4 mm block of 2 x 2 points per 0.5 mm cell, inside a grid with 4 cells of margin.
     fn setup() -> (Grid, Particles) {
@@ -441,15 +442,17 @@ mod tests {
 
     /// The block `[1, 2] x max` (mm) with `margin_cells` of grid margin.
     fn setup_block(max: [f64; 2], margin_cells: usize) -> (Grid, Particles) {
-        let geometry = Geometry {
-            include: vec![Region::Rect {
-                min: [1.0, 2.0],
-                max,
-            }],
-            exclude: vec![],
-        };
+        let geometry = rect_geometry([1.0, 2.0], max);
+        seed_block(&geometry, margin_cells)
+    }
+
+    /// 2^D points per 0.5 mm cell in `body`, inside a grid with `margin_cells` of margin.
+    fn seed_block<const D: usize>(
+        body: &impl crate::particles::Body<D>,
+        margin_cells: usize,
+    ) -> (Grid<D>, Particles<D>) {
         let ps = Particles::seed(
-            &geometry,
+            body,
             &Seeding {
                 h: 0.5,
                 points_per_cell: 2,
@@ -479,25 +482,7 @@ mod tests {
         for kind in ShapeKind::ALL {
             table.compute(kind, &grid, &ps).unwrap();
             particles_to_grid(&table, &ps, &grid, 0.0, &mut state).unwrap();
-            let m_p: f64 = ps.mass.iter().sum();
-            let mv_p: Vector2<f64> = (0..ps.len()).map(|p| ps.v[p] * ps.mass[p]).sum();
-            let ma_p: Vector2<f64> = (0..ps.len()).map(|p| ps.a[p] * ps.mass[p]).sum();
-            let m_i: f64 = state.mass.iter().sum();
-            let mv_i: Vector2<f64> = (0..grid.num_nodes())
-                .map(|i| state.velocity[i] * state.mass[i])
-                .sum();
-            let ma_i: Vector2<f64> = (0..grid.num_nodes())
-                .map(|i| state.acceleration[i] * state.mass[i])
-                .sum();
-            assert!((m_i / m_p - 1.0).abs() < 1e-13, "{kind:?}");
-            assert!(
-                (mv_i - mv_p).norm() < 1e-12 * m_p * 1e3,
-                "{kind:?}: {mv_i} vs {mv_p}"
-            );
-            assert!(
-                (ma_i - ma_p).norm() < 1e-12 * m_p * 1e8,
-                "{kind:?}: {ma_i} vs {ma_p}"
-            );
+            check_conservation(&grid, &ps, &state, kind);
             assert!(
                 state
                     .active
@@ -521,15 +506,8 @@ mod tests {
                 .build()
                 .unwrap();
             pool.install(|| {
-                let mut state = GridState::new();
-                particles_to_grid(
-                    &table,
-                    &ps,
-                    &grid,
-                    DEFAULT_RELATIVE_MASS_TOLERANCE,
-                    &mut state,
-                )
-                .unwrap();
+                let (mut state, tol) = (GridState::new(), DEFAULT_RELATIVE_MASS_TOLERANCE);
+                particles_to_grid(&table, &ps, &grid, tol, &mut state).unwrap();
                 (state.mass, state.velocity, state.acceleration)
             })
         };
@@ -560,15 +538,8 @@ mod tests {
         table.compute(ShapeKind::Cpdi1, &grid, &ps).unwrap();
         let mut state = GridState::new();
         particles_to_grid(&table, &ps, &grid, 0.0, &mut state).unwrap();
-        let all = state.num_active();
-        particles_to_grid(
-            &table,
-            &ps,
-            &grid,
-            DEFAULT_RELATIVE_MASS_TOLERANCE,
-            &mut state,
-        )
-        .unwrap();
+        let (all, tol) = (state.num_active(), DEFAULT_RELATIVE_MASS_TOLERANCE);
+        particles_to_grid(&table, &ps, &grid, tol, &mut state).unwrap();
         assert!(state.num_active() < all);
         for i in 0..grid.num_nodes() {
             if state.active[i] {
@@ -580,15 +551,86 @@ mod tests {
     }
 
     /// G2P of a nodal increment that is linear in `x`: `du_I = (R - I)(x_I - x0) + d`.
-    fn linear_increment(
-        grid: &Grid,
-        rot: Matrix2<f64>,
-        x0: Vector2<f64>,
-        d: Vector2<f64>,
-    ) -> Vec<Vector2<f64>> {
+    fn linear_increment<const D: usize>(
+        grid: &Grid<D>,
+        rot: SMatrix<f64, D, D>,
+        x0: SVector<f64, D>,
+        d: SVector<f64, D>,
+    ) -> Vec<SVector<f64, D>> {
         (0..grid.num_nodes())
-            .map(|i| (rot - Matrix2::identity()) * (grid.node_position(i) - x0) + d)
+            .map(|i| (rot - SMatrix::identity()) * (grid.node_position(i) - x0) + d)
             .collect()
+    }
+
+    /// A converged step with the nodal increment `du` and acceleration `acceleration` (`gamma = 0.5`,
+    /// `dt = 1 us`).
+    fn solution<'a, const D: usize>(
+        du: &'a [SVector<f64, D>],
+        acceleration: &'a [SVector<f64, D>],
+    ) -> StepSolution<'a, D> {
+        StepSolution {
+            du,
+            acceleration,
+            gamma: 0.5,
+            dt: 1e-6,
+        }
+    }
+
+    /// Asserts that P2G into `state` kept the points' mass, momentum and `m a` (kind `kind`).
+    fn check_conservation<const D: usize>(
+        grid: &Grid<D>,
+        ps: &Particles<D>,
+        state: &GridState<D>,
+        kind: ShapeKind,
+    ) {
+        let m_p: f64 = ps.mass.iter().sum();
+        let mv_p: SVector<f64, D> = (0..ps.len()).map(|p| ps.v[p] * ps.mass[p]).sum();
+        let ma_p: SVector<f64, D> = (0..ps.len()).map(|p| ps.a[p] * ps.mass[p]).sum();
+        let m_i: f64 = state.mass.iter().sum();
+        let mv_i: SVector<f64, D> = (0..grid.num_nodes())
+            .map(|i| state.velocity[i] * state.mass[i])
+            .sum();
+        let ma_i: SVector<f64, D> = (0..grid.num_nodes())
+            .map(|i| state.acceleration[i] * state.mass[i])
+            .sum();
+        assert!((m_i / m_p - 1.0).abs() < 1e-13, "{kind:?}");
+        assert!(
+            (mv_i - mv_p).norm() < 1e-12 * m_p * 1e3,
+            "{kind:?}: {mv_i} vs {mv_p}"
+        );
+        assert!(
+            (ma_i - ma_p).norm() < 1e-12 * m_p * 1e8,
+            "{kind:?}: {ma_i} vs {ma_p}"
+        );
+    }
+
+    /// Asserts that G2P moved the points `ps0` to `ps` by the rigid motion `x -> R (x - x0) + x0 + d`:
+    /// centres and corners moved, `F = R`, volume kept (kind `kind`).
+    fn check_rigid_motion<const D: usize>(
+        ps0: &Particles<D>,
+        ps: &Particles<D>,
+        rot: SMatrix<f64, D, D>,
+        x0: SVector<f64, D>,
+        d: SVector<f64, D>,
+        kind: ShapeKind,
+    ) {
+        for p in 0..ps.len() {
+            let expected = rot * (ps0.x[p] - x0) + x0 + d;
+            assert!((ps.x[p] - expected).norm() < 1e-13, "{kind:?} point {p}");
+            assert!(
+                (ps.f[p] - rot).norm() < 1e-13,
+                "{kind:?} point {p}: F = {}",
+                ps.f[p]
+            );
+            assert!((ps.vol[p] / ps.vol0[p] - 1.0).abs() < 1e-13);
+            for (c, (xc, xc0)) in ps.corners(p).iter().zip(ps0.corners(p)).enumerate() {
+                let expected = rot * (xc0 - x0) + x0 + d;
+                assert!(
+                    (xc - expected).norm() < 1e-13,
+                    "{kind:?} point {p} corner {c}"
+                );
+            }
+        }
     }
 
     #[test]
@@ -599,34 +641,15 @@ mod tests {
         let d = Vector2::new(0.05, -0.02);
         let du = linear_increment(&grid, rot, x0, d);
         let zero = vec![Vector2::zeros(); grid.num_nodes()];
-        let solution = StepSolution {
-            du: &du,
-            acceleration: &zero,
-            gamma: 0.5,
-            dt: 1e-6,
-        };
+        let solution = solution(&du, &zero);
         let mut table = ShapeTable::new();
         for kind in ShapeKind::ALL {
             let mut ps = ps0.clone();
             table.compute(kind, &grid, &ps).unwrap();
             grid_to_particles(&table, &grid, &solution, &mut ps).unwrap();
+            check_rigid_motion(&ps0, &ps, rot, x0, d, kind);
             for p in 0..ps.len() {
-                let expected = rot * (ps0.x[p] - x0) + x0 + d;
-                assert!((ps.x[p] - expected).norm() < 1e-13, "{kind:?} point {p}");
-                assert!(
-                    (ps.f[p] - rot).norm() < 1e-13,
-                    "{kind:?} point {p}: F = {}",
-                    ps.f[p]
-                );
-                assert!((ps.vol[p] / ps.vol0[p] - 1.0).abs() < 1e-13);
                 assert!((ps.r[p] - rot * ps.r0[p]).norm() < 1e-14);
-                for c in 0..4 {
-                    let expected = rot * (ps0.corners(p)[c] - x0) + x0 + d;
-                    assert!(
-                        (ps.corners(p)[c] - expected).norm() < 1e-13,
-                        "{kind:?} point {p} corner {c}"
-                    );
-                }
             }
         }
     }
@@ -668,12 +691,7 @@ mod tests {
         let d = Vector2::new(0.0173, -0.0071);
         let du = vec![d; grid.num_nodes()];
         let zero = vec![Vector2::zeros(); grid.num_nodes()];
-        let solution = StepSolution {
-            du: &du,
-            acceleration: &zero,
-            gamma: 0.5,
-            dt: 1e-6,
-        };
+        let solution = solution(&du, &zero);
         let mut table = ShapeTable::new();
         for kind in ShapeKind::ALL {
             let mut ps = ps0.clone();
@@ -717,12 +735,7 @@ mod tests {
     fn transfer_errors_leave_particles_unchanged() {
         let (grid, mut ps) = setup();
         let zero = vec![Vector2::zeros(); grid.num_nodes()];
-        let solution = StepSolution {
-            du: &zero,
-            acceleration: &zero,
-            gamma: 0.5,
-            dt: 1e-6,
-        };
+        let solution = solution(&zero, &zero);
         let mut table = ShapeTable::new();
         assert_eq!(
             grid_to_particles(&table, &grid, &solution, &mut ps),
@@ -769,18 +782,7 @@ mod tests {
             }],
             exclude: vec![],
         };
-        let mut ps = Particles::<3>::seed(
-            &block,
-            &Seeding {
-                h: 0.5,
-                points_per_cell: 2,
-                density: 2.4e-9,
-                body: 0,
-            },
-        )
-        .unwrap();
-        let (lo, hi) = ps.bounding_box().unwrap();
-        let grid = Grid::covering(lo, hi, 0.5, 3).unwrap();
+        let (grid, mut ps) = seed_block(&block, 3);
         for p in 0..ps.len() {
             ps.mass[p] *= rng.random_range(0.5..2.0);
             ps.v[p] = SVector::from_fn(|_, _| rng.random_range(-1e3..1e3));
@@ -799,47 +801,16 @@ mod tests {
             SVector::from([2.0, 3.0, 1.0]),
             SVector::from([0.05, -0.02, 0.03]),
         );
-        let du: Vec<SVector<f64, 3>> = (0..grid.num_nodes())
-            .map(|i| (rot - SMatrix::identity()) * (grid.node_position(i) - x0) + d)
-            .collect();
+        let du = linear_increment(&grid, rot, x0, d);
         let zero = vec![SVector::zeros(); grid.num_nodes()];
-        let solution = StepSolution {
-            du: &du,
-            acceleration: &zero,
-            gamma: 0.5,
-            dt: 1e-6,
-        };
+        let solution = solution(&du, &zero);
         for kind in ShapeKind::ALL {
             table.compute(kind, &grid, &ps0).unwrap();
             particles_to_grid(&table, &ps0, &grid, 0.0, &mut state).unwrap();
-            let m_p: f64 = ps0.mass.iter().sum();
-            let mv_p: SVector<f64, 3> = (0..ps0.len()).map(|p| ps0.v[p] * ps0.mass[p]).sum();
-            let ma_p: SVector<f64, 3> = (0..ps0.len()).map(|p| ps0.a[p] * ps0.mass[p]).sum();
-            let m_i: f64 = state.mass.iter().sum();
-            let mv_i: SVector<f64, 3> = (0..grid.num_nodes())
-                .map(|i| state.velocity[i] * state.mass[i])
-                .sum();
-            let ma_i: SVector<f64, 3> = (0..grid.num_nodes())
-                .map(|i| state.acceleration[i] * state.mass[i])
-                .sum();
-            assert!((m_i / m_p - 1.0).abs() < 1e-13, "{kind:?}");
-            assert!((mv_i - mv_p).norm() < 1e-12 * m_p * 1e3, "{kind:?}");
-            assert!((ma_i - ma_p).norm() < 1e-12 * m_p * 1e8, "{kind:?}");
+            check_conservation(&grid, &ps0, &state, kind);
             let mut ps = ps0.clone();
             grid_to_particles(&table, &grid, &solution, &mut ps).unwrap();
-            for p in 0..ps.len() {
-                let expected = rot * (ps0.x[p] - x0) + x0 + d;
-                assert!((ps.x[p] - expected).norm() < 1e-13, "{kind:?} point {p}");
-                assert!((ps.f[p] - rot).norm() < 1e-13, "{kind:?} point {p}");
-                assert!((ps.vol[p] / ps.vol0[p] - 1.0).abs() < 1e-13);
-                for c in 0..8 {
-                    let expected = rot * (ps0.corners(p)[c] - x0) + x0 + d;
-                    assert!(
-                        (ps.corners(p)[c] - expected).norm() < 1e-13,
-                        "{kind:?} point {p} corner {c}"
-                    );
-                }
-            }
+            check_rigid_motion(&ps0, &ps, rot, x0, d, kind);
         }
     }
 }

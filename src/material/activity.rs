@@ -23,7 +23,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::MaterialError;
+use super::{MaterialError, invalid};
 
 fn default_residual() -> f64 {
     0.01
@@ -97,26 +97,19 @@ impl GradientActivity {
 
     /// Checks the parameter ranges (field names as in the config).
     pub fn validate(&self) -> Result<(), MaterialError> {
-        let bad = |field, value, allowed| {
-            Err(MaterialError::InvalidParameter {
-                field,
-                value,
-                allowed,
-            })
-        };
         let residual_ok = |r: f64| r.is_finite() && r > 0.0 && r <= 1.0;
         match *self {
             GradientActivity::Constant => Ok(()),
             GradientActivity::Localizing { residual, decay } => {
                 if !residual_ok(residual) {
-                    return bad(
+                    return invalid(
                         "gradient_activity.residual",
                         residual,
                         "0 < residual <= 1 (fraction of c left at full damage)",
                     );
                 }
                 if !(decay.is_finite() && (0.0..=50.0).contains(&decay)) {
-                    return bad("gradient_activity.decay", decay, "0 <= decay <= 50");
+                    return invalid("gradient_activity.decay", decay, "0 <= decay <= 50");
                 }
                 Ok(())
             }
@@ -126,17 +119,17 @@ impl GradientActivity {
                 residual,
             } => {
                 if !(ultimate_strain.is_finite() && ultimate_strain > 0.0) {
-                    return bad(
+                    return invalid(
                         "gradient_activity.ultimate_strain",
                         ultimate_strain,
                         "a finite strain > 0",
                     );
                 }
                 if !(exponent.is_finite() && exponent > 0.0 && exponent <= 10.0) {
-                    return bad("gradient_activity.exponent", exponent, "0 < exponent <= 10");
+                    return invalid("gradient_activity.exponent", exponent, "0 < exponent <= 10");
                 }
                 if !residual_ok(residual) {
-                    return bad(
+                    return invalid(
                         "gradient_activity.residual",
                         residual,
                         "0 < residual <= 1 (lower bound of c/c_0)",

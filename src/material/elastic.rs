@@ -8,8 +8,8 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    Constitutive, MaterialError, Response, Sym6, check_finite, check_jacobian,
-    first_piola_from_pk2, green_lagrange,
+    Constitutive, MaterialError, Response, Sym6, check_finite, first_piola_from_pk2,
+    green_lagrange, invalid, positive_jacobian,
 };
 
 /// Elastic parameters of the `linear_elastic`, `svk` and `neo_hookean` config sections: give either
@@ -55,11 +55,7 @@ pub(crate) fn positive(field: &'static str, v: f64) -> Result<f64, MaterialError
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(MaterialError::InvalidParameter {
-            field,
-            value: v,
-            allowed: "a finite value > 0",
-        })
+        invalid(field, v, "a finite value > 0")
     }
 }
 
@@ -75,11 +71,7 @@ impl ElasticConfig {
             (Some(e), Some(nu), None, None) => {
                 let e = positive("youngs_modulus", e)?;
                 if !(nu.is_finite() && nu > -1.0 && nu < 0.5) {
-                    return Err(MaterialError::InvalidParameter {
-                        field: "poisson_ratio",
-                        value: nu,
-                        allowed: "-1 < nu < 0.5",
-                    });
+                    return invalid("poisson_ratio", nu, "-1 < nu < 0.5");
                 }
                 Ok(ElasticModuli {
                     bulk: e / (3.0 * (1.0 - 2.0 * nu)),
@@ -169,7 +161,15 @@ fn clear_nonlocal(out: &mut Response) {
     out.damage = 0.0;
 }
 
-impl Constitutive for LinearElastic {
+/// A history-free local elastic law (the three laws of this file): only the stress, the tangent and the
+/// energy differ; [`Constitutive::update`] checks `F` and clears the nonlocal outputs around
+/// [`ElasticLaw::stress`].
+trait ElasticLaw {
+    /// `out.p`, `out.a` and `out.energy` at a finite `f`.
+    fn stress(&self, f: &Matrix3<f64>, out: &mut Response) -> Result<(), MaterialError>;
+}
+
+impl<T: ElasticLaw + Send + Sync> Constitutive for T {
     fn update(
         &self,
         f: &Matrix3<f64>,
@@ -179,6 +179,14 @@ impl Constitutive for LinearElastic {
         out: &mut Response,
     ) -> Result<(), MaterialError> {
         check_finite(f, eta_bar)?;
+        self.stress(f, out)?;
+        clear_nonlocal(out);
+        Ok(())
+    }
+}
+
+impl ElasticLaw for LinearElastic {
+    fn stress(&self, f: &Matrix3<f64>, out: &mut Response) -> Result<(), MaterialError> {
         let (lam, mu) = (self.moduli.lambda(), self.moduli.shear);
         let eps = (f + f.transpose()) * 0.5 - Matrix3::identity();
         let tr = eps.trace();
@@ -194,21 +202,12 @@ impl Constitutive for LinearElastic {
             }
         }
         out.energy = 0.5 * lam * tr * tr + mu * eps.norm_squared();
-        clear_nonlocal(out);
         Ok(())
     }
 }
 
-impl Constitutive for StVenantKirchhoff {
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        _h_n: &[f64],
-        _h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError> {
-        check_finite(f, eta_bar)?;
+impl ElasticLaw for StVenantKirchhoff {
+    fn stress(&self, f: &Matrix3<f64>, out: &mut Response) -> Result<(), MaterialError> {
         let (lam, mu) = (self.moduli.lambda(), self.moduli.shear);
         let e = green_lagrange(f);
         let tr = e[0] + e[1] + e[2];
@@ -227,25 +226,17 @@ impl Constitutive for StVenantKirchhoff {
             + e[2] * e[2]
             + 2.0 * (e[3] * e[3] + e[4] * e[4] + e[5] * e[5]);
         out.energy = 0.5 * lam * tr * tr + mu * ee;
-        clear_nonlocal(out);
         Ok(())
     }
 }
 
-impl Constitutive for NeoHookean {
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        _h_n: &[f64],
-        _h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError> {
-        let det = check_jacobian(f, eta_bar)?;
+impl ElasticLaw for NeoHookean {
+    fn stress(&self, f: &Matrix3<f64>, out: &mut Response) -> Result<(), MaterialError> {
+        let (lam, mu) = (self.moduli.lambda(), self.moduli.shear);
+        let det = positive_jacobian(f)?;
         let fi = f
             .try_inverse()
             .ok_or(MaterialError::NonPositiveJacobian { det })?;
-        let (lam, mu) = (self.moduli.lambda(), self.moduli.shear);
         let ln_j = det.ln();
         let fit = fi.transpose();
         out.p = (f - fit) * mu + fit * (lam * ln_j);
@@ -263,7 +254,6 @@ impl Constitutive for NeoHookean {
             }
         }
         out.energy = 0.5 * mu * (f.norm_squared() - 3.0) - mu * ln_j + 0.5 * lam * ln_j * ln_j;
-        clear_nonlocal(out);
         Ok(())
     }
 }

@@ -37,7 +37,8 @@ use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::{
     Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, Response, Sym6,
-    check_history_len, check_jacobian, first_piola_from_pk2, green_lagrange, sym_to_matrix,
+    check_history_len, check_jacobian, first_piola_from_pk2, green_lagrange, invalid,
+    sym_to_matrix,
 };
 
 /// Definition of the local equivalent strain `eta`.
@@ -115,27 +116,20 @@ pub struct IsotropicDamage {
 impl IsotropicDamageConfig {
     /// Validates the parameters and builds the material.
     pub fn build(&self) -> Result<IsotropicDamage, MaterialError> {
-        let bad = |field, value, allowed| {
-            Err(MaterialError::InvalidParameter {
-                field,
-                value,
-                allowed,
-            })
-        };
         let e = positive("youngs_modulus", self.youngs_modulus)?;
         let nu = self.poisson_ratio;
         if !(nu.is_finite() && nu > -1.0 && nu < 0.5) {
-            return bad("poisson_ratio", nu, "-1 < nu < 0.5");
+            return invalid("poisson_ratio", nu, "-1 < nu < 0.5");
         }
         positive("gamma_0", self.gamma_0)?;
         if !(0.0..=1.0).contains(&self.alpha) {
-            return bad("alpha", self.alpha, "0 <= alpha <= 1");
+            return invalid("alpha", self.alpha, "0 <= alpha <= 1");
         }
         if !(self.beta.is_finite() && self.beta >= 0.0) {
-            return bad("beta", self.beta, "a finite value >= 0");
+            return invalid("beta", self.beta, "a finite value >= 0");
         }
         if !(self.c.is_finite() && self.c >= 0.0) {
-            return bad("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
+            return invalid("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
         }
         self.gradient_activity.validate()?;
         Ok(IsotropicDamage {

@@ -50,7 +50,7 @@ use super::elastic::positive;
 use super::quadrature::Quadrature;
 use super::{
     Constitutive, MaterialError, PAIRS, Response, Sym6, check_history_len, check_jacobian,
-    first_piola_from_pk2, green_lagrange,
+    first_piola_from_pk2, green_lagrange, invalid,
 };
 
 /// Below this macroscopic `eta` the ratio `eta_bar/eta` of eq. 13 is replaced by `eta_bar_mic = eta_bar`.
@@ -264,36 +264,29 @@ impl MicroplaneParams {
 
     /// Checks every parameter range.
     pub fn validate(&self) -> Result<(), MaterialError> {
-        let bad = |field, value, allowed| {
-            Err(MaterialError::InvalidParameter {
-                field,
-                value,
-                allowed,
-            })
-        };
         positive("bulk_modulus", self.bulk_modulus)?;
         positive("shear_modulus", self.shear_modulus)?;
         positive("gamma_0", self.gamma_0)?;
         let nu = self.poisson_ratio;
         if !(nu.is_finite() && (0.0..0.5).contains(&nu)) {
-            return bad("poisson_ratio", nu, "0 <= nu < 0.5");
+            return invalid("poisson_ratio", nu, "0 <= nu < 0.5");
         }
         if !(self.k_r.is_finite() && self.k_r > 1.0) {
-            return bad("k_r", self.k_r, "a finite value > 1");
+            return invalid("k_r", self.k_r, "a finite value > 1");
         }
         if !(0.0..=1.0).contains(&self.alpha) {
-            return bad("alpha", self.alpha, "0 <= alpha <= 1");
+            return invalid("alpha", self.alpha, "0 <= alpha <= 1");
         }
         if !(self.beta.is_finite() && self.beta >= 0.0) {
-            return bad("beta", self.beta, "a finite value >= 0");
+            return invalid("beta", self.beta, "a finite value >= 0");
         }
         if !(self.c.is_finite() && self.c >= 0.0) {
-            return bad("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
+            return invalid("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
         }
         if let Some(de) = self.erosion_damage
             && !(de > 0.0 && de < 1.0)
         {
-            return bad("erosion_damage", de, "0 < erosion_damage < 1");
+            return invalid("erosion_damage", de, "0 < erosion_damage < 1");
         }
         self.gradient_activity.validate()
     }

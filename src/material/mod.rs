@@ -157,6 +157,19 @@ pub enum MaterialError {
     DriverArgument(String),
 }
 
+/// The error of a parameter `field` (config key) whose `value` lies outside the range `allowed`.
+pub(crate) fn invalid<T>(
+    field: &'static str,
+    value: f64,
+    allowed: &'static str,
+) -> Result<T, MaterialError> {
+    Err(MaterialError::InvalidParameter {
+        field,
+        value,
+        allowed,
+    })
+}
+
 /// A constitutive law in first-Piola form (see [`Response`]).
 pub trait Constitutive: Send + Sync {
     /// Number of f64 history slots per material point (microplane: one `gamma` per direction); none
@@ -505,6 +518,11 @@ pub(crate) fn check_finite(f: &Matrix3<f64>, eta_bar: f64) -> Result<(), Materia
 /// laws that need an invertible `F`. Returns `J = det F`.
 pub(crate) fn check_jacobian(f: &Matrix3<f64>, eta_bar: f64) -> Result<f64, MaterialError> {
     check_finite(f, eta_bar)?;
+    positive_jacobian(f)
+}
+
+/// `J = det F` of a finite `F`, or [`MaterialError::NonPositiveJacobian`] where `J <= 0`.
+pub(crate) fn positive_jacobian(f: &Matrix3<f64>) -> Result<f64, MaterialError> {
     let det = f.determinant();
     if det <= 0.0 {
         return Err(MaterialError::NonPositiveJacobian { det });

@@ -14,7 +14,8 @@
 //!   lattice).
 
 use super::{
-    PetscError, PetscInt, Result, SessionGuard, Vector, check, comm_world, sys, to_petsc_int,
+    PetscError, PetscInt, Result, SessionGuard, Vector, check, comm_world, create, ownership_range,
+    sys, to_petsc_int,
 };
 
 /// A PETSc matrix. Owned matrices are destroyed on drop; borrowed ones (callbacks) are not.
@@ -39,14 +40,10 @@ impl Matrix {
         block_size: usize,
         mat_type: &str,
     ) -> Result<Self> {
-        let mut raw = std::ptr::null_mut();
         let n = to_petsc_int(local_rows, "MatSetSizes")?;
         let decide = unsafe { sys::mpmc_petsc_decide() };
-        // SAFETY: out-parameter; later failures leave `m` to Drop.
-        check(
-            unsafe { sys::MatCreate(comm_world(), &mut raw) },
-            "MatCreate",
-        )?;
+        // Later failures leave `m` to Drop.
+        let raw = create(sys::MatCreate, "MatCreate")?;
         let m = Self {
             raw,
             owned: true,
@@ -370,13 +367,11 @@ impl Matrix {
 
     /// Rows `[start, end)` owned by this process.
     pub fn ownership_range(&self) -> Result<std::ops::Range<usize>> {
-        let (mut lo, mut hi) = (0, 0);
-        // SAFETY: out-parameters.
-        check(
-            unsafe { sys::MatGetOwnershipRange(self.raw, &mut lo, &mut hi) },
+        ownership_range(
+            // SAFETY: out-parameters.
+            |lo, hi| unsafe { sys::MatGetOwnershipRange(self.raw, lo, hi) },
             "MatGetOwnershipRange",
-        )?;
-        Ok(lo as usize..hi as usize)
+        )
     }
 
     /// Attaches the near-null space given by the vectors (e.g. the rigid-body modes of the displacement

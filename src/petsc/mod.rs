@@ -161,28 +161,39 @@ impl Session {
     /// `values[i]` summed over all processes, in place, with the same bits on every process (collective;
     /// one process: unchanged).
     pub fn sum(&self, values: &mut [f64]) -> Result<()> {
-        if self.size() == 1 {
-            return Ok(());
-        }
-        let n = to_petsc_int(values.len(), "values to sum")?;
-        // SAFETY: the buffer holds n doubles; an MPI reduction and broadcast over the world communicator.
-        check(
-            unsafe { sys::mpmc_sum_doubles(values.as_mut_ptr(), n) },
+        self.reduce(
+            values,
+            sys::mpmc_sum_doubles,
+            "values to sum",
             "MPI_Reduce (sum)",
         )
     }
 
     /// `values[i]` replaced by its minimum over all processes, in place (collective; as [`Session::sum`]).
     pub fn min(&self, values: &mut [f64]) -> Result<()> {
+        self.reduce(
+            values,
+            sys::mpmc_min_doubles,
+            "values to reduce",
+            "MPI_Reduce (min)",
+        )
+    }
+
+    /// `values` reduced in place over all processes by the MPI reduction and broadcast `op` (`what`
+    /// names the buffer, `call` the reduction in errors; collective; one process: unchanged).
+    fn reduce(
+        &self,
+        values: &mut [f64],
+        op: unsafe extern "C" fn(*mut f64, PetscInt) -> sys::PetscErrorCode,
+        what: &'static str,
+        call: &'static str,
+    ) -> Result<()> {
         if self.size() == 1 {
             return Ok(());
         }
-        let n = to_petsc_int(values.len(), "values to reduce")?;
-        // SAFETY: as in `sum`.
-        check(
-            unsafe { sys::mpmc_min_doubles(values.as_mut_ptr(), n) },
-            "MPI_Reduce (min)",
-        )
+        let n = to_petsc_int(values.len(), what)?;
+        // SAFETY: the buffer holds n doubles; `op` reduces and broadcasts over the world communicator.
+        check(unsafe { op(values.as_mut_ptr(), n) }, call)
     }
 
     /// Sends records of `width` values: `send` holds `counts[r]` records for process `r`, in process
@@ -343,6 +354,29 @@ pub(crate) fn to_petsc_int(n: usize, what: &'static str) -> Result<PetscInt> {
 pub(crate) fn comm_world() -> sys::MPI_Comm {
     // SAFETY: reads PETSC_COMM_WORLD; only called while a session exists.
     unsafe { sys::mpmc_comm_world() }
+}
+
+/// A new PETSc object (vector, matrix, solver) made on the world communicator by the constructor
+/// `create`, named `call` in errors.
+pub(crate) fn create<T>(
+    create: unsafe extern "C" fn(sys::MPI_Comm, *mut *mut T) -> sys::PetscErrorCode,
+    call: &'static str,
+) -> Result<*mut T> {
+    let mut raw = std::ptr::null_mut();
+    // SAFETY: `raw` is an out-parameter of a PETSc constructor; the caller's wrapper owns the object.
+    check(unsafe { create(comm_world(), &mut raw) }, call)?;
+    Ok(raw)
+}
+
+/// The range `[start, end)` of rows or entries owned by this process, as written by the PETSc query
+/// `get` (named `call` in errors).
+pub(crate) fn ownership_range(
+    get: impl FnOnce(&mut PetscInt, &mut PetscInt) -> sys::PetscErrorCode,
+    call: &'static str,
+) -> Result<std::ops::Range<usize>> {
+    let (mut lo, mut hi) = (0, 0);
+    check(get(&mut lo, &mut hi), call)?;
+    Ok(lo as usize..hi as usize)
 }
 
 /// A user-registered logging event; time spent between [`LogEvent::begin`] and the drop of the returned

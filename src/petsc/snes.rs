@@ -6,7 +6,7 @@
 //! both from `x` alone and commit nothing inside a callback.
 
 use super::{
-    IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, Vector, check, comm_world, cstring, sys,
+    IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, Vector, check, create, cstring, sys,
 };
 use std::ffi::{CStr, c_char, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -89,12 +89,8 @@ impl Snes {
     /// A SNES whose options are read with `prefix` (e.g. `Some("smoke_")` reads `-smoke_snes_rtol`); the
     /// program's main solver uses no prefix so that plain `-snes_*`/`-ksp_*`/`-pc_*` options apply.
     pub fn new(_s: &SessionGuard, prefix: Option<&str>) -> Result<Self> {
-        let mut raw = std::ptr::null_mut();
-        // SAFETY: out-parameter; the wrapper destroys it on drop.
-        check(
-            unsafe { sys::SNESCreate(comm_world(), &mut raw) },
-            "SNESCreate",
-        )?;
+        // The wrapper destroys it on drop.
+        let raw = create(sys::SNESCreate, "SNESCreate")?;
         let snes = Self {
             raw,
             residual: None,

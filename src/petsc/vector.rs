@@ -1,6 +1,8 @@
 //! PETSc `Vec` (called `PetscVec` in the bindings): distributed vectors with a block size.
 
-use super::{PetscError, PetscInt, Result, SessionGuard, check, comm_world, sys, to_petsc_int};
+use super::{
+    PetscError, PetscInt, Result, SessionGuard, check, create, ownership_range, sys, to_petsc_int,
+};
 
 /// A PETSc vector. Owned vectors are destroyed on drop; borrowed ones (handed to SNES callbacks) are not.
 pub struct Vector {
@@ -12,13 +14,9 @@ impl Vector {
     /// A vector on PETSc's world communicator with `local` entries on this process (a multiple of
     /// `block_size`), e.g. 3 unknowns (u_x, u_y, eta_bar) per grid node.
     pub fn new(_s: &SessionGuard, local: usize, block_size: usize) -> Result<Self> {
-        let mut raw: sys::PetscVec = std::ptr::null_mut();
         let n = to_petsc_int(local, "VecSetSizes")?;
-        // SAFETY: raw is an out-parameter; on failure it is destroyed by Drop (null is tolerated).
-        check(
-            unsafe { sys::VecCreate(comm_world(), &mut raw) },
-            "VecCreate",
-        )?;
+        // Later failures leave `v` to Drop.
+        let raw = create(sys::VecCreate, "VecCreate")?;
         let v = Self { raw, owned: true };
         check(
             unsafe { sys::VecSetSizes(v.raw, n, sys::mpmc_petsc_decide()) },
@@ -70,13 +68,11 @@ impl Vector {
 
     /// Range `[start, end)` of global indices owned by this process.
     pub fn ownership_range(&self) -> Result<std::ops::Range<usize>> {
-        let (mut lo, mut hi) = (0, 0);
-        // SAFETY: out-parameters.
-        check(
-            unsafe { sys::VecGetOwnershipRange(self.raw, &mut lo, &mut hi) },
+        ownership_range(
+            // SAFETY: out-parameters.
+            |lo, hi| unsafe { sys::VecGetOwnershipRange(self.raw, lo, hi) },
             "VecGetOwnershipRange",
-        )?;
-        Ok(lo as usize..hi as usize)
+        )
     }
 
     /// Euclidean norm.

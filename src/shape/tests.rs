@@ -6,7 +6,8 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
 use super::*;
-use crate::particles::{Geometry, Region, Seeding};
+use crate::particles::Seeding;
+use crate::particles::tests::rect_geometry;
 
 const H: f64 = 0.5;
 const N: usize = 2;
@@ -16,17 +17,18 @@ fn grid() -> Grid {
     Grid::new(Vector2::new(-3.0, 1.0), H, [24, 20]).unwrap()
 }
 
-/// Undeformed half-edges for 2 x 2 points per cell.
-fn r0() -> (Vector2<f64>, Vector2<f64>) {
-    (Vector2::new(H / 4.0, 0.0), Vector2::new(0.0, H / 4.0))
-}
-
-/// Points at `xs` whose domains are deformed by `f` (`r_i = F r_i^0`, corners the parallelogram).
-fn points(xs: &[Vector2<f64>], f: Matrix2<f64>) -> Particles {
-    let (r1_0, r2_0) = r0();
+/// Points at `xs` (2^D per cell: volume `(h/2)^D`, half-edges `h/4`) whose domains are deformed by `f`
+/// (`r_i = F r_i^0`, corners the parallelogram or parallelepiped).
+fn points<const D: usize>(xs: &[SVector<f64, D>], f: SMatrix<f64, D, D>) -> Particles<D> {
     let mut ps = Particles::new();
     for &x in xs {
-        ps.push(x, H * H / 4.0, 1.0, Matrix2::from_columns(&[r1_0, r2_0]), 0);
+        ps.push(
+            x,
+            (H / 2.0).powi(D as i32),
+            1.0,
+            SMatrix::identity() * (H / 4.0),
+            0,
+        );
     }
     for p in 0..ps.len() {
         ps.set_deformation(p, f);
@@ -123,24 +125,26 @@ fn check_invariants<const D: usize>(
     }
 }
 
+/// [`check_invariants`] of every interpolator for points at `xs` with domains deformed by `f`.
+fn check_every_kind(xs: &[Vector2<f64>], f: Matrix2<f64>) {
+    let ps = points(xs, f);
+    for kind in ShapeKind::ALL {
+        check_invariants(kind, &grid(), &ps, xs);
+    }
+}
+
 #[test]
 fn shape_invariants_random_positions() {
     let mut rng = StdRng::seed_from_u64(1);
     let xs = random_positions(&mut rng, 500);
-    let ps = points(&xs, Matrix2::identity());
-    for kind in ShapeKind::ALL {
-        check_invariants(kind, &grid(), &ps, &xs);
-    }
+    check_every_kind(&xs, Matrix2::identity());
 }
 
 #[test]
 fn shape_invariants_on_cell_edges_and_nodes() {
     let mut rng = StdRng::seed_from_u64(2);
     let xs = edge_and_node_positions(&mut rng);
-    let ps = points(&xs, Matrix2::identity());
-    for kind in ShapeKind::ALL {
-        check_invariants(kind, &grid(), &ps, &xs);
-    }
+    check_every_kind(&xs, Matrix2::identity());
 }
 
 #[test]
@@ -149,10 +153,7 @@ fn shape_invariants_in_stretched_and_sheared_domains() {
     let mut xs = random_positions(&mut rng, 200);
     xs.extend(edge_and_node_positions(&mut rng));
     for f in deformations() {
-        let ps = points(&xs, f);
-        for kind in ShapeKind::ALL {
-            check_invariants(kind, &grid(), &ps, &xs);
-        }
+        check_every_kind(&xs, f);
     }
 }
 
@@ -185,18 +186,28 @@ fn shape_cpdi2_equals_cpdi1_on_parallelograms() {
     let mut rng = StdRng::seed_from_u64(5);
     let xs = random_positions(&mut rng, 200);
     for f in deformations() {
-        let ps = points(&xs, f);
-        let (mut t1, mut t2) = (ShapeTable::new(), ShapeTable::new());
-        t1.compute(ShapeKind::Cpdi1, &grid(), &ps).unwrap();
-        t2.compute(ShapeKind::Cpdi2, &grid(), &ps).unwrap();
-        for p in 0..ps.len() {
-            let (w1, w2) = (t1.weights(p), t2.weights(p));
-            assert_eq!(w1.len(), w2.len());
-            for (a, b) in w1.iter().zip(w2) {
-                assert_eq!(a.node, b.node);
-                assert!((a.value - b.value).abs() < 1e-14);
-                assert!((a.grad - b.grad).norm() < 1e-12);
-            }
+        assert_cpdi2_equals_cpdi1(&grid(), &points(&xs, f), 1e-14, 1e-12);
+    }
+}
+
+/// Asserts that CPDI2 and CPDI1 give the points `ps` the same nodes, weights (to `value_tol`) and
+/// gradients (to `grad_tol`).
+fn assert_cpdi2_equals_cpdi1<const D: usize>(
+    grid: &Grid<D>,
+    ps: &Particles<D>,
+    value_tol: f64,
+    grad_tol: f64,
+) {
+    let (mut t1, mut t2) = (ShapeTable::new(), ShapeTable::new());
+    t1.compute(ShapeKind::Cpdi1, grid, ps).unwrap();
+    t2.compute(ShapeKind::Cpdi2, grid, ps).unwrap();
+    for p in 0..ps.len() {
+        let (w1, w2) = (t1.weights(p), t2.weights(p));
+        assert_eq!(w1.len(), w2.len());
+        for (a, b) in w1.iter().zip(w2) {
+            assert_eq!(a.node, b.node);
+            assert!((a.value - b.value).abs() < value_tol);
+            assert!((a.grad - b.grad).norm() < grad_tol);
         }
     }
 }
@@ -302,13 +313,7 @@ fn shape_degenerate_domains_and_gimp_width_are_errors() {
 fn shape_undeformed_seeded_points_have_compact_supports() {
     // 2 x 2 points per cell: CPDI corners and GIMP support edges lie on grid lines, so only the owning cell's
     // 4 nodes carry weight; linear always lists 4 nodes; the B-spline reaches 3 x 3 nodes.
-    let geometry = Geometry {
-        include: vec![Region::Rect {
-            min: [0.0, 3.0],
-            max: [4.0, 6.0],
-        }],
-        exclude: vec![],
-    };
+    let geometry = rect_geometry([0.0, 3.0], [4.0, 6.0]);
     let ps = Particles::seed(
         &geometry,
         &Seeding {
@@ -372,24 +377,6 @@ fn grid3() -> Grid<3> {
     Grid::new(Vector3::new(-1.0, 0.5, 2.0), H, [14, 12, 10]).unwrap()
 }
 
-/// 3D points at `xs` (2 x 2 x 2 per cell) whose domains are deformed by `f`.
-fn points3(xs: &[Vector3<f64>], f: Matrix3<f64>) -> Particles<3> {
-    let mut ps = Particles::<3>::new();
-    for &x in xs {
-        ps.push(
-            x,
-            (H / 2.0).powi(3),
-            1.0,
-            Matrix3::identity() * (H / 4.0),
-            0,
-        );
-    }
-    for p in 0..ps.len() {
-        ps.set_deformation(p, f);
-    }
-    ps
-}
-
 /// Random points 3 cells inside the 3D grid, and points on its nodes, edges and faces.
 fn positions3(rng: &mut StdRng, n: usize) -> Vec<Vector3<f64>> {
     let g = grid3();
@@ -428,7 +415,7 @@ fn shape_3d_invariants_in_undeformed_and_deformed_domains() {
     let mut rng = StdRng::seed_from_u64(31);
     let xs = positions3(&mut rng, 150);
     for f in deformations3() {
-        let ps = points3(&xs, f);
+        let ps = points(&xs, f);
         for kind in ShapeKind::ALL {
             check_invariants(kind, &grid3(), &ps, &xs);
         }
@@ -472,20 +459,9 @@ fn hexahedron_centroid(corners: &[Vector3<f64>]) -> Vector3<f64> {
 fn shape_3d_cpdi2_general_hexahedra_reproduce_the_centroid_and_equal_cpdi1_on_parallelepipeds() {
     let mut rng = StdRng::seed_from_u64(32);
     let xs = positions3(&mut rng, 120);
-    let mut ps = points3(&xs, deformations3()[3]);
+    let mut ps = points(&xs, deformations3()[3]);
     // CPDI2 on parallelepipeds is CPDI1.
-    let (mut t1, mut t2) = (ShapeTable::new(), ShapeTable::new());
-    t1.compute(ShapeKind::Cpdi1, &grid3(), &ps).unwrap();
-    t2.compute(ShapeKind::Cpdi2, &grid3(), &ps).unwrap();
-    for p in 0..ps.len() {
-        let (w1, w2) = (t1.weights(p), t2.weights(p));
-        assert_eq!(w1.len(), w2.len());
-        for (a, b) in w1.iter().zip(w2) {
-            assert_eq!(a.node, b.node);
-            assert!((a.value - b.value).abs() < 1e-13);
-            assert!((a.grad - b.grad).norm() < 1e-11);
-        }
-    }
+    assert_cpdi2_equals_cpdi1(&grid3(), &ps, 1e-13, 1e-11);
     // Perturbed corners: general hexahedra with curved faces.
     for c in ps.corners.iter_mut() {
         *c += Vector3::from_fn(|_, _| rng.random_range(-0.25..0.25)) * (H / 4.0);
@@ -493,12 +469,14 @@ fn shape_3d_cpdi2_general_hexahedra_reproduce_the_centroid_and_equal_cpdi1_on_pa
     let centres: Vec<_> = ps.corners.chunks(8).map(hexahedron_centroid).collect();
     check_invariants(ShapeKind::Cpdi2, &grid3(), &ps, &centres);
     // An inverted hexahedron is an error naming the point.
-    let mut bad = points3(&xs[..3], Matrix3::identity());
+    let mut bad = points(&xs[..3], Matrix3::identity());
     bad.corners_mut(1).swap(0, 7);
     bad.corners_mut(1).swap(1, 6);
     bad.corners_mut(1).swap(2, 5);
     bad.corners_mut(1).swap(3, 4);
-    let err = t2.compute(ShapeKind::Cpdi2, &grid3(), &bad).unwrap_err();
+    let err = ShapeTable::new()
+        .compute(ShapeKind::Cpdi2, &grid3(), &bad)
+        .unwrap_err();
     assert!(
         matches!(err, ShapeError::DegenerateDomain { particle: 1, .. }),
         "{err}"
@@ -511,7 +489,7 @@ fn shape_3d_seeded_supports_and_out_of_grid_errors() {
     let xs: Vec<Vector3<f64>> = crate::particles::lattice([4, 3, 2])
         .map(|c| g.origin() + Vector3::from_fn(|d, _| (3.0 + c[d] as f64 + 0.25) * H))
         .collect();
-    let ps = points3(&xs, Matrix3::identity());
+    let ps = points(&xs, Matrix3::identity());
     let mut table = ShapeTable::new();
     for (kind, expected) in [
         (ShapeKind::Linear, 8),
@@ -524,7 +502,7 @@ fn shape_3d_seeded_supports_and_out_of_grid_errors() {
         assert_eq!(table.stride(), kind.max_support::<3>());
         assert!(table.iter().all(|(_, ws)| ws.len() == expected), "{kind:?}");
     }
-    let out = points3(
+    let out = points(
         &[g.upper() - Vector3::new(1.0, 1.0, 0.1 * H)],
         Matrix3::identity(),
     );
