@@ -12,9 +12,13 @@
 //! Each process evaluates the springs whose first node it owns on a gathered copy of x and adds its
 //! contributions with global indices, so the problem runs unchanged under `mpirun -n N`.
 
+use super::{bad, share_cores};
 use crate::petsc::{
-    self, CallbackError, Matrix, NonlinearProblem, PetscInt, SessionGuard, Snes, SolveInfo, Vector,
+    self, CallbackError, Matrix, NonlinearProblem, PetscInt, Session, SessionGuard, Snes,
+    SolveInfo, Vector,
 };
+use crate::preflight;
+use anyhow::{Context, Result};
 use nalgebra::{Matrix2, Vector2};
 
 /// Parameters of the lattice.
@@ -319,4 +323,62 @@ pub fn jacobian_fd_error(s: &SessionGuard, p: SmokeParams, x0: &[f64]) -> petsc:
         }
     }
     Ok(max_diff / max_j)
+}
+
+/// `smoke`: solves the `n` x `n` lattice under `load` with the PETSc options of the command line
+/// (`petsc_args`, starting with the program name; default a direct solve), prints the solver's
+/// statistics (and with `print_solution` the solution as JSON) and fails on unused options or when the
+/// solve did not converge.
+pub fn command(petsc_args: &[String], n: usize, load: f64, print_solution: bool) -> Result<()> {
+    if n < 2 {
+        return Err(bad(format!("--n must be at least 2 (got {n})")));
+    }
+    preflight::check_petsc_options(&petsc_args[1..].join(" "))
+        .map_err(|e| bad(format!("command line: {e}")))?;
+    let session = Session::initialize(petsc_args).context("starting PETSc")?;
+    share_cores(&session);
+    smoke_test(&session, n, load, print_solution)?;
+    Session::finalize(session)?;
+    Ok(())
+}
+
+/// The lattice solve of [`command`] on a started PETSc session.
+fn smoke_test(session: &SessionGuard, n: usize, load: f64, print_solution: bool) -> Result<()> {
+    petsc::apply_default_options(session, "-ksp_type preonly -pc_type lu")?;
+    let p = SmokeParams {
+        n,
+        load,
+        ..SmokeParams::default()
+    };
+    let r = solve(session, p, None).context("solving the lattice problem")?;
+    let norm = r.solution.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if session.rank() == 0 {
+        println!(
+            "lattice {n}x{n} ({} unknowns) on {} process(es), solver {}",
+            r.solution.len(),
+            session.size(),
+            r.solver
+        );
+        println!(
+            "{}: {} Newton iterations, {} linear iterations, |x| = {norm:.12e}",
+            r.info.reason_name, r.info.iterations, r.info.linear_iterations
+        );
+        if print_solution {
+            println!("{}", serde_json::to_string(&r.solution)?);
+        }
+    }
+    let unused = petsc::unused_options(session)?;
+    if !unused.is_empty() {
+        return Err(bad(format!(
+            "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options)",
+            unused.join(" ")
+        )));
+    }
+    if !r.info.converged() {
+        anyhow::bail!(
+            "the lattice problem did not converge: {}",
+            r.info.reason_name
+        );
+    }
+    Ok(())
 }

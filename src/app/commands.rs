@@ -1,0 +1,123 @@
+//! The drivers of the commands that only check their arguments and call an application: `crack` (the
+//! crack re-measurement of a finished run), `bench` and `study` (each case or option set in its own
+//! process).
+
+use super::{bad, bench, no_petsc_options, study};
+use crate::config::RunConfig;
+use crate::io::{self, OutputError};
+use crate::preflight;
+use anyhow::{Context, Result};
+use std::path::{Path, PathBuf};
+
+/// `crack RUN_DIR`: re-measures the crack metrics of a finished CT run from its snapshots, rewrites its
+/// crack.json and prints the states.
+pub fn crack(run_dir: &Path, petsc_args: &[String]) -> Result<()> {
+    no_petsc_options("crack", "", petsc_args)?;
+    // A directory that is no CT run (or no run at all) is bad input; unreadable snapshots are not.
+    let states = io::remeasure_cracks(run_dir).map_err(|e| match e {
+        OutputError::Run { .. } | OutputError::Io { .. } => bad(e),
+        other => other.into(),
+    })?;
+    for s in &states {
+        let bands: Vec<String> = s
+            .bands
+            .iter()
+            .map(|b| format!("{:.0}", b.angle_degrees))
+            .collect();
+        println!(
+            "t = {:8.1} us: {:<10} length {:6.1} mm, bands [{}] deg, band width {:.1} mm (max {:.1})",
+            s.time * 1e6,
+            s.classification,
+            s.length,
+            bands.join(", "),
+            s.band_width,
+            s.band_width_max
+        );
+    }
+    Ok(())
+}
+
+/// `bench`: the benchmark `cases` (all when empty), each for `steps` steps (its default when None), with
+/// the PETSc options of the command line, results in `output`.
+pub fn bench(
+    cases: &[String],
+    steps: Option<usize>,
+    output: &Path,
+    petsc_args: &[String],
+) -> Result<()> {
+    let mut all = bench::default_cases();
+    if !cases.is_empty() {
+        let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
+        if let Some(unknown) = cases.iter().find(|c| !names.contains(c)) {
+            return Err(bad(format!(
+                "--cases: unknown case `{unknown}` (allowed: {})",
+                names.join(", ")
+            )));
+        }
+        all.retain(|c| cases.contains(&c.name));
+    }
+    if let Some(n) = steps {
+        if n == 0 {
+            return Err(bad("--steps must be at least 1"));
+        }
+        all.iter_mut().for_each(|c| c.steps = n);
+    }
+    if let Some(c) = all.iter().find(|c| !c.config.is_file()) {
+        return Err(bad(format!(
+            "bench: {} not found (the cases' configs are relative to the repository root: run \
+             the command there)",
+            c.config.display()
+        )));
+    }
+    let options = petsc_args[1..].join(" ");
+    preflight::check_petsc_options(&options).map_err(|e| bad(format!("command line: {e}")))?;
+    let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
+    let report = bench::run(&exe, &all, &options, output).map_err(anyhow::Error::msg)?;
+    println!("{}", bench::markdown(&report));
+    println!("results in {}", output.display());
+    Ok(())
+}
+
+/// `study CONFIG`: the configuration for `steps` steps with each option set of the file `sets` (the
+/// default sets when None), results in `output` (default runs/study-<config name>).
+pub fn study(
+    config: &Path,
+    steps: usize,
+    sets: Option<&Path>,
+    output: Option<PathBuf>,
+    overwrite: bool,
+    petsc_args: &[String],
+) -> Result<()> {
+    no_petsc_options(
+        "study",
+        ": the options of each run go into a --sets file",
+        petsc_args,
+    )?;
+    if steps == 0 {
+        return Err(bad("--steps must be at least 1"));
+    }
+    RunConfig::from_file(config).map_err(bad)?;
+    let sets = match sets {
+        Some(p) => study::read_sets(p).map_err(bad)?,
+        None => study::default_sets(),
+    };
+    let dir = output.unwrap_or_else(|| study::default_dir(config));
+    if dir.join(study::REPORT).exists() && !overwrite {
+        return Err(bad(format!(
+            "{} holds an earlier study ({}): use --overwrite to replace it, or another --output",
+            dir.display(),
+            study::REPORT
+        )));
+    }
+    let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
+    let results = study::run(&exe, config, steps, &sets, &dir).map_err(anyhow::Error::msg)?;
+    let failed = results.iter().filter(|r| !r.completed).count();
+    println!("{}", std::fs::read_to_string(dir.join(study::REPORT))?);
+    println!(
+        "{} of {} option sets completed; results in {}",
+        results.len() - failed,
+        results.len(),
+        dir.display()
+    );
+    Ok(())
+}

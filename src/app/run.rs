@@ -1,0 +1,961 @@
+//! `run`: a simulation described by a configuration file, from the checks of its input to the final
+//! table. Everything that can be checked is checked before anything is written ([`prepare`], then the
+//! first step, which validates the PETSc set-up); then the output directory belongs to the run, which
+//! records every step, writes the point fields and a checkpoint at the output cadence, on Ctrl-C and when a
+//! step fails for good, and keeps run.json up to date.
+//!
+//! On several processes every one holds the whole model and its own share of the points (from the first
+//! step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes"); process 0
+//! gathers the points and alone writes.
+
+use super::{bad, processes_per_node, share_cores};
+use crate::checkpoint;
+use crate::config::{self, RunConfig};
+use crate::io::RunOutput;
+use crate::model::Setup;
+use crate::petsc::{self, Session, SessionGuard};
+use crate::preflight;
+use crate::rundir::{self, RunIdentity, RunRecord};
+use crate::scenario;
+use crate::solver::{Simulation, StepError, StepReport};
+use crate::solver_defaults::{self, FALLBACK_PREFIX};
+use anyhow::{Context, Result};
+use indicatif::ProgressBar;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
+/// range, unsupported, incompatible, unknown type).
+const PETSC_INPUT_ERRORS: [i32; 5] = [56, 62, 63, 75, 86];
+
+/// Command-line flags of `run`.
+pub struct RunFlags {
+    /// `--steps`: overrides `run.steps`.
+    pub steps: Option<usize>,
+    /// `--output`: overrides the output directory.
+    pub output: Option<PathBuf>,
+    /// `--quiet`: log lines instead of a progress bar.
+    pub quiet: bool,
+    /// `--resume`: continue from the checkpoint in the output directory.
+    pub resume: bool,
+    /// `--overwrite`: replace the results of another run in the output directory.
+    pub overwrite: bool,
+    /// `--allow-large`: start even if the estimated memory need exceeds the memory available.
+    pub allow_large: bool,
+    /// `--set KEY=VALUE` overrides of the configuration.
+    pub set: Vec<String>,
+}
+
+/// How the run was invoked: the arguments (for run.json and the resume hint) and the flags that act after
+/// the checks.
+struct Invocation<'a> {
+    /// The program's arguments.
+    own: &'a [String],
+    /// PETSc's arguments, starting with the program name.
+    petsc: &'a [String],
+    /// The configuration file as given.
+    file: String,
+    /// `--quiet`.
+    quiet: bool,
+    /// `--overwrite`.
+    overwrite: bool,
+}
+
+/// A run that passed the checks that need no PETSc.
+struct Prepared {
+    cfg: RunConfig,
+    /// `--set` overrides, `--steps` as `run.steps=N`.
+    overrides: Vec<String>,
+    /// The effective configuration (canonical TOML).
+    effective: String,
+    identity: RunIdentity,
+    /// The output directory.
+    dir: PathBuf,
+    /// The checkpoint a `--resume` continues from.
+    resume_from: Option<checkpoint::Header>,
+}
+
+/// `run CONFIG`: checks the input (`own_args` the program's arguments, `petsc_args` PETSc's, starting with
+/// the program name), starts PETSc and runs the simulation in 2D, or in 3D with `[extrusion]`.
+pub fn run(own_args: &[String], petsc_args: &[String], path: &Path, flags: RunFlags) -> Result<()> {
+    let prepared = prepare(path, &flags, petsc_args)?;
+    let session = Session::initialize(petsc_args).context("starting PETSc")?;
+    share_cores(&session);
+    let invocation = Invocation {
+        own: own_args,
+        petsc: petsc_args,
+        file: path.display().to_string(),
+        quiet: flags.quiet,
+        overwrite: flags.overwrite,
+    };
+    // A plane set-up, or the plate it is extruded to ([extrusion]): the same run in 2D or 3D.
+    match prepared.cfg.extrusion.as_ref().map(|e| e.thickness) {
+        None => simulate::<2>(&session, &invocation, prepared, &Ok)?,
+        Some(thickness) => simulate::<3>(&session, &invocation, prepared, &|plane: Setup| {
+            plane
+                .extrude(thickness)
+                .map_err(|e| format!("[extrusion]: {e}"))
+        })?,
+    }
+    Session::finalize(session)?;
+    Ok(())
+}
+
+/// The checks before PETSc starts: the configuration with its overrides (--steps is run.steps), the
+/// PETSc option values, the output directory or the checkpoint to resume, the memory.
+fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepared> {
+    let file = path.display().to_string();
+    if flags.steps == Some(0) {
+        return Err(bad("--steps must be at least 1"));
+    }
+    let mut overrides = flags.set.clone();
+    if let Some(n) = flags.steps {
+        overrides.push(format!("run.steps={n}"));
+    }
+    let (cfg, effective) = RunConfig::load(path, &overrides).map_err(bad)?;
+    preflight::check_petsc_options(&cfg.run.petsc_options)
+        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
+    let command_options = petsc_args[1..].join(" ");
+    preflight::check_petsc_options(&command_options)
+        .map_err(|e| bad(format!("command line: {e}")))?;
+    let dir = flags.output.clone().unwrap_or_else(|| cfg.output_dir());
+    let petsc_options = format!("{} {command_options}", cfg.run.petsc_options)
+        .trim()
+        .to_owned();
+    let identity = RunIdentity::new(&effective, &petsc_options);
+    let contents = rundir::inspect(&dir).map_err(bad)?;
+    let resume_from = if flags.resume {
+        Some(check_resume(&dir, &identity, cfg.run.steps)?)
+    } else {
+        if !contents.results.is_empty() && !flags.overwrite {
+            return Err(bad(refusal(&dir, &contents, &identity)));
+        }
+        None
+    };
+    check_memory(
+        &cfg,
+        &config::source_label(&file, &overrides),
+        flags.allow_large,
+    )?;
+    Ok(Prepared {
+        cfg,
+        overrides,
+        effective,
+        identity,
+        dir,
+        resume_from,
+    })
+}
+
+/// Refuses a run whose estimated memory need exceeds the memory available, unless `allow_large`; `label`
+/// names the configuration.
+fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
+    // Every process builds the whole model before it keeps its share of the points, and process 0
+    // gathers all points for the output: each process on this node may peak near a serial run's memory
+    // (paper-size CT: 731 MB per process on 2 against 649 MB on one).
+    let mut need = preflight::memory_need(cfg);
+    need.bytes *= processes_per_node().unwrap_or(1) as f64;
+    if let Some(limit) = preflight::memory_limit()
+        && need.bytes > limit.bytes
+        && !allow_large
+    {
+        return Err(bad(format!(
+            "{label}: the run needs about {} of memory ({:.3e} material points, {:.3e} grid nodes), more \
+             than the {} available ({}): use a larger grid.cell_size or fewer shape.points_per_cell, or \
+             --allow-large to start anyway",
+            preflight::human_bytes(need.bytes),
+            need.points,
+            need.nodes,
+            preflight::human_bytes(limit.bytes),
+            limit.source
+        )));
+    }
+    Ok(())
+}
+
+/// The run of a prepared configuration: `lift` turns the plane set-up the configuration describes into
+/// the one of `D` dimensions that runs (2D: itself; 3D: its extrusion).
+fn simulate<const D: usize>(
+    session: &SessionGuard,
+    invocation: &Invocation,
+    prepared: Prepared,
+    lift: &dyn Fn(Setup) -> Result<Setup<D>, String>,
+) -> Result<()> {
+    let (cfg, file) = (&prepared.cfg, &invocation.file);
+    let root = session.rank() == 0;
+    let (mut sim, defaults) = build(session, cfg, file, lift)?;
+    if prepared.resume_from.is_some() {
+        checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
+        if root {
+            eprintln!(
+                "resuming at step {} (t = {:e} s)",
+                sim.state.step, sim.state.time
+            );
+        }
+    }
+    // Ctrl-C: finish the current step, write a checkpoint and the outputs, and stop.
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .context("installing the Ctrl-C handler")?;
+    }
+    if root {
+        announce(session, cfg, &sim, &prepared.dir);
+    }
+    let bar = progress_bar(invocation.quiet || !root, cfg.run.steps, sim.state.step);
+    let started = std::time::Instant::now();
+    // A PETSc logging stage for the time loop, so -log_view separates it from the set-up.
+    let _stage = session.push_stage(session.register_stage("MPM time steps")?)?;
+    // The first step sets up PETSc's solvers, which read (and so validate) the options: until it has
+    // passed, nothing is written.
+    let step = sim.advance(session);
+    if let Err(e) = check_first_step(session, &step, &defaults, file) {
+        bar.abandon();
+        return Err(e);
+    }
+    let model = || {
+        let plane = scenario::build(cfg).map_err(|e| bad(format!("{file}: {e}")))?;
+        lift(plane).map_err(|e| bad(format!("{file}: {e}")))
+    };
+    let mut records = open_output(invocation, &prepared, &sim, root, model)?;
+    let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
+    let steps = Steps {
+        session,
+        bar: &bar,
+        interrupted: &interrupted,
+        hint: &hint,
+        quiet: invocation.quiet,
+    };
+    steps.run(&mut records, &mut sim, step)?;
+    bar.finish();
+    let note = records.finish(&sim, "finished", None)?;
+    if !root {
+        return Ok(());
+    }
+    summary(
+        &records.out,
+        started.elapsed().as_secs_f64(),
+        note.as_deref(),
+    );
+    if let Some(n) = note {
+        eprintln!("warning: {n}");
+    }
+    report_unused_fallback(session, &defaults)
+}
+
+/// The simulation of `cfg` (the file `file`) in `D` dimensions with its solver defaults applied, and the
+/// defaults' option names: those a user's solver choice makes irrelevant (e.g. the MUMPS option under
+/// -pc_type hypre) must not be reported as unused.
+fn build<const D: usize>(
+    session: &SessionGuard,
+    cfg: &RunConfig,
+    file: &str,
+    lift: &dyn Fn(Setup) -> Result<Setup<D>, String>,
+) -> Result<(Simulation<D>, Vec<String>)> {
+    petsc::apply_default_options(session, &cfg.run.petsc_options)
+        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
+    let mut setup = scenario::build(cfg).map_err(|e| bad(format!("{file}: {e}")))?;
+    // The solver defaults follow the kind of step (docs/solvers.md).
+    let (_, defaults) = solver_defaults::apply(session, &mut setup, D)?;
+    let setup = lift(setup).map_err(|e| bad(format!("{file}: {e}")))?;
+    let sim = Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")))?;
+    Ok((sim, defaults))
+}
+
+/// The run's one-line description on standard error: points, grid, steps, unknowns, processes, output.
+fn announce<const D: usize>(
+    session: &SessionGuard,
+    cfg: &RunConfig,
+    sim: &Simulation<D>,
+    dir: &Path,
+) {
+    let grid = &sim.model.grid;
+    let cells: Vec<String> = grid.cells().iter().map(usize::to_string).collect();
+    eprintln!(
+        "{}: {} material points, grid {} cells of {} mm{}, {} steps of {:e} s, {} unknowns per node, {}output in {}",
+        cfg.run.name,
+        sim.state.particles.len(),
+        cells.join("x"),
+        grid.cell_size(),
+        match &cfg.extrusion {
+            Some(e) => format!(", a {} mm plate (3D)", e.thickness),
+            None => String::new(),
+        },
+        cfg.run.steps,
+        cfg.time.dt,
+        sim.model.layout().per_node(),
+        match session.size() {
+            1 => String::new(),
+            n => format!("{n} processes, "),
+        },
+        dir.display()
+    );
+}
+
+/// The progress bar over `steps` steps, at step `done`; `hidden` for quiet runs and processes other
+/// than 0.
+fn progress_bar(hidden: bool, steps: usize, done: usize) -> ProgressBar {
+    let bar = if hidden {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(steps as u64)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_position(done as u64);
+    bar
+}
+
+/// Bad input that the first step revealed: PETSc options that no solver used (other than the solver
+/// defaults `defaults` and the fallback solver's), options PETSc refused, or a set-up the solver refused.
+/// A step that failed otherwise is left to the time loop.
+fn check_first_step(
+    session: &SessionGuard,
+    step: &Result<StepReport, StepError>,
+    defaults: &[String],
+    file: &str,
+) -> Result<()> {
+    match step {
+        Ok(_) => {
+            let mut unused = petsc::unused_options(session)?;
+            unused.retain(|o| {
+                !defaults.contains(o) && !o.starts_with(&format!("-{FALLBACK_PREFIX}"))
+            });
+            if !unused.is_empty() {
+                return Err(bad(format!(
+                    "unknown or unused PETSc option(s): {} (check the spelling; -help lists the options); \
+                     nothing was written",
+                    unused.join(" ")
+                )));
+            }
+        }
+        Err(StepError::Petsc(e)) => {
+            let message = format!("the first step failed in PETSc: {e}; nothing was written");
+            return Err(if PETSC_INPUT_ERRORS.contains(&e.code) {
+                bad(message)
+            } else {
+                anyhow::anyhow!(message)
+            });
+        }
+        Err(e @ StepError::Setup(_)) => {
+            return Err(bad(format!("{file}: {e}; nothing was written")));
+        }
+        Err(_) => {}
+    }
+    Ok(())
+}
+
+/// The output: the directory now belongs to this run. Removes an earlier run's files (--overwrite),
+/// writes the effective configuration, the reference state (or restores the records of a resumed run)
+/// and run.json; `model` builds the model again for the reference state on process 0.
+fn open_output<'a, const D: usize>(
+    invocation: &Invocation,
+    prepared: &'a Prepared,
+    sim: &Simulation<D>,
+    root: bool,
+    model: impl Fn() -> Result<Setup<D>>,
+) -> Result<Records<'a>> {
+    let Prepared { cfg, dir, .. } = prepared;
+    if invocation.overwrite && root {
+        let removed = rundir::remove_program_files(dir).map_err(anyhow::Error::msg)?;
+        if removed > 0 {
+            eprintln!(
+                "--overwrite: removed {removed} files of the earlier run from {}",
+                dir.display()
+            );
+        }
+    }
+    let config_copy = format!(
+        "# The effective configuration of the run in this directory: {}.\n\
+         # Canonical form (sorted keys; the file's comments are not kept).\n\n{}",
+        config::source_label(&invocation.file, &prepared.overrides),
+        prepared.effective
+    );
+    // The output's reference state (initial positions, the step-0 fields) is the model as built, on the
+    // process that writes (the others keep the records only).
+    let initial = if root {
+        let file = &invocation.file;
+        Some(crate::model::Model::new(model()?).map_err(|e| bad(format!("{file}: {e}")))?)
+    } else {
+        None
+    };
+    let mut out = match &initial {
+        Some((initial_model, initial)) => {
+            RunOutput::create(dir, &cfg.run.name, &config_copy, initial_model, initial)?
+        }
+        None => RunOutput::mirror(dir, &cfg.run.name, &config_copy, cfg.grid.cell_size),
+    };
+    if let Some(z) = cfg.extrusion.as_ref().and_then(|e| e.section_z) {
+        out.set_section(z);
+    }
+    if let Some(ct) = &cfg.ct {
+        out.track_crack(
+            nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
+            crate::crack::CrackCriteria::for_notch(ct.notch_width, cfg.grid.cell_size),
+        );
+    }
+    let record = new_record(invocation, prepared, sim);
+    if root {
+        record.write(dir)?;
+    }
+    match (&prepared.resume_from, &initial) {
+        (Some(header), _) => header
+            .restore_records(&mut out)
+            .context("restoring the output's records from the checkpoint")?,
+        (None, Some((_, initial))) => out.snapshot(initial)?,
+        (None, None) => {}
+    }
+    Ok(Records {
+        cfg,
+        dir,
+        identity: &prepared.identity,
+        root,
+        out,
+        record,
+    })
+}
+
+/// The run.json of a run starting (or resuming) at the state of `sim`.
+fn new_record<const D: usize>(
+    invocation: &Invocation,
+    prepared: &Prepared,
+    sim: &Simulation<D>,
+) -> RunRecord {
+    let cfg = &prepared.cfg;
+    RunRecord {
+        identity: prepared.identity.clone(),
+        command: command_line(invocation.own, invocation.petsc),
+        config_file: invocation.file.clone(),
+        overrides: prepared.overrides.clone(),
+        started_unix: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
+        resumed_from_step: prepared.resume_from.as_ref().map(|h| h.counters.step),
+        status: "running".into(),
+        steps_done: sim.state.step,
+        steps_requested: cfg.run.steps,
+        time_reached: sim.state.time,
+        time_requested: cfg.run.steps as f64 * cfg.time.dt,
+        reduced_steps: 0,
+        note: None,
+    }
+}
+
+/// The records of a run in progress: its output and its run.json, and where they go.
+struct Records<'a> {
+    cfg: &'a RunConfig,
+    dir: &'a Path,
+    identity: &'a RunIdentity,
+    /// This process writes (process 0).
+    root: bool,
+    out: RunOutput,
+    record: RunRecord,
+}
+
+impl Records<'_> {
+    /// Writes the point fields, the force plots and the checkpoint of the current state (with the points
+    /// shared out over processes, process 0 gathers them first). Collective.
+    fn save<const D: usize>(&mut self, session: &SessionGuard, sim: &Simulation<D>) -> Result<()> {
+        let Some(state) = crate::partition::whole_state(session, &sim.state)
+            .context("gathering the points on process 0")?
+        else {
+            return Ok(());
+        };
+        self.out.snapshot(&state)?;
+        self.out.force_plots()?;
+        if self.out.writes() {
+            checkpoint::save(self.dir, &state, &self.out, self.identity)?;
+        }
+        Ok(())
+    }
+
+    /// run.json follows the checkpoint, so a run killed outright shows how far it got.
+    fn follow<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<()> {
+        self.record.steps_done = sim.state.step;
+        self.record.time_reached = sim.state.time;
+        if self.root {
+            self.record.write(self.dir)?;
+        }
+        Ok(())
+    }
+
+    /// Closes run.json with `status` and the note `why` (and a note on an early end or reduced steps,
+    /// which also goes into history.csv); returns the latter note.
+    fn finish<const D: usize>(
+        &mut self,
+        sim: &Simulation<D>,
+        status: &str,
+        why: Option<String>,
+    ) -> Result<Option<String>> {
+        let cfg = self.cfg;
+        let taken: Vec<f64> = self.out.rows().iter().map(|r| r.dt).collect();
+        let note = time_note(&taken, sim.state.time, cfg.run.steps, cfg.time.dt);
+        let record = &mut self.record;
+        record.status = status.into();
+        record.steps_done = sim.state.step;
+        record.time_reached = sim.state.time;
+        record.reduced_steps = reduced_steps(&taken, cfg.time.dt);
+        record.note = match (&why, &note) {
+            (Some(w), Some(n)) => Some(format!("{w}; {n}")),
+            (w, n) => w.clone().or(n.clone()),
+        };
+        if self.root {
+            if let Some(n) = &record.note {
+                append_history_note(self.dir, n)?;
+            }
+            record.write(self.dir)?;
+        }
+        Ok(note)
+    }
+}
+
+/// The time loop's surroundings: the session, the progress display, the Ctrl-C flag and the command
+/// that resumes the run.
+struct Steps<'a> {
+    session: &'a SessionGuard,
+    bar: &'a ProgressBar,
+    interrupted: &'a AtomicBool,
+    hint: &'a str,
+    quiet: bool,
+}
+
+impl Steps<'_> {
+    /// Records the first step's result `step` and advances until the requested step, a step that fails
+    /// for good or an interruption (both an error, after the state is saved).
+    fn run<const D: usize>(
+        &self,
+        records: &mut Records,
+        sim: &mut Simulation<D>,
+        mut step: Result<StepReport, StepError>,
+    ) -> Result<()> {
+        let steps = records.cfg.run.steps;
+        loop {
+            let report = match step {
+                Ok(r) => r,
+                Err(e) => return Err(self.failed(records, sim, &e)),
+            };
+            self.show(&report, records.root);
+            records.out.record(report)?;
+            let every = records.cfg.run.output_every;
+            // Every process stops after the same step (a signal may reach them at different steps).
+            let stop = self.session.any(self.interrupted.load(Ordering::SeqCst));
+            if (every > 0 && sim.state.step % every == 0) || sim.state.step == steps || stop {
+                records.save(self.session, sim)?;
+                records.follow(sim)?;
+            }
+            if stop && sim.state.step < steps {
+                self.bar.abandon();
+                let why = format!("interrupted after step {}", sim.state.step);
+                records.finish(sim, "interrupted", Some(why))?;
+                anyhow::bail!(
+                    "interrupted after step {}; the state is saved in {}: continue with {}",
+                    sim.state.step,
+                    records.dir.display(),
+                    self.hint
+                );
+            }
+            if sim.state.step >= steps {
+                return Ok(());
+            }
+            step = sim.advance(self.session);
+        }
+    }
+
+    /// A step's line: on the progress bar, and with `--quiet` on standard error (process 0).
+    fn show(&self, report: &StepReport, root: bool) {
+        let msg = format!(
+            "t = {:.2} us, Newton {}, KSP {}, {}",
+            report.time * 1e6,
+            report.solve.iterations,
+            report.solve.linear_iterations,
+            report.solve.reason_name
+        );
+        if self.quiet && root {
+            eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
+        }
+        self.bar.set_message(msg);
+        self.bar.inc(1);
+    }
+
+    /// A step that failed for good: saves the last converged state and closes the records; the error
+    /// says how to continue.
+    fn failed<const D: usize>(
+        &self,
+        records: &mut Records,
+        sim: &Simulation<D>,
+        e: &StepError,
+    ) -> anyhow::Error {
+        self.bar.abandon();
+        if let Err(saving) = records.save(self.session, sim) {
+            return saving;
+        }
+        let why = format!(
+            "step {} failed: {}",
+            sim.state.step + 1,
+            e.to_string().trim()
+        );
+        if let Err(closing) = records.finish(sim, "failed", Some(why)) {
+            return closing;
+        }
+        anyhow::anyhow!(
+            "{}; the last converged state (step {}, t = {:e} s) is saved in {} with a checkpoint; \
+             to continue (e.g. with other solver options): {}",
+            e.to_string().trim(),
+            sim.state.step,
+            sim.state.time,
+            records.dir.display(),
+            self.hint
+        )
+    }
+}
+
+/// A note on the fallback solver's options that were never used (the fallback did not run, or the option
+/// is misspelled), other than its defaults `defaults`.
+fn report_unused_fallback(session: &SessionGuard, defaults: &[String]) -> Result<()> {
+    let unused_fallback: Vec<String> = petsc::unused_options(session)?
+        .into_iter()
+        .filter(|o| o.starts_with(&format!("-{FALLBACK_PREFIX}")) && !defaults.contains(o))
+        .collect();
+    if !unused_fallback.is_empty() {
+        eprintln!(
+            "note: {} never used: the fallback solver did not run, or the option is misspelled",
+            unused_fallback.join(" ")
+        );
+    }
+    Ok(())
+}
+
+/// Quotes `word` for a POSIX shell when it needs it.
+fn shell_quote(word: &str) -> String {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./=:,+@%".contains(c);
+    if !word.is_empty() && word.chars().all(plain) {
+        word.to_owned()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
+    }
+}
+
+/// The command line as given, quoted for a shell.
+fn command_line(own: &[String], petsc: &[String]) -> String {
+    own.iter()
+        .chain(&petsc[1..])
+        .map(|w| shell_quote(w))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The command that resumes a run started with `own` + `petsc`: the same arguments with `--resume`
+/// instead of `--overwrite` and with the output directory spelled out.
+fn resume_command(own: &[String], petsc: &[String], dir: &Path) -> String {
+    let mut words: Vec<String> = own
+        .iter()
+        .filter(|a| *a != "--overwrite")
+        .cloned()
+        .collect();
+    if !own
+        .iter()
+        .any(|a| a == "--output" || a.starts_with("--output="))
+    {
+        words.push("--output".into());
+        words.push(dir.display().to_string());
+    }
+    if !own.iter().any(|a| a == "--resume") {
+        words.push("--resume".into());
+    }
+    let mut all = vec![words.remove(0)];
+    all.extend(words);
+    command_line(&all, petsc)
+}
+
+/// Why a new run may not write into `dir`.
+fn refusal(dir: &Path, contents: &rundir::Contents, identity: &RunIdentity) -> String {
+    let what = match &contents.record {
+        Some(r) => format!(
+            "the results of {} (config {}, {} at step {} of {})",
+            if r.identity.physics == identity.physics {
+                "an earlier run of the same model"
+            } else {
+                "another run"
+            },
+            r.config_file,
+            r.status,
+            r.steps_done,
+            r.steps_requested
+        ),
+        None => {
+            let n = contents.results.len();
+            format!(
+                "the results of another run ({}{})",
+                contents.results[..n.min(3)].join(", "),
+                if n > 3 {
+                    format!(" and {} more files", n - 3)
+                } else {
+                    String::new()
+                }
+            )
+        }
+    };
+    format!(
+        "{} holds {what}: use --overwrite to replace them, --resume to continue that run, or another --output",
+        dir.display()
+    )
+}
+
+/// Checks that the checkpoint in `dir` can be resumed by a run of `identity` with `steps` steps.
+fn check_resume(dir: &Path, identity: &RunIdentity, steps: usize) -> Result<checkpoint::Header> {
+    let header = checkpoint::read_header(dir).map_err(bad)?;
+    let file = dir.join(checkpoint::FILE);
+    let changes = header.identity.physics_changes(identity);
+    if !changes.is_empty() {
+        return Err(bad(format!(
+            "{}: the checkpoint was written with other physics ({}); --resume may change only the [run] \
+             section (steps, output_every, output_dir, name, petsc_options): start a new run instead",
+            file.display(),
+            changes.join("; ")
+        )));
+    }
+    let done = header.counters.step;
+    if steps <= done {
+        return Err(bad(format!(
+            "{}: the checkpoint is at step {done} and the run asks for {steps} steps, so there is nothing to \
+             do: give --steps N with N > {done} to continue",
+            file.display()
+        )));
+    }
+    if header.identity.version != identity.version {
+        eprintln!(
+            "note: the checkpoint was written by version {}, this is {}",
+            header.identity.version, identity.version
+        );
+    }
+    if header.identity.petsc_options != identity.petsc_options {
+        let shown = |o: &str| {
+            if o.is_empty() {
+                "none".to_owned()
+            } else {
+                format!("`{o}`")
+            }
+        };
+        eprintln!(
+            "note: PETSc options {} at the checkpoint, {} now",
+            shown(&header.identity.petsc_options),
+            shown(&identity.petsc_options)
+        );
+    }
+    Ok(header)
+}
+
+/// Steps (their time steps `taken`) that took less than the nominal time step `dt`.
+fn reduced_steps(taken: &[f64], dt: f64) -> usize {
+    taken.iter().filter(|&&t| t < dt * (1.0 - 1e-9)).count()
+}
+
+/// A sentence when a run whose steps took `taken` reached less than its requested end time (steps x dt)
+/// or took reduced steps.
+fn time_note(taken: &[f64], time: f64, steps: usize, dt: f64) -> Option<String> {
+    let end = steps as f64 * dt;
+    let reduced = reduced_steps(taken, dt);
+    if time >= end * (1.0 - 1e-9) && reduced == 0 {
+        return None;
+    }
+    let smallest = taken.iter().copied().fold(f64::INFINITY, f64::min);
+    let mut note = format!(
+        "the run ended at t = {:.4} us, before its requested end time {:.4} us ({steps} steps of {:.4} us)",
+        time * 1e6,
+        end * 1e6,
+        dt * 1e6
+    );
+    if reduced > 0 {
+        note += &format!(
+            "; {reduced} of {} steps took a reduced time step (down to {:.4} us)",
+            taken.len(),
+            smallest * 1e6
+        );
+    }
+    Some(note)
+}
+
+/// Appends `# note` to the run's history.csv, if it has one (the next rewrite of the history, by a resumed
+/// run, drops it).
+fn append_history_note(dir: &Path, note: &str) -> Result<()> {
+    use std::io::Write as _;
+    let path = dir.join(crate::schema::file::HISTORY);
+    if !path.exists() {
+        return Ok(());
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&path)
+        .with_context(|| format!("{}: appending a note", path.display()))?;
+    writeln!(f, "# {note}").with_context(|| format!("{}: appending a note", path.display()))
+}
+
+/// Final table: steps, time reached, iterations, times, memory, reactions; `note` says that the run ended
+/// before its requested end time.
+fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
+    let rows = out.rows();
+    println!("\n| quantity | value |\n|---|---|");
+    summary_steps(rows, note);
+    summary_costs(rows, wall);
+    summary_results(out);
+}
+
+/// The summary's rows on the steps: how many, the time reached, the iterations, contact solves and points
+/// between processes.
+fn summary_steps(rows: &[StepReport], note: Option<&str>) {
+    let newton: usize = rows.iter().map(|r| r.solve.iterations).sum();
+    let linear: usize = rows.iter().map(|r| r.solve.linear_iterations).sum();
+    let retries: usize = rows.iter().map(|r| r.attempts - 1).sum();
+    let per_step = |n: usize| n as f64 / rows.len().max(1) as f64;
+    println!(
+        "| steps | {} ({} retried with the fallback solver or a smaller dt) |",
+        rows.len(),
+        retries
+    );
+    let time = rows.last().map_or(0.0, |r| r.time);
+    match note {
+        Some(n) => println!("| time reached | **{:.4} us**: {n} |", time * 1e6),
+        None => println!(
+            "| time reached | {:.4} us, the requested end time |",
+            time * 1e6
+        ),
+    }
+    println!(
+        "| Newton iterations | {newton} ({:.2} per step) |",
+        per_step(newton)
+    );
+    println!("| linear iterations | {linear} |");
+    let contact: usize = rows.iter().map(|r| r.contact_solves).sum();
+    if contact > rows.len() {
+        println!(
+            "| contact solves | {contact} ({:.2} per step: SNES solves while the contact active sets and \
+             pin rotations settled) |",
+            per_step(contact)
+        );
+    }
+    let ghosts: usize = rows.iter().map(|r| r.ghosts).sum();
+    if ghosts > 0 {
+        let migrated: usize = rows.iter().map(|r| r.migrated).sum();
+        println!(
+            "| points between processes | {migrated} moved to another process; {:.0} ghost copies per step |",
+            per_step(ghosts)
+        );
+    }
+}
+
+/// The summary's rows on the costs: wall times (`wall` this process's) and peak memory.
+fn summary_costs(rows: &[StepReport], wall: f64) {
+    let assembly: f64 = rows.iter().map(|r| r.wall_assembly).sum();
+    let solve: f64 = rows.iter().map(|r| r.wall_solve - r.wall_assembly).sum();
+    let setup: f64 = rows.iter().map(|r| r.wall_setup).sum();
+    // The steps' times cover the whole run, also the part before a resume; `wall` is this process's.
+    let steps_wall: f64 = rows.iter().map(|r| r.wall_total).sum();
+    println!(
+        "| wall time | {steps_wall:.1} s in the steps (set-up {setup:.1} s, assembly {assembly:.1} s, PETSc solve \
+         {solve:.1} s); {wall:.1} s in this process |"
+    );
+    println!("| peak memory | {:.0} MB |", peak_rss_mb());
+}
+
+/// The summary's rows on the results: final reactions, the crack, the output directory.
+fn summary_results(out: &RunOutput) {
+    if let Some(last) = out.rows().last() {
+        for (name, f) in &last.reactions {
+            let components: Vec<String> = f.iter().map(|v| format!("{v:.4e}")).collect();
+            // A 3D run's reactions are of the whole plate, a 2D run's per mm of thickness.
+            let units = if f.len() == 3 { "N" } else { "N/mm" };
+            println!(
+                "| final reaction `{name}` | ({}) {units} |",
+                components.join(", ")
+            );
+        }
+    }
+    if let Some(c) = out.cracks().last() {
+        let angles: Vec<String> = c
+            .bands
+            .iter()
+            .map(|b| format!("{:.0} deg", b.angle_degrees))
+            .collect();
+        println!(
+            "| crack | {} (length {:.1} mm, bands at {}; criteria in crack.json) |",
+            c.classification,
+            c.length,
+            if angles.is_empty() {
+                "-".to_owned()
+            } else {
+                angles.join(", ")
+            }
+        );
+    }
+    println!("| output | {} |", out.dir().display());
+}
+
+/// Peak resident set size of this process (MB), from /proc.
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+            })
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn words(s: &[&str]) -> Vec<String> {
+        s.iter().map(|w| w.to_string()).collect()
+    }
+
+    #[test]
+    fn the_resume_command_repeats_the_invocation_with_resume_and_the_output() {
+        let own = words(&[
+            "target/release/mpm-concrete",
+            "run",
+            "configs/ct-demo.toml",
+            "--steps",
+            "20",
+            "--overwrite",
+            "--set",
+            "ct.material={ model = \"microplane\", preset = \"paper\" }",
+        ]);
+        let petsc = words(&["prog", "-ksp_type", "gmres"]);
+        assert_eq!(
+            resume_command(&own, &petsc, Path::new("runs/ct demo")),
+            "target/release/mpm-concrete run configs/ct-demo.toml --steps 20 --set \
+             'ct.material={ model = \"microplane\", preset = \"paper\" }' --output 'runs/ct demo' --resume \
+             -ksp_type gmres"
+        );
+        let own = words(&["mpm-concrete", "run", "c.toml", "--output", "d", "--resume"]);
+        assert_eq!(
+            resume_command(&own, &words(&["p"]), Path::new("d")),
+            "mpm-concrete run c.toml --output d --resume"
+        );
+        assert_eq!(shell_quote("it's"), "'it'\\''s'");
+    }
+
+    #[test]
+    fn the_time_note_tells_an_early_end_and_reduced_steps() {
+        let full = [1e-6; 4];
+        assert_eq!(time_note(&full, 4e-6, 4, 1e-6), None);
+        let halved = [1e-6, 0.5e-6, 0.25e-6, 0.5e-6];
+        let note = time_note(&halved, 2.25e-6, 4, 1e-6).expect("note");
+        assert!(
+            note.contains("t = 2.2500 us, before its requested end time 4.0000 us")
+                && note.contains("3 of 4 steps took a reduced time step (down to 0.2500 us)"),
+            "{note}"
+        );
+        assert!(time_note(&full[..2], 2e-6, 4, 1e-6).is_some());
+    }
+}
