@@ -1,0 +1,401 @@
+//! The sections of what is simulated besides the CT generator: `[[body]]`, `[[constraint]]`, `[[load]]`
+//! and `[[rigid_body]]` (with its `contact`), with their checks and the rule for the names that become
+//! history.csv columns.
+
+use super::{Check, ConfigError, density_ok, finite, time_ok};
+use crate::particles::Geometry;
+use crate::material::MaterialConfig;
+use serde::Deserialize;
+
+/// `[[body]]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodySection {
+    /// Name.
+    pub name: String,
+    /// Density (t/mm^3), e.g. 2.4e-9 for concrete.
+    pub density: f64,
+    /// Geometry: union of include regions minus exclude regions.
+    pub geometry: Geometry,
+    /// Constitutive law.
+    pub material: MaterialConfig,
+    /// Initial velocity (mm/s).
+    #[serde(default)]
+    pub initial_velocity: [f64; 2],
+    /// The body has its own velocity field on the grid and meets the specimen (the first body) only
+    /// through frictionless unilateral contact; default false: it shares the specimen's grid nodes
+    /// (bonded where they touch).
+    #[serde(default)]
+    pub own_field: bool,
+}
+
+/// Motion of one component: "free", "fixed" or `{ velocity = v }` (mm/s).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum MotionSpec {
+    /// "free" or "fixed".
+    Keyword(Keyword),
+    /// Prescribed velocity.
+    Velocity {
+        /// mm/s.
+        velocity: f64,
+    },
+}
+
+/// Keywords of [`MotionSpec`].
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Keyword {
+    /// Not constrained.
+    Free,
+    /// Zero velocity.
+    Fixed,
+}
+
+impl From<Keyword> for MotionSpec {
+    fn from(k: Keyword) -> Self {
+        MotionSpec::Keyword(k)
+    }
+}
+
+impl Default for MotionSpec {
+    fn default() -> Self {
+        MotionSpec::Keyword(Keyword::Free)
+    }
+}
+
+impl MotionSpec {
+    /// As the solver's motion.
+    pub fn motion(self) -> crate::boundary::Motion {
+        use crate::boundary::Motion;
+        match self {
+            MotionSpec::Keyword(Keyword::Free) => Motion::Free,
+            MotionSpec::Keyword(Keyword::Fixed) => Motion::Velocity(0.0),
+            MotionSpec::Velocity { velocity } => Motion::Velocity(velocity),
+        }
+    }
+}
+
+/// `[[constraint]]`: grid nodes in a box.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConstraintSection {
+    /// Name (reaction-force columns).
+    pub name: String,
+    /// Box lower-left corner (mm).
+    pub min: [f64; 2],
+    /// Box upper-right corner (mm).
+    pub max: [f64; 2],
+    /// x component.
+    #[serde(default)]
+    pub x: MotionSpec,
+    /// y component.
+    #[serde(default)]
+    pub y: MotionSpec,
+    /// Prescribed velocities rise linearly from zero over this time (s); default 0 (a step).
+    #[serde(default)]
+    pub rise_time: f64,
+}
+
+/// `[[load]]`: a force distributed over the grid nodes on a segment as a uniform traction.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSection {
+    /// Name (history columns `NAME_ux, NAME_uy, NAME_fx, NAME_fy`).
+    pub name: String,
+    /// Start of the segment (mm); the segment lies on a grid line (horizontal or vertical).
+    pub from: [f64; 2],
+    /// End of the segment (mm).
+    pub to: [f64; 2],
+    /// Resultant force (N per mm thickness).
+    pub force: [f64; 2],
+    /// The force rises linearly from zero over this time (s); default 0 (applied at once).
+    #[serde(default)]
+    pub rise_time: f64,
+}
+
+/// `[[rigid_body]]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigidBodySection {
+    /// Name (reaction-force columns).
+    pub name: String,
+    /// Geometry of the body.
+    pub geometry: Geometry,
+    /// x component.
+    #[serde(default)]
+    pub x: MotionSpec,
+    /// y component.
+    #[serde(default)]
+    pub y: MotionSpec,
+    /// Prescribed velocities rise linearly from zero over this time (s); default 0 (a step).
+    #[serde(default)]
+    pub rise_time: f64,
+    /// Unilateral contact with the specimen instead of gluing (default: glued).
+    #[serde(default)]
+    pub contact: Option<ContactSection>,
+    /// The `[[body]]` with `own_field = true` it holds or pushes (by name); default: the specimen and
+    /// the bodies that share its nodes.
+    #[serde(default)]
+    pub acts_on: Option<String>,
+}
+
+/// `contact = { normal = [nx, ny], friction = mu, pin = [x, y] }` of a `[[rigid_body]]`: the device pushes
+/// on the specimen through its flat face with the outward normal `normal` (from the device into the
+/// specimen; normalised), never pulls, with Coulomb friction `friction` (-, default 0), and, with `pin`
+/// (mm), is driven at the pin and turns freely about it.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSection {
+    /// Outward normal of the contact face (from the device into the specimen).
+    pub normal: [f64; 2],
+    /// Coulomb friction coefficient (-), default 0 (frictionless).
+    #[serde(default)]
+    pub friction: f64,
+    /// Pin position at t = 0 (mm); none: the device only translates.
+    #[serde(default)]
+    pub pin: Option<[f64; 2]>,
+}
+
+/// Checks the `[[body]]` sections; `ct`: the run has a `[ct]` section (whose bodies' names are taken, and
+/// whose concrete is the specimen).
+pub(super) fn validate_bodies(
+    bodies: &[BodySection],
+    ct: bool,
+    c: Check,
+) -> Result<(), ConfigError> {
+    for (i, b) in bodies.iter().enumerate() {
+        if b.name.trim().is_empty() {
+            return Err(c.bad(&format!("body[{i}].name"), "\"\"".into(), "a name"));
+        }
+        // Names are unique (`acts_on` refers to them), and [ct] names its own bodies.
+        let reserved: &[&str] = if ct {
+            &["concrete", "loading_insert", "support_insert"]
+        } else {
+            &[]
+        };
+        if reserved.contains(&b.name.as_str()) || bodies[..i].iter().any(|o| o.name == b.name) {
+            return Err(c.bad(
+                &format!("body[{i}].name"),
+                format!("{:?}", b.name),
+                &format!("a name no other body has (with [ct] also not one of {reserved:?})"),
+            ));
+        }
+        if !density_ok(b.density) {
+            return Err(c.bad(
+                &format!("body[{i}].density"),
+                b.density.to_string(),
+                "a density > 0 (t/mm^3)",
+            ));
+        }
+        if !finite(&b.initial_velocity) {
+            return Err(c.bad(
+                &format!("body[{i}].initial_velocity"),
+                format!("{:?}", b.initial_velocity),
+                "finite components (mm/s)",
+            ));
+        }
+        b.geometry.validate().map_err(|e| {
+            c.bad(
+                &format!("body[{i}].geometry"),
+                String::new(),
+                &e.to_string(),
+            )
+        })?;
+        b.material.build().map_err(|e| {
+            c.bad(
+                &format!("body[{i}].material"),
+                String::new(),
+                &e.to_string(),
+            )
+        })?;
+        if b.own_field && i == 0 && !ct {
+            return Err(c.bad(
+                "body[0].own_field",
+                "true".into(),
+                "false: the first body is the specimen, which the bodies with their own field meet \
+                 in contact",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks the motions `x` and `y` of the section `field` and the time `rise_time` over which they rise.
+fn validate_motion(
+    c: Check,
+    field: &str,
+    [x, y]: [&MotionSpec; 2],
+    rise_time: f64,
+) -> Result<(), ConfigError> {
+    for (axis, m) in [("x", x), ("y", y)] {
+        let ok = match m {
+            MotionSpec::Velocity { velocity } => velocity.is_finite(),
+            MotionSpec::Keyword(_) => true,
+        };
+        if !ok {
+            return Err(c.bad(
+                &format!("{field}.{axis}"),
+                format!("{m:?}"),
+                "\"free\", \"fixed\" or { velocity = v } with a finite v (mm/s)",
+            ));
+        }
+    }
+    if !time_ok(rise_time) {
+        return Err(c.bad(
+            &format!("{field}.rise_time"),
+            rise_time.to_string(),
+            "a time >= 0 (s)",
+        ));
+    }
+    Ok(())
+}
+
+impl ConstraintSection {
+    /// Checks the `i`-th `[[constraint]]`.
+    pub(super) fn validate(&self, c: Check, i: usize) -> Result<(), ConfigError> {
+        let field = format!("constraint[{i}]");
+        if !finite(&self.min) || !finite(&self.max) || (0..2).any(|k| self.min[k] > self.max[k]) {
+            return Err(c.bad(
+                &format!("{field}.min/max"),
+                format!("{:?}/{:?}", self.min, self.max),
+                "finite corners with min <= max in both directions (mm)",
+            ));
+        }
+        validate_motion(c, &field, [&self.x, &self.y], self.rise_time)
+    }
+}
+
+impl RigidBodySection {
+    /// Checks the `i`-th `[[rigid_body]]` of a run with the deformable bodies `bodies`.
+    pub(super) fn validate(
+        &self,
+        c: Check,
+        i: usize,
+        bodies: &[BodySection],
+    ) -> Result<(), ConfigError> {
+        let field = format!("rigid_body[{i}]");
+        if let Some(name) = &self.acts_on
+            && !bodies.iter().any(|b| b.own_field && &b.name == name)
+        {
+            let own: Vec<&str> = bodies
+                .iter()
+                .filter(|b| b.own_field)
+                .map(|b| b.name.as_str())
+                .collect();
+            return Err(c.bad(
+                &format!("{field}.acts_on"),
+                format!("{name:?}"),
+                &format!("the name of a [[body]] with own_field = true: {own:?}"),
+            ));
+        }
+        self.geometry
+            .validate()
+            .map_err(|e| c.bad(&format!("{field}.geometry"), String::new(), &e.to_string()))?;
+        validate_motion(c, &field, [&self.x, &self.y], self.rise_time)?;
+        match &self.contact {
+            Some(contact) => contact.validate(c, &field, [&self.x, &self.y]),
+            None => Ok(()),
+        }
+    }
+}
+
+impl ContactSection {
+    /// Checks the `contact` of the rigid body `field` that moves with `motion` (x, y).
+    fn validate(&self, c: Check, field: &str, motion: [&MotionSpec; 2]) -> Result<(), ConfigError> {
+        let norm = (self.normal[0] * self.normal[0] + self.normal[1] * self.normal[1]).sqrt();
+        if !(finite(&self.normal) && norm > 0.0) {
+            return Err(c.bad(
+                &format!("{field}.contact.normal"),
+                format!("{:?}", self.normal),
+                "a finite non-zero vector, the outward normal of the contact face (from the \
+                 device into the specimen)",
+            ));
+        }
+        if !(self.friction.is_finite() && self.friction >= 0.0) {
+            return Err(c.bad(
+                &format!("{field}.contact.friction"),
+                self.friction.to_string(),
+                "a Coulomb coefficient >= 0 (0 = frictionless)",
+            ));
+        }
+        if self.pin.is_some_and(|p| !finite(&p)) {
+            return Err(c.bad(
+                &format!("{field}.contact.pin"),
+                format!("{:?}", self.pin),
+                "a finite point (mm)",
+            ));
+        }
+        for (axis, m) in [("x", motion[0]), ("y", motion[1])] {
+            if !matches!(
+                m,
+                MotionSpec::Velocity { .. } | MotionSpec::Keyword(Keyword::Fixed)
+            ) {
+                return Err(c.bad(
+                    &format!("{field}.{axis}"),
+                    format!("{m:?}"),
+                    "\"fixed\" or { velocity = v }: a device in contact is driven in both \
+                     directions (a free component would need the device's mass)",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl LoadSection {
+    /// Checks the `i`-th `[[load]]`.
+    pub(super) fn validate(&self, c: Check, i: usize) -> Result<(), ConfigError> {
+        let axis_aligned = self.from[0] == self.to[0] || self.from[1] == self.to[1];
+        if !finite(&self.from)
+            || !finite(&self.to)
+            || !finite(&self.force)
+            || !axis_aligned
+            || self.from == self.to
+        {
+            return Err(c.bad(
+                &format!("load[{i}] ({}).from/to/force", self.name),
+                format!("{:?}/{:?}/{:?}", self.from, self.to, self.force),
+                "finite values and a horizontal or vertical segment of non-zero length (mm)",
+            ));
+        }
+        if !time_ok(self.rise_time) {
+            return Err(c.bad(
+                &format!("load[{i}] ({}).rise_time", self.name),
+                self.rise_time.to_string(),
+                "a time >= 0 (s)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Checks the names of the constraint sets, rigid bodies and loads, which name history.csv columns:
+/// `sets` holds (section, name) in the order of the file ([ct] first with its two plates).
+pub(super) fn validate_names(c: Check, sets: &[(String, &str)]) -> Result<(), ConfigError> {
+    for (k, (field, name)) in sets.iter().enumerate() {
+        let column_safe = |ch: char| ch.is_ascii_alphanumeric() || "_-.".contains(ch);
+        if name.is_empty() || !name.chars().all(column_safe) {
+            return Err(c.bad(
+                &format!("{field}.name"),
+                format!("{name:?}"),
+                "letters, digits, _, - or . (it names columns of history.csv)",
+            ));
+        }
+        if let Some((other, _)) = sets[..k].iter().find(|(_, n)| n == name) {
+            return Err(c.bad(
+                &format!("{field}.name"),
+                format!("{name:?}"),
+                &format!(
+                    "a name not used by {other} (the names of constraints, rigid bodies and loads are history.csv columns{})",
+                    if other == "ct" {
+                        "; [ct] uses loading_plate and support_plate"
+                    } else {
+                        ""
+                    }
+                ),
+            ));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,279 @@
+//! The run-control sections: `[run]`, `[time]`, `[grid]`, `[shape]` and `[extrusion]`, with their checks.
+
+use super::{Check, ConfigError};
+use crate::model::{InitialAcceleration, Method};
+use crate::shape::ShapeKind;
+use serde::Deserialize;
+use std::path::PathBuf;
+
+/// `[extrusion]`: the set-up of the file, read as a plane (x, y) one, extruded along z to a plate of
+/// finite thickness with free faces and run in three dimensions (docs/theory.md, "Three dimensions").
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtrusionSection {
+    /// Plate thickness (mm), `0 <= z <= thickness`; a multiple of `grid.cell_size`.
+    pub thickness: f64,
+    /// The z (mm) of the section on which the crack is measured and the damage maps are drawn (the layer
+    /// of points seeded nearest it); default: the mid-plane.
+    pub section_z: Option<f64>,
+}
+
+/// `[run]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSection {
+    /// Name of the run (titles, file names).
+    pub name: String,
+    /// Number of time steps.
+    pub steps: usize,
+    /// Output directory (relative to the working directory); default `runs/<name>`.
+    pub output_dir: Option<PathBuf>,
+    /// Write point fields (HDF5) and damage maps (PNG) every this many steps (0: only at the end).
+    #[serde(default = "default_output_every")]
+    pub output_every: usize,
+    /// PETSc options applied as defaults; options given on the command line win.
+    #[serde(default)]
+    pub petsc_options: String,
+}
+
+fn default_output_every() -> usize {
+    100
+}
+
+/// `[time]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeSection {
+    /// Time step (s), > 0.
+    #[serde(default = "default_dt")]
+    pub dt: f64,
+    /// Smallest time step of the retry halving (s); default dt/64.
+    pub dt_min: Option<f64>,
+    /// Newmark beta, in (0, 0.5].
+    #[serde(default = "default_beta")]
+    pub beta: f64,
+    /// Newmark gamma, in [0.5, 1].
+    #[serde(default = "default_gamma")]
+    pub gamma: f64,
+    /// Static equilibrium each step (no inertia).
+    #[serde(default)]
+    pub quasi_static: bool,
+    /// Acceleration of a dynamic run at t = 0: "consistent" (default, `M a_0 = f_ext - f_int`) or "zero".
+    #[serde(default)]
+    pub initial_acceleration: InitialAcceleration,
+}
+
+fn default_dt() -> f64 {
+    1e-6
+}
+fn default_beta() -> f64 {
+    0.25
+}
+fn default_gamma() -> f64 {
+    0.5
+}
+
+impl Default for TimeSection {
+    fn default() -> Self {
+        Self {
+            dt: default_dt(),
+            dt_min: None,
+            beta: default_beta(),
+            gamma: default_gamma(),
+            quasi_static: false,
+            initial_acceleration: InitialAcceleration::default(),
+        }
+    }
+}
+
+/// `[grid]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSection {
+    /// Cell size h (mm), > 0.
+    pub cell_size: f64,
+    /// Empty cells around the bodies' bounding box.
+    #[serde(default = "default_margin")]
+    pub margin_cells: usize,
+    /// Nodes whose mass is at most this fraction of the largest nodal mass carry no unknowns (they
+    /// only touch the fringe of a particle domain and would make the system nearly singular).
+    #[serde(default = "default_mass_tolerance")]
+    pub mass_tolerance: f64,
+}
+
+fn default_mass_tolerance() -> f64 {
+    1e-6
+}
+
+fn default_margin() -> usize {
+    3
+}
+
+/// `[shape]`
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeSection {
+    /// Interpolator: "linear", "gimp", "cpdi1" (default), "cpdi2", "bspline2".
+    #[serde(default = "default_kind")]
+    pub kind: ShapeKind,
+    /// Material points per cell and direction.
+    #[serde(default = "default_ppc")]
+    pub points_per_cell: usize,
+    /// Discretisation: "mpm" (default; grid reset each step) or "fem" (points fixed at the Gauss points of
+    /// the grid cells, bilinear elements, no grid reset; requires `kind = "linear"`).
+    #[serde(default)]
+    pub method: Method,
+}
+
+fn default_kind() -> ShapeKind {
+    ShapeKind::Cpdi1
+}
+fn default_ppc() -> usize {
+    2
+}
+
+impl Default for ShapeSection {
+    fn default() -> Self {
+        Self {
+            kind: default_kind(),
+            points_per_cell: default_ppc(),
+            method: Method::default(),
+        }
+    }
+}
+
+impl RunSection {
+    /// Checks `[run]`.
+    pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
+        let name = &self.name;
+        if name.trim().is_empty()
+            || name.contains(['/', '\\'])
+            || name == "."
+            || name == ".."
+            || name.chars().any(char::is_control)
+        {
+            return Err(c.bad(
+                "run.name",
+                format!("{name:?}"),
+                "a non-empty name without / or \\ (it names the output directory runs/<name>)",
+            ));
+        }
+        if self.steps == 0 {
+            return Err(c.bad("run.steps", "0".into(), "at least one step"));
+        }
+        Ok(())
+    }
+}
+
+impl TimeSection {
+    /// Checks `[time]`.
+    pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(c.bad("time.dt", self.dt.to_string(), "a time step > 0 (s)"));
+        }
+        if let Some(m) = self.dt_min
+            && !(m > 0.0 && m <= self.dt)
+        {
+            return Err(c.bad("time.dt_min", m.to_string(), "0 < dt_min <= dt (s)"));
+        }
+        if !(self.beta > 0.0 && self.beta <= 0.5) {
+            return Err(c.bad(
+                "time.beta",
+                self.beta.to_string(),
+                "Newmark beta in (0, 0.5]; 0 (explicit) is not supported",
+            ));
+        }
+        if !(0.5..=1.0).contains(&self.gamma) {
+            return Err(c.bad(
+                "time.gamma",
+                self.gamma.to_string(),
+                "Newmark gamma in [0.5, 1]",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl GridSection {
+    /// Checks `[grid]`.
+    pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
+        if !(self.cell_size.is_finite() && self.cell_size > 0.0) {
+            return Err(c.bad(
+                "grid.cell_size",
+                self.cell_size.to_string(),
+                "a cell size > 0 (mm)",
+            ));
+        }
+        if !(0.0..1e-2).contains(&self.mass_tolerance) {
+            return Err(c.bad(
+                "grid.mass_tolerance",
+                self.mass_tolerance.to_string(),
+                "a fraction in [0, 0.01)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl ShapeSection {
+    /// Checks `[shape]`.
+    pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
+        if self.points_per_cell == 0 || self.points_per_cell > 8 {
+            return Err(c.bad(
+                "shape.points_per_cell",
+                self.points_per_cell.to_string(),
+                "1 to 8 points per direction",
+            ));
+        }
+        if self.method == Method::Fem {
+            if self.kind != ShapeKind::Linear {
+                return Err(c.bad(
+                    "shape.kind",
+                    self.kind.name().into(),
+                    "\"linear\" with method = \"fem\" (bilinear elements)",
+                ));
+            }
+            if !(1..=3).contains(&self.points_per_cell) {
+                return Err(c.bad(
+                    "shape.points_per_cell",
+                    self.points_per_cell.to_string(),
+                    "1, 2 or 3 Gauss points per direction with method = \"fem\"",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ExtrusionSection {
+    /// Checks `[extrusion]` of a run on a grid of cell size `h` (mm) with the discretisation `method`.
+    pub(super) fn validate(&self, c: Check, h: f64, method: Method) -> Result<(), ConfigError> {
+        let layers = self.thickness / h;
+        if !(self.thickness.is_finite() && self.thickness > 0.0)
+            || (layers - layers.round()).abs() > 1e-9 * layers.max(1.0)
+        {
+            return Err(c.bad(
+                "extrusion.thickness",
+                self.thickness.to_string(),
+                &format!("a plate thickness > 0 (mm), a multiple of grid.cell_size = {h}"),
+            ));
+        }
+        if method == Method::Fem {
+            return Err(c.bad(
+                "shape.method",
+                "\"fem\"".into(),
+                "\"mpm\" with [extrusion] (the FEM mode is plane only)",
+            ));
+        }
+        if let Some(z) = self.section_z
+            && !(0.0..=self.thickness).contains(&z)
+        {
+            return Err(c.bad(
+                "extrusion.section_z",
+                z.to_string(),
+                &format!("a z within the plate, 0 to {} (mm)", self.thickness),
+            ));
+        }
+        Ok(())
+    }
+}

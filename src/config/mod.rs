@@ -1,0 +1,330 @@
+//! Run configuration (TOML), one section per concept of the method; unknown fields are rejected.
+//! Units: mm, s, N, MPa, t (tonne); density in t/mm^3, velocity in mm/s.
+//!
+//! ```toml
+//! [run]                 # name, steps, output cadence, PETSc options (the command line wins)
+//! [time]                # dt, Newmark beta/gamma, quasi-static, dt_min, initial acceleration
+//! [grid]                # cell size, margin cells
+//! [shape]               # interpolator, points per cell
+//! [ct]                  # optional: the compact tension specimen generator (ct.rs; built by scenario.rs)
+//! [[body]]              # deformable bodies: geometry, density, material, initial velocity
+//! [[constraint]]        # grid nodes in a box, per component: "free", "fixed" or { velocity = v }
+//! [[rigid_body]]        # rigid bodies of particles moving with a prescribed velocity
+//! ```
+//!
+//! Every error names the file, the field and what is allowed. Each section checks itself (`validate`
+//! beside its type: control.rs for run, time, grid, shape and extrusion, bodies.rs for bodies,
+//! constraints, rigid bodies and loads, ct.rs for the CT specimen); [`RunConfig`] checks what spans
+//! sections (the names of history.csv columns, a run without bodies).
+
+#[macro_use]
+mod choice;
+mod bodies;
+mod control;
+mod ct;
+#[cfg(test)]
+mod tests;
+
+pub use bodies::{
+    BodySection, ConstraintSection, ContactSection, Keyword, LoadSection, MotionSpec,
+    RigidBodySection,
+};
+pub use choice::Choice;
+pub use control::{ExtrusionSection, GridSection, RunSection, ShapeSection, TimeSection};
+pub use ct::{CtSection, LoadIntroduction, NotchTip};
+
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A configuration error: file, field and what is allowed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// File name.
+        file: String,
+        /// I/O error.
+        source: std::io::Error,
+    },
+    /// TOML syntax or schema error (serde names the field and the expected type).
+    #[error("{file}: {message}")]
+    Parse {
+        /// File name.
+        file: String,
+        /// Parser message with line and column.
+        message: String,
+    },
+    /// A value out of its range.
+    #[error("{file}: field `{field}` = {value}: {allowed}")]
+    Invalid {
+        /// File name.
+        file: String,
+        /// Dotted field name.
+        field: String,
+        /// Offending value.
+        value: String,
+        /// What is allowed.
+        allowed: String,
+    },
+}
+
+/// Builds the errors of one file's checks.
+#[derive(Clone, Copy)]
+struct Check<'a> {
+    /// The file (with its overrides) as errors name it.
+    file: &'a str,
+}
+
+impl Check<'_> {
+    /// The error: `field` = `value` is not allowed; `allowed` says what is.
+    fn bad(self, field: &str, value: String, allowed: &str) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.file.to_owned(),
+            field: field.to_owned(),
+            value,
+            allowed: allowed.to_owned(),
+        }
+    }
+}
+
+/// All components finite.
+fn finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// A time (s) >= 0.
+fn time_ok(t: f64) -> bool {
+    t.is_finite() && t >= 0.0
+}
+
+/// A density (t/mm^3) > 0.
+fn density_ok(d: f64) -> bool {
+    d.is_finite() && d > 0.0
+}
+
+/// The whole run configuration.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunConfig {
+    /// Run control and output.
+    pub run: RunSection,
+    /// Time integration.
+    #[serde(default)]
+    pub time: TimeSection,
+    /// Background grid.
+    pub grid: GridSection,
+    /// Interpolation.
+    #[serde(default)]
+    pub shape: ShapeSection,
+    /// Body force per unit mass (mm/s^2), e.g. [0, -9810] for gravity.
+    #[serde(default)]
+    pub body_force: [f64; 2],
+    /// Quasi-static runs ramp the body force over this time (s).
+    #[serde(default)]
+    pub body_force_ramp: f64,
+    /// Compact tension specimen generator.
+    pub ct: Option<CtSection>,
+    /// Deformable bodies.
+    #[serde(default)]
+    pub body: Vec<BodySection>,
+    /// Node-box constraints.
+    #[serde(default)]
+    pub constraint: Vec<ConstraintSection>,
+    /// Rigid bodies.
+    #[serde(default)]
+    pub rigid_body: Vec<RigidBodySection>,
+    /// Loads (`[[load]]`).
+    #[serde(default)]
+    pub load: Vec<LoadSection>,
+    /// The plane set-up extruded to a plate and run in 3D (`[extrusion]`); absent: plane strain.
+    pub extrusion: Option<ExtrusionSection>,
+}
+
+/// How errors name a configuration file read with `overrides`: `configs/x.toml (with --set a=1)`.
+pub fn source_label(file: &str, overrides: &[String]) -> String {
+    if overrides.is_empty() {
+        return file.to_owned();
+    }
+    let sets: Vec<String> = overrides.iter().map(|o| format!("--set {o}")).collect();
+    format!("{file} (with {})", sets.join(" "))
+}
+
+/// A TOML error on one line: the parser's message, the table it is in and, with `position`, the line and
+/// column in `text`.
+fn toml_message(e: &toml::de::Error, text: &str, position: bool) -> String {
+    let mut message = e.message().trim().replace('\n', " ");
+    if let Some(before) = e.span().and_then(|span| text.get(..span.start)) {
+        if let Some(table) = before
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('['))
+        {
+            message += &format!(" (in {table})");
+        }
+        if position {
+            let line = before.matches('\n').count() + 1;
+            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            message = format!("line {line}, column {column}: {message}");
+        }
+    }
+    message
+}
+
+impl RunConfig {
+    /// Reads and validates a configuration file.
+    pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        Self::from_str_named(&text, &file)
+    }
+
+    /// Reads a configuration file, applies `key=value` overrides (dotted keys into tables, values in TOML
+    /// syntax, e.g. `shape.method="fem"` or `grid.cell_size=2.5`; a bare word is taken as a string) and
+    /// validates the result. Returns the configuration and its effective text: the file with the
+    /// overrides applied, in canonical TOML (sorted keys, no comments), the same for every spelling of
+    /// the same configuration.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<(Self, String), ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        let parse_err = |file: &str, message: String| ConfigError::Parse {
+            file: file.to_owned(),
+            message,
+        };
+        if overrides.is_empty() {
+            // Parse the file itself first, so that errors point at its lines.
+            let cfg = Self::from_str_named(&text, &file)?;
+            let table: toml::Table = toml::from_str(&text)
+                .map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
+            let canonical = toml::to_string(&table).map_err(|e| parse_err(&file, e.to_string()))?;
+            return Ok((cfg, canonical));
+        }
+        let mut table: toml::Table =
+            toml::from_str(&text).map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
+        for o in overrides {
+            let (key, value) = o.split_once('=').ok_or_else(|| {
+                parse_err(
+                    &file,
+                    format!("--set {o}: expected key=value (e.g. grid.cell_size=2.5)"),
+                )
+            })?;
+            let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+                Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
+                Err(_) => toml::Value::String(value.trim().into()),
+            };
+            let keys: Vec<&str> = key.trim().split('.').collect();
+            let mut t = &mut table;
+            for k in &keys[..keys.len() - 1] {
+                t = t
+                    .entry(k.to_string())
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                    .as_table_mut()
+                    .ok_or_else(|| parse_err(&file, format!("--set {o}: `{k}` is not a table")))?;
+            }
+            t.insert(keys[keys.len() - 1].to_string(), value);
+        }
+        let named = source_label(&file, overrides);
+        let canonical = toml::to_string(&table).map_err(|e| parse_err(&named, e.to_string()))?;
+        // Lines of the canonical text mean nothing to the user: name the table instead.
+        let cfg = Self::parse(&canonical, &named, false)?;
+        Ok((cfg, canonical))
+    }
+
+    /// Parses and validates configuration text; `file` names it in errors.
+    pub fn from_str_named(text: &str, file: &str) -> Result<Self, ConfigError> {
+        Self::parse(text, file, true)
+    }
+
+    /// As [`RunConfig::from_str_named`]; `position`: errors give the line and column in `text`.
+    fn parse(text: &str, file: &str, position: bool) -> Result<Self, ConfigError> {
+        let cfg: RunConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
+            message: toml_message(&e, text, position),
+        })?;
+        cfg.validate(file)?;
+        Ok(cfg)
+    }
+
+    /// Checks every section, then what spans sections.
+    fn validate(&self, file: &str) -> Result<(), ConfigError> {
+        let c = Check { file };
+        self.run.validate(c)?;
+        self.time.validate(c)?;
+        self.grid.validate(c)?;
+        self.shape.validate(c)?;
+        if let Some(e) = &self.extrusion {
+            e.validate(c, self.grid.cell_size, self.shape.method)?;
+        }
+        if !finite(&self.body_force) {
+            return Err(c.bad(
+                "body_force",
+                format!("{:?}", self.body_force),
+                "finite components (mm/s^2)",
+            ));
+        }
+        if !time_ok(self.body_force_ramp) {
+            return Err(c.bad(
+                "body_force_ramp",
+                self.body_force_ramp.to_string(),
+                "a time >= 0 (s)",
+            ));
+        }
+        bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
+        for (i, s) in self.constraint.iter().enumerate() {
+            s.validate(c, i)?;
+        }
+        for (i, rb) in self.rigid_body.iter().enumerate() {
+            rb.validate(c, i, &self.body)?;
+        }
+        for (i, l) in self.load.iter().enumerate() {
+            l.validate(c, i)?;
+        }
+        match &self.ct {
+            Some(ct) => ct.validate(c, self.grid.cell_size)?,
+            None if self.body.is_empty() => {
+                return Err(c.bad(
+                    "body",
+                    "[]".into(),
+                    "at least one [[body]] (or a [ct] section)",
+                ));
+            }
+            None => {}
+        }
+        bodies::validate_names(c, &self.history_names())
+    }
+
+    /// The sets that name history.csv columns, (section, name) in the order of the file: [ct]'s two
+    /// plates, the constraints, the rigid bodies, the loads.
+    fn history_names(&self) -> Vec<(String, &str)> {
+        let mut sets: Vec<(String, &str)> = Vec::new();
+        if self.ct.is_some() {
+            sets.push(("ct".into(), "loading_plate"));
+            sets.push(("ct".into(), "support_plate"));
+        }
+        for (i, s) in self.constraint.iter().enumerate() {
+            sets.push((format!("constraint[{i}]"), &s.name));
+        }
+        for (i, rb) in self.rigid_body.iter().enumerate() {
+            sets.push((format!("rigid_body[{i}]"), &rb.name));
+        }
+        for (i, l) in self.load.iter().enumerate() {
+            sets.push((format!("load[{i}]"), &l.name));
+        }
+        sets
+    }
+
+    /// Output directory of the run.
+    pub fn output_dir(&self) -> PathBuf {
+        self.run
+            .output_dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("runs").join(&self.run.name))
+    }
+}

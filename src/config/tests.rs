@@ -1,0 +1,204 @@
+//! Tests of the configuration: parsing, overrides, the effective text and the checks' messages.
+
+use super::*;
+use crate::model::{InitialAcceleration, Method};
+use crate::shape::ShapeKind;
+
+/// Every configuration the repository ships parses and validates (a renamed field breaks no run
+/// unnoticed), and the 3D demo is the plane demo extruded.
+#[test]
+fn the_shipped_configurations_are_valid() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).expect("configs/") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            RunConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 10, "{checked} configurations");
+    let plane = RunConfig::from_file(&dir.join("ct-demo.toml")).expect("ct-demo");
+    let plate = RunConfig::from_file(&dir.join("ct-3d-demo.toml")).expect("ct-3d-demo");
+    assert!(plane.extrusion.is_none());
+    assert_eq!(plate.extrusion.map(|e| e.thickness), Some(8.0));
+    assert_eq!(format!("{:?}", plane.ct), format!("{:?}", plate.ct));
+}
+
+const MINIMAL: &str = r#"
+[run]
+name = "t"
+steps = 2
+[grid]
+cell_size = 1.0
+[[body]]
+name = "b"
+density = 1e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [2.0, 2.0] }] }
+material = { model = "svk", youngs_modulus = 100.0, poisson_ratio = 0.2 }
+[[constraint]]
+name = "base"
+min = [-1.0, -0.1]
+max = [3.0, 0.1]
+y = "fixed"
+x = { velocity = 5.0 }
+"#;
+
+#[test]
+fn minimal_config_parses_with_defaults() {
+    let c = RunConfig::from_str_named(MINIMAL, "t.toml").expect("valid");
+    assert_eq!(c.time.beta, 0.25);
+    assert_eq!(c.time.initial_acceleration, InitialAcceleration::Consistent);
+    assert_eq!(c.shape.kind, ShapeKind::Cpdi1);
+    assert_eq!(c.constraint[0].x, MotionSpec::Velocity { velocity: 5.0 });
+    assert_eq!(c.constraint[0].y, MotionSpec::Keyword(Keyword::Fixed));
+}
+
+#[test]
+fn errors_name_file_field_and_allowed_range() {
+    let neg = MINIMAL.replace("[grid]", "[time]\ndt = -1e-6\n[grid]");
+    let e = RunConfig::from_str_named(&neg, "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t.toml") && e.contains("time.dt") && e.contains("> 0"),
+        "{e}"
+    );
+    let typo = MINIMAL.replace("cell_size", "cell_sise");
+    let e = RunConfig::from_str_named(&typo, "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("t.toml") && e.contains("cell_sise"), "{e}");
+    assert!(
+        !e.contains('\n') && e.contains("line 6, column 1") && e.contains("(in [grid])"),
+        "one line with the position and the table: {e}"
+    );
+    let start = MINIMAL.replace("[grid]", "[time]\ninitial_acceleration = \"rest\"\n[grid]");
+    let e = RunConfig::from_str_named(&start, "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t.toml")
+            && e.contains("time.initial_acceleration")
+            && e.contains("\"rest\"")
+            && e.contains("\"consistent\"")
+            && e.contains("\"zero\""),
+        "{e}"
+    );
+    let beta0 = MINIMAL.replace("[grid]", "[time]\nbeta = 0.0\n[grid]");
+    let e = RunConfig::from_str_named(&beta0, "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("time.beta"), "{e}");
+}
+
+#[test]
+fn overrides_and_fem_mode_are_validated() {
+    let path = std::env::temp_dir().join(format!("mpmc-cfg-{}.toml", std::process::id()));
+    std::fs::write(&path, MINIMAL).unwrap();
+    let set = |o: &[&str]| {
+        RunConfig::load(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>()).map(|(c, _)| c)
+    };
+    let c = set(&[
+        "shape.method=fem",
+        "shape.kind=linear",
+        "grid.cell_size=2.5",
+    ])
+    .unwrap();
+    assert_eq!(c.shape.method, Method::Fem);
+    assert_eq!(c.grid.cell_size, 2.5);
+    // FEM needs the bilinear interpolator and 1-3 Gauss points.
+    let e = set(&["shape.method=fem"]).unwrap_err().to_string();
+    assert!(e.contains("shape.kind") && e.contains("linear"), "{e}");
+    let e = set(&["shape.method=\"fe\""]).unwrap_err().to_string();
+    assert!(e.contains("--set") && e.contains("method"), "{e}");
+    let e = set(&["grid.cell_size"]).unwrap_err().to_string();
+    assert!(e.contains("key=value"), "{e}");
+    std::fs::remove_file(&path).ok();
+}
+
+#[test]
+fn effective_text_includes_the_overrides_and_ignores_formatting() {
+    let dir = std::env::temp_dir().join(format!("mpmc-cfg-eff-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (a, b) = (dir.join("a.toml"), dir.join("b.toml"));
+    std::fs::write(&a, MINIMAL).unwrap();
+    let reformatted = format!(
+        "# a comment\n{}",
+        MINIMAL.replace("steps = 2", "steps   =   2 # two")
+    );
+    std::fs::write(&b, reformatted).unwrap();
+    let (_, ta) = RunConfig::load(&a, &[]).unwrap();
+    let (_, tb) = RunConfig::load(&b, &[]).unwrap();
+    assert_eq!(
+        ta, tb,
+        "comments and spacing do not change the effective text"
+    );
+    let (c, tc) = RunConfig::load(&a, &["grid.cell_size=0.5".to_string()]).unwrap();
+    assert_eq!(c.grid.cell_size, 0.5);
+    assert!(tc.contains("cell_size = 0.5"), "{tc}");
+    let again = RunConfig::from_str_named(&tc, "effective").unwrap();
+    assert_eq!(again.grid.cell_size, 0.5);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn non_finite_negative_and_inconsistent_values_are_rejected() {
+    let ct = |extra: &str| {
+        format!(
+            "[run]\nname = \"c\"\nsteps = 1\n[grid]\ncell_size = 4.0\n[ct]\nloading_rate = 4300.0\n\
+             material = {{ model = \"svk\", youngs_modulus = 100.0, poisson_ratio = 0.2 }}\n{extra}"
+        )
+    };
+    let cases: Vec<(String, &str)> = vec![
+        (ct("rise_time = -1e-6"), "ct.rise_time"),
+        (ct("rise_time = nan"), "ct.rise_time"),
+        (ct("load_zone = [-100.0, -50.0]"), "ct.load_zone"),
+        (ct("density = inf"), "ct.density"),
+        (ct("width = nan"), "ct.width"),
+        (
+            MINIMAL.replace("y = \"fixed\"", "y = { velocity = nan }"),
+            "constraint[0].y",
+        ),
+        (
+            MINIMAL.replace("max = [3.0, 0.1]", "max = [inf, 0.1]"),
+            "constraint[0].min/max",
+        ),
+        (
+            MINIMAL.replace(
+                "material = {",
+                "initial_velocity = [nan, 0.0]\nmaterial = {",
+            ),
+            "body[0].initial_velocity",
+        ),
+        (
+            MINIMAL.replace("y = \"fixed\"", "y = \"fixed\"\nrise_time = -1.0"),
+            "constraint[0].rise_time",
+        ),
+        (
+            MINIMAL.replace("max = [2.0, 2.0]", "max = [-2.0, 2.0]"),
+            "body[0].geometry",
+        ),
+        (MINIMAL.replace("name = \"t\"", "name = \"\""), "run.name"),
+        (
+            MINIMAL.replace("name = \"base\"", "name = \"a,b\""),
+            "constraint[0].name",
+        ),
+        (
+            format!(
+                "{MINIMAL}\n[[constraint]]\nname = \"base\"\nmin = [0.0, 0.0]\nmax = [1.0, 1.0]\n"
+            ),
+            "constraint[1].name",
+        ),
+        (format!("body_force = [0.0, nan]\n{MINIMAL}"), "body_force"),
+    ];
+    for (text, field) in cases {
+        let e = RunConfig::from_str_named(&text, "t.toml")
+            .expect_err(field)
+            .to_string();
+        assert!(
+            e.starts_with("t.toml: field `") && e.contains(field),
+            "{field}: {e}"
+        );
+    }
+}
