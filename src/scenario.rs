@@ -3,8 +3,8 @@
 
 use crate::boundary::{NodalLoad, NodeBox, RigidBody};
 use crate::config::{
-    ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction, MotionSpec, NotchTip,
-    RigidBodySection, RunConfig,
+    ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction, LoadSection,
+    MotionSpec, NotchTip, RigidBodySection, RunConfig,
 };
 use crate::contact::Contact;
 use crate::grid::{Grid, GridError};
@@ -12,6 +12,7 @@ use crate::material::{Material, MaterialError};
 use crate::model::{Method, Setup, TimeIntegration};
 use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
 use nalgebra::Vector2;
+use std::collections::HashMap;
 
 /// Failure to build a run from a valid configuration.
 #[derive(Debug, thiserror::Error)]
@@ -111,142 +112,12 @@ struct BodyDef {
 
 /// The run described by `cfg` (options prefix: none, so plain `-snes_*` options apply).
 pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
-    let h = cfg.grid.cell_size;
-    let ppc = cfg.shape.points_per_cell;
-    let seed = match cfg.shape.method {
-        Method::Mpm => Particles::seed,
-        Method::Fem => Particles::seed_gauss,
-    };
     let mut bodies = Vec::new();
-    let mut constraints: Vec<ConstraintSection> = cfg.constraint.clone();
     let mut rigid_defs: Vec<RigidBodySection> = cfg.rigid_body.clone();
     if let Some(ct) = &cfg.ct {
-        let (mid, half) = (0.5 * ct.height, 0.5 * ct.notch_width);
-        let (lower, upper) = (mid - half, mid + half);
-        bodies.push(BodyDef {
-            name: "concrete".into(),
-            geometry: Geometry {
-                include: vec![Region::Rect {
-                    min: [0.0, 0.0],
-                    max: [ct.width, ct.height],
-                }],
-                exclude: notch(ct),
-            },
-            density: ct.density,
-            material: ct
-                .material
-                .build()
-                .map_err(|source| ScenarioError::Material {
-                    what: "ct.material".into(),
-                    source,
-                })?,
-            velocity: Vector2::zeros(),
-            own_field: false,
-        });
-        let [a, b] = ct.load_zone;
-        let [sa, sb] = ct.support_zone.unwrap_or(ct.load_zone);
-        let t = ct.plate_thickness;
-        let (down, up) = if ct.symmetric {
-            (-0.5 * ct.loading_rate, 0.5 * ct.loading_rate)
-        } else {
-            (-ct.loading_rate, 0.0)
-        };
-        let velocity = |v: f64| MotionSpec::Velocity { velocity: v };
-        // The plates' x motion: glued, the loading plate is x-free and the support holds x (a clamp),
-        // both x-free when symmetric (mirror images of each other); in contact both are driven in x at
-        // zero velocity, which holds nothing unless friction acts (mirror-identical either way).
-        let (x_load, x_support) = match (ct.load_introduction, ct.symmetric) {
-            (LoadIntroduction::Glued, false) => (Keyword::Free.into(), Keyword::Fixed.into()),
-            (LoadIntroduction::Glued, true) => (Keyword::Free.into(), Keyword::Free.into()),
-            _ => (velocity(0.0), velocity(0.0)),
-        };
-        // Contact: outward normals from the plates into the concrete; pins on the plates' mid-lines (or at
-        // pin_x), pin_offset into the plates from their faces.
-        let offset = ct.pin_offset.unwrap_or(0.5 * t);
-        let contact = |normal: [f64; 2], pin: [f64; 2]| match ct.load_introduction {
-            LoadIntroduction::Glued => None,
-            LoadIntroduction::Contact => Some(ContactSection {
-                normal,
-                friction: ct.friction,
-                pin: None,
-            }),
-            LoadIntroduction::Pin | LoadIntroduction::Inserts => Some(ContactSection {
-                normal,
-                friction: ct.friction,
-                pin: Some(pin),
-            }),
-        };
-        // Steel inserts on the notch faces, each on its own velocity field; the plates then push on the
-        // inserts' inner faces.
-        let ti = match ct.load_introduction {
-            LoadIntroduction::Inserts => ct.insert_thickness.unwrap_or(0.0),
-            _ => 0.0,
-        };
-        let (load_face, support_face) = (lower + ti, upper - ti);
-        let mut acts_on = [None, None];
-        if ti > 0.0 {
-            for (k, (name, min, max)) in [
-                ("loading_insert", [a, lower], [b, load_face]),
-                ("support_insert", [sa, support_face], [sb, upper]),
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                bodies.push(BodyDef {
-                    name: name.into(),
-                    geometry: Geometry {
-                        include: vec![Region::Rect { min, max }],
-                        exclude: vec![],
-                    },
-                    density: ct.insert_density,
-                    material: ct.insert_material.build().map_err(|source| {
-                        ScenarioError::Material {
-                            what: "ct.insert_material".into(),
-                            source,
-                        }
-                    })?,
-                    velocity: Vector2::zeros(),
-                    own_field: true,
-                });
-                acts_on[k] = Some(name.to_string());
-            }
-        }
-        rigid_defs.push(RigidBodySection {
-            name: "loading_plate".into(),
-            geometry: Geometry {
-                include: vec![Region::Rect {
-                    min: [a, load_face],
-                    max: [b, load_face + t],
-                }],
-                exclude: vec![],
-            },
-            x: x_load,
-            y: velocity(down),
-            rise_time: ct.rise_time,
-            contact: contact(
-                [0.0, -1.0],
-                [ct.pin_x.unwrap_or(0.5 * (a + b)), load_face + offset],
-            ),
-            acts_on: acts_on[0].clone(),
-        });
-        rigid_defs.push(RigidBodySection {
-            name: "support_plate".into(),
-            geometry: Geometry {
-                include: vec![Region::Rect {
-                    min: [sa, support_face - t],
-                    max: [sb, support_face],
-                }],
-                exclude: vec![],
-            },
-            x: x_support,
-            y: velocity(up),
-            rise_time: ct.rise_time,
-            contact: contact(
-                [0.0, 1.0],
-                [ct.pin_x.unwrap_or(0.5 * (sa + sb)), support_face - offset],
-            ),
-            acts_on: acts_on[1].clone(),
-        });
+        let (ct_bodies, plates) = ct_specimen(ct)?;
+        bodies.extend(ct_bodies);
+        rigid_defs.extend(plates);
     }
     for (i, b) in cfg.body.iter().enumerate() {
         bodies.push(BodyDef {
@@ -264,112 +135,12 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             own_field: b.own_field,
         });
     }
-    // Velocity fields: 0 for the specimen and the bodies bonded to it, 1, 2, ... for the bodies with
-    // their own (in order).
-    let mut fields = Vec::with_capacity(bodies.len());
-    let mut field_of = std::collections::HashMap::new();
-    for body in &bodies {
-        let f = if body.own_field {
-            field_of.len() as u16 + 1
-        } else {
-            0
-        };
-        if body.own_field {
-            field_of.insert(body.name.clone(), f);
-        }
-        fields.push(f);
-    }
-    let mut particles = Particles::new();
-    let mut materials = Vec::new();
-    for (tag, body) in bodies.into_iter().enumerate() {
-        let what = format!("body `{}`", body.name);
-        let seeding = Seeding {
-            h,
-            points_per_cell: ppc,
-            density: body.density,
-            body: tag as u16,
-        };
-        let mut p = seed(&body.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
-            what: what.clone(),
-            source,
-        })?;
-        if p.is_empty() {
-            return Err(ScenarioError::NoMaterial { what, h, ppc });
-        }
-        p.v.iter_mut().for_each(|v| *v = body.velocity);
-        particles
-            .append(&p)
-            .map_err(|source| ScenarioError::Seeding { what, source })?;
-        materials.push(body.material);
-    }
-    let (mut rigid, mut rigid_points) = (Vec::new(), Vec::new());
-    for r in &rigid_defs {
-        let what = format!("rigid body `{}`", r.name);
-        let seeding = Seeding {
-            h,
-            points_per_cell: ppc,
-            density: 1.0,
-            body: 0,
-        };
-        let p = seed(&r.geometry, &seeding).map_err(|source| ScenarioError::Seeding {
-            what: what.clone(),
-            source,
-        })?;
-        if p.is_empty() {
-            return Err(ScenarioError::NoMaterial { what, h, ppc });
-        }
-        rigid_points.push(p);
-        rigid.push(RigidBody {
-            name: r.name.clone(),
-            motion: [r.x.motion(), r.y.motion()],
-            rise_time: r.rise_time,
-            field: r
-                .acts_on
-                .as_ref()
-                .and_then(|name| field_of.get(name).copied())
-                .unwrap_or(0),
-            contact: r.contact.as_ref().map(|c| Contact {
-                normal: Vector2::from(c.normal).normalize(),
-                friction: c.friction,
-                pin: c.pin.map(Vector2::from),
-            }),
-        });
-    }
-    let mut lo = Vector2::repeat(f64::INFINITY);
-    let mut hi = Vector2::repeat(f64::NEG_INFINITY);
-    for x in particles
-        .x
-        .iter()
-        .chain(rigid_points.iter().flat_map(|r| r.x.iter()))
-    {
-        lo = lo.inf(x);
-        hi = hi.sup(x);
-    }
-    let grid = Grid::covering(lo, hi, h, cfg.grid.margin_cells.max(1))?;
-    if let Some(c) = constraints
-        .iter()
-        .find(|c| !box_holds_a_node(&grid, c.min, c.max))
-    {
-        let (lo, hi) = (grid.origin(), grid.upper());
-        return Err(ScenarioError::EmptyBox {
-            name: c.name.clone(),
-            min: c.min,
-            max: c.max,
-            lo: [lo.x, lo.y],
-            hi: [hi.x, hi.y],
-            h,
-        });
-    }
-    let boxes = constraints
-        .drain(..)
-        .map(|c| NodeBox {
-            name: c.name,
-            min: Vector2::new(c.min[0], c.min[1]),
-            max: Vector2::new(c.max[0], c.max[1]),
-            motion: [c.x.motion(), c.y.motion()],
-            rise_time: c.rise_time,
-        })
-        .collect();
+    let (fields, field_of) = velocity_fields(&bodies);
+    let seeder = Seeder::new(cfg);
+    let (particles, materials) = seeder.bodies(bodies)?;
+    let (rigid, rigid_points) = seeder.rigid_bodies(&rigid_defs, &field_of)?;
+    let grid = covering_grid(cfg, &particles, &rigid_points)?;
+    let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
     let t = &cfg.time;
     Ok(Setup {
         grid,
@@ -390,20 +161,342 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         boxes,
         rigid,
         rigid_points,
-        loads: cfg
-            .load
-            .iter()
-            .map(|l| NodalLoad {
-                name: l.name.clone(),
-                from: Vector2::from(l.from),
-                to: Vector2::from(l.to),
-                force: Vector2::from(l.force),
-                rise_time: l.rise_time,
-            })
-            .collect(),
+        loads: cfg.load.iter().map(nodal_load).collect(),
         method: cfg.shape.method,
         options_prefix: None,
         mass_tolerance: cfg.grid.mass_tolerance,
         fallback_prefix: None,
     })
+}
+
+/// The CT specimen's deformable bodies (the concrete, and with `load_introduction = "inserts"` the two
+/// steel inserts) and its two plates, the loading plate first.
+fn ct_specimen(ct: &CtSection) -> Result<(Vec<BodyDef>, [RigidBodySection; 2]), ScenarioError> {
+    let mut bodies = vec![BodyDef {
+        name: "concrete".into(),
+        geometry: Geometry {
+            include: vec![Region::Rect {
+                min: [0.0, 0.0],
+                max: [ct.width, ct.height],
+            }],
+            exclude: notch(ct),
+        },
+        density: ct.density,
+        material: ct
+            .material
+            .build()
+            .map_err(|source| ScenarioError::Material {
+                what: "ct.material".into(),
+                source,
+            })?,
+        velocity: Vector2::zeros(),
+        own_field: false,
+    }];
+    let (inserts, faces) = ct_inserts(ct)?;
+    let acts_on = [0, 1].map(|k| inserts.get(k).map(|b: &BodyDef| b.name.clone()));
+    bodies.extend(inserts);
+    Ok((bodies, ct_plates(ct, faces, acts_on)))
+}
+
+/// The steel inserts on the notch faces (none unless `load_introduction = "inserts"`), each on its own
+/// velocity field, and the faces the plates then push on (y of the loading and the support face, mm): the
+/// inserts' inner faces, or the notch faces.
+fn ct_inserts(ct: &CtSection) -> Result<(Vec<BodyDef>, [f64; 2]), ScenarioError> {
+    let (mid, half) = (0.5 * ct.height, 0.5 * ct.notch_width);
+    let (lower, upper) = (mid - half, mid + half);
+    let ti = match ct.load_introduction {
+        LoadIntroduction::Inserts => ct.insert_thickness.unwrap_or(0.0),
+        _ => 0.0,
+    };
+    let (load_face, support_face) = (lower + ti, upper - ti);
+    let mut inserts = Vec::new();
+    if ti > 0.0 {
+        let [a, b] = ct.load_zone;
+        let [sa, sb] = ct.support_zone.unwrap_or(ct.load_zone);
+        for (name, min, max) in [
+            ("loading_insert", [a, lower], [b, load_face]),
+            ("support_insert", [sa, support_face], [sb, upper]),
+        ] {
+            inserts.push(BodyDef {
+                name: name.into(),
+                geometry: Geometry {
+                    include: vec![Region::Rect { min, max }],
+                    exclude: vec![],
+                },
+                density: ct.insert_density,
+                material: ct
+                    .insert_material
+                    .build()
+                    .map_err(|source| ScenarioError::Material {
+                        what: "ct.insert_material".into(),
+                        source,
+                    })?,
+                velocity: Vector2::zeros(),
+                own_field: true,
+            });
+        }
+    }
+    Ok((inserts, [load_face, support_face]))
+}
+
+/// The CT's loading and support plates on the faces at `faces` (y, mm), acting on the bodies `acts_on`
+/// (the inserts; none: the concrete).
+fn ct_plates(
+    ct: &CtSection,
+    [load_face, support_face]: [f64; 2],
+    acts_on: [Option<String>; 2],
+) -> [RigidBodySection; 2] {
+    let [a, b] = ct.load_zone;
+    let [sa, sb] = ct.support_zone.unwrap_or(ct.load_zone);
+    let t = ct.plate_thickness;
+    let (down, up) = if ct.symmetric {
+        (-0.5 * ct.loading_rate, 0.5 * ct.loading_rate)
+    } else {
+        (-ct.loading_rate, 0.0)
+    };
+    let velocity = |v: f64| MotionSpec::Velocity { velocity: v };
+    // The plates' x motion: glued, the loading plate is x-free and the support holds x (a clamp),
+    // both x-free when symmetric (mirror images of each other); in contact both are driven in x at
+    // zero velocity, which holds nothing unless friction acts (mirror-identical either way).
+    let (x_load, x_support) = match (ct.load_introduction, ct.symmetric) {
+        (LoadIntroduction::Glued, false) => (Keyword::Free.into(), Keyword::Fixed.into()),
+        (LoadIntroduction::Glued, true) => (Keyword::Free.into(), Keyword::Free.into()),
+        _ => (velocity(0.0), velocity(0.0)),
+    };
+    // Contact: outward normals from the plates into the concrete; pins on the plates' mid-lines (or at
+    // pin_x), pin_offset into the plates from their faces.
+    let offset = ct.pin_offset.unwrap_or(0.5 * t);
+    let contact = |normal: [f64; 2], pin: [f64; 2]| match ct.load_introduction {
+        LoadIntroduction::Glued => None,
+        LoadIntroduction::Contact => Some(ContactSection {
+            normal,
+            friction: ct.friction,
+            pin: None,
+        }),
+        LoadIntroduction::Pin | LoadIntroduction::Inserts => Some(ContactSection {
+            normal,
+            friction: ct.friction,
+            pin: Some(pin),
+        }),
+    };
+    let [load_on, support_on] = acts_on;
+    let plate = |name: &str, min, max, x, y, contact, acts_on| RigidBodySection {
+        name: name.into(),
+        geometry: Geometry {
+            include: vec![Region::Rect { min, max }],
+            exclude: vec![],
+        },
+        x,
+        y: velocity(y),
+        rise_time: ct.rise_time,
+        contact,
+        acts_on,
+    };
+    [
+        plate(
+            "loading_plate",
+            [a, load_face],
+            [b, load_face + t],
+            x_load,
+            down,
+            contact(
+                [0.0, -1.0],
+                [ct.pin_x.unwrap_or(0.5 * (a + b)), load_face + offset],
+            ),
+            load_on,
+        ),
+        plate(
+            "support_plate",
+            [sa, support_face - t],
+            [sb, support_face],
+            x_support,
+            up,
+            contact(
+                [0.0, 1.0],
+                [ct.pin_x.unwrap_or(0.5 * (sa + sb)), support_face - offset],
+            ),
+            support_on,
+        ),
+    ]
+}
+
+/// The velocity field of each body, 0 for the specimen and the bodies bonded to it, 1, 2, ... for the
+/// bodies with their own (in order), and the fields of the latter by name.
+fn velocity_fields(bodies: &[BodyDef]) -> (Vec<u16>, HashMap<String, u16>) {
+    let mut fields = Vec::with_capacity(bodies.len());
+    let mut field_of = HashMap::new();
+    for body in bodies {
+        let f = if body.own_field {
+            field_of.len() as u16 + 1
+        } else {
+            0
+        };
+        if body.own_field {
+            field_of.insert(body.name.clone(), f);
+        }
+        fields.push(f);
+    }
+    (fields, field_of)
+}
+
+/// Seeds the bodies of a configuration: cell size, points per cell and the seeding of its method.
+struct Seeder {
+    /// Cell size h (mm).
+    h: f64,
+    /// Points per cell and direction.
+    ppc: usize,
+    /// Points in the cells (MPM) or at their Gauss points (FEM).
+    seed: fn(&Geometry, &Seeding) -> Result<Particles, ParticleError>,
+}
+
+impl Seeder {
+    /// The seeding of `cfg`.
+    fn new(cfg: &RunConfig) -> Self {
+        Self {
+            h: cfg.grid.cell_size,
+            ppc: cfg.shape.points_per_cell,
+            seed: match cfg.shape.method {
+                Method::Mpm => Particles::seed,
+                Method::Fem => Particles::seed_gauss,
+            },
+        }
+    }
+
+    /// The points of `geometry` (`what` names it in errors) with `density`, tagged `body`.
+    fn points(
+        &self,
+        what: &str,
+        geometry: &Geometry,
+        density: f64,
+        body: u16,
+    ) -> Result<Particles, ScenarioError> {
+        let seeding = Seeding {
+            h: self.h,
+            points_per_cell: self.ppc,
+            density,
+            body,
+        };
+        let p = (self.seed)(geometry, &seeding).map_err(|source| ScenarioError::Seeding {
+            what: what.to_owned(),
+            source,
+        })?;
+        if p.is_empty() {
+            return Err(ScenarioError::NoMaterial {
+                what: what.to_owned(),
+                h: self.h,
+                ppc: self.ppc,
+            });
+        }
+        Ok(p)
+    }
+
+    /// The deformable bodies' points (tagged by body, with their initial velocities) and materials.
+    fn bodies(&self, bodies: Vec<BodyDef>) -> Result<(Particles, Vec<Material>), ScenarioError> {
+        let mut particles = Particles::new();
+        let mut materials = Vec::new();
+        for (tag, body) in bodies.into_iter().enumerate() {
+            let what = format!("body `{}`", body.name);
+            let mut p = self.points(&what, &body.geometry, body.density, tag as u16)?;
+            p.v.iter_mut().for_each(|v| *v = body.velocity);
+            particles
+                .append(&p)
+                .map_err(|source| ScenarioError::Seeding { what, source })?;
+            materials.push(body.material);
+        }
+        Ok((particles, materials))
+    }
+
+    /// The rigid bodies of `defs` and their points; `field_of` gives the velocity field of the bodies they
+    /// may act on.
+    fn rigid_bodies(
+        &self,
+        defs: &[RigidBodySection],
+        field_of: &HashMap<String, u16>,
+    ) -> Result<(Vec<RigidBody>, Vec<Particles>), ScenarioError> {
+        let (mut rigid, mut rigid_points) = (Vec::new(), Vec::new());
+        for r in defs {
+            let what = format!("rigid body `{}`", r.name);
+            rigid_points.push(self.points(&what, &r.geometry, 1.0, 0)?);
+            rigid.push(RigidBody {
+                name: r.name.clone(),
+                motion: [r.x.motion(), r.y.motion()],
+                rise_time: r.rise_time,
+                field: r
+                    .acts_on
+                    .as_ref()
+                    .and_then(|name| field_of.get(name).copied())
+                    .unwrap_or(0),
+                contact: r.contact.as_ref().map(|c| Contact {
+                    normal: Vector2::from(c.normal).normalize(),
+                    friction: c.friction,
+                    pin: c.pin.map(Vector2::from),
+                }),
+            });
+        }
+        Ok((rigid, rigid_points))
+    }
+}
+
+/// The grid that covers the points of the bodies and of the rigid bodies with `grid.margin_cells` (at
+/// least one) empty cells around them.
+fn covering_grid(
+    cfg: &RunConfig,
+    particles: &Particles,
+    rigid_points: &[Particles],
+) -> Result<Grid, ScenarioError> {
+    let mut lo = Vector2::repeat(f64::INFINITY);
+    let mut hi = Vector2::repeat(f64::NEG_INFINITY);
+    for x in particles
+        .x
+        .iter()
+        .chain(rigid_points.iter().flat_map(|r| r.x.iter()))
+    {
+        lo = lo.inf(x);
+        hi = hi.sup(x);
+    }
+    let h = cfg.grid.cell_size;
+    Ok(Grid::covering(lo, hi, h, cfg.grid.margin_cells.max(1))?)
+}
+
+/// The node boxes of the `[[constraint]]` sections; each must hold a node of `grid` (cell size `h`, mm).
+fn node_boxes(
+    constraints: &[ConstraintSection],
+    grid: &Grid,
+    h: f64,
+) -> Result<Vec<NodeBox>, ScenarioError> {
+    if let Some(c) = constraints
+        .iter()
+        .find(|c| !box_holds_a_node(grid, c.min, c.max))
+    {
+        let (lo, hi) = (grid.origin(), grid.upper());
+        return Err(ScenarioError::EmptyBox {
+            name: c.name.clone(),
+            min: c.min,
+            max: c.max,
+            lo: [lo.x, lo.y],
+            hi: [hi.x, hi.y],
+            h,
+        });
+    }
+    Ok(constraints
+        .iter()
+        .map(|c| NodeBox {
+            name: c.name.clone(),
+            min: Vector2::new(c.min[0], c.min[1]),
+            max: Vector2::new(c.max[0], c.max[1]),
+            motion: [c.x.motion(), c.y.motion()],
+            rise_time: c.rise_time,
+        })
+        .collect())
+}
+
+/// The nodal load of a `[[load]]` section.
+fn nodal_load(l: &LoadSection) -> NodalLoad {
+    NodalLoad {
+        name: l.name.clone(),
+        from: Vector2::from(l.from),
+        to: Vector2::from(l.to),
+        force: Vector2::from(l.force),
+        rise_time: l.rise_time,
+    }
 }
