@@ -12,9 +12,10 @@ use std::hint::black_box;
 
 use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
+use mpm_concrete::geometry::{BoxBody, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
-use mpm_concrete::particles::{BoxBody, Particles, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{GridState, particles_to_grid};

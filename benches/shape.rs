@@ -13,8 +13,9 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use std::hint::black_box;
 
+use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::solids::{Solid, Solids};
 use mpm_concrete::transfer::{

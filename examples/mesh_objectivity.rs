@@ -22,11 +22,12 @@
 //!    identical in exact arithmetic), which hides its mesh dependence.
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::material::isotropic::peerlings::Bar;
 use mpm_concrete::model::{Setup, TimeIntegration};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::LinePlot;
 use mpm_concrete::shape::ShapeKind;

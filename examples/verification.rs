@@ -10,10 +10,11 @@
 //! large-deformation column uses AMPLE's numbers, which are only consistent among themselves).
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Setup, TimeIntegration};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::{LinePlot, Series};
 use mpm_concrete::shape::ShapeKind;

@@ -27,6 +27,7 @@ pub mod config;
 pub mod contact;
 pub mod crack;
 pub mod dofs;
+pub mod geometry;
 pub mod grid;
 pub mod io;
 pub mod material;

@@ -3,7 +3,7 @@
 //! the memory the run will need.
 
 use crate::config::{LoadIntroduction, NotchTip, RunConfig};
-use crate::particles::{Geometry, Region};
+use crate::geometry::{Geometry, Region};
 
 /// What the value of a checked PETSc option must be.
 #[derive(Debug, Clone, Copy)]

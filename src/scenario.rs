@@ -7,10 +7,11 @@ use crate::config::{
     MotionSpec, NotchTip, RigidBodySection, RunConfig,
 };
 use crate::contact::Contact;
+use crate::geometry::{Geometry, Region, Seeding};
 use crate::grid::{Grid, GridError};
 use crate::material::{Material, MaterialError};
 use crate::model::{Method, Setup, TimeIntegration};
-use crate::particles::{Geometry, ParticleError, Particles, Region, Seeding};
+use crate::particles::{ParticleError, Particles};
 use nalgebra::Vector2;
 use std::collections::HashMap;
 

@@ -1,5 +1,5 @@
 //! Regions of space for seeding 3D bodies (mm): boxes, cylinders and prisms (a plane [`Region`] extruded
-//! along z), combined like the plane [`Geometry`](crate::particles::Geometry): the body is the closure of
+//! along z), combined like the plane [`Geometry`](crate::geometry::Geometry): the body is the closure of
 //! the union of the `include` solids minus the interiors of the `exclude` solids, with boundaries taken
 //! within [`BOUNDARY_TOL`].
 //!
@@ -10,7 +10,7 @@
 use nalgebra::{Vector2, Vector3};
 use serde::Deserialize;
 
-use crate::particles::{BOUNDARY_TOL, Body, ParticleError, Region, validate_lists};
+use crate::geometry::{BOUNDARY_TOL, Body, GeometryError, Region, validate_lists};
 
 /// A solid region of space (mm).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -153,7 +153,7 @@ pub struct Solids {
 }
 
 impl Body<3> for Solids {
-    fn validate(&self) -> Result<(), ParticleError> {
+    fn validate(&self) -> Result<(), GeometryError> {
         validate_lists(&self.include, &self.exclude, Solid::validate)
     }
 
@@ -173,7 +173,8 @@ impl Body<3> for Solids {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::particles::{Particles, Seeding};
+    use crate::geometry::Seeding;
+    use crate::particles::{ParticleError, Particles};
 
     fn seeding(h: f64, n: usize) -> Seeding {
         Seeding {
@@ -266,11 +267,11 @@ mod tests {
         assert!(
             matches!(
                 e,
-                ParticleError::InvalidRegion {
+                ParticleError::Geometry(GeometryError::InvalidRegion {
                     list: "exclude",
                     index: 0,
                     ..
-                }
+                })
             ),
             "{e}"
         );
@@ -287,7 +288,7 @@ mod tests {
         };
         assert_eq!(
             Particles::<3>::seed(&empty, &seeding(1.0, 2)),
-            Err(ParticleError::EmptyGeometry)
+            Err(ParticleError::Geometry(GeometryError::EmptyGeometry))
         );
     }
 }

@@ -432,7 +432,7 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     use super::*;
-    use crate::particles::Seeding;
+    use crate::geometry::Seeding;
     use crate::particles::tests::rect_geometry;
 
     /// A 6 x 4 mm block of 2 x 2 points per 0.5 mm cell, inside a grid with 4 cells of margin.
@@ -448,7 +448,7 @@ mod tests {
 
     /// 2^D points per 0.5 mm cell in `body`, inside a grid with `margin_cells` of margin.
     fn seed_block<const D: usize>(
-        body: &impl crate::particles::Body<D>,
+        body: &impl crate::geometry::Body<D>,
         margin_cells: usize,
     ) -> (Grid<D>, Particles<D>) {
         let ps = Particles::seed(

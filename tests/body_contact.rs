@@ -300,9 +300,10 @@ fn pair_rows_match_finite_differences() {
 fn paired_rows_share_the_union_of_their_columns() {
     use mpm_concrete::assembly::{Assembler, StepInput};
     use mpm_concrete::dofs::{DofMap, FieldLayout, INACTIVE};
+    use mpm_concrete::geometry::{Geometry, Region, Seeding};
     use mpm_concrete::grid::Grid;
     use mpm_concrete::material::{Material, MaterialConfig};
-    use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+    use mpm_concrete::particles::Particles;
     use mpm_concrete::shape::{ShapeKind, ShapeTable};
     use mpm_concrete::transfer::{self, GridState};
     use nalgebra::Vector2;

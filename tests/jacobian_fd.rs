@@ -8,9 +8,10 @@ use common::material;
 
 use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
 use mpm_concrete::dofs::{DofMap, FieldLayout};
+use mpm_concrete::geometry::{BoxBody, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Constitutive, Material};
-use mpm_concrete::particles::{BoxBody, Particles, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::BlockLayout;
 use mpm_concrete::shape::{ShapeKind, ShapeTable};
 use mpm_concrete::transfer::{self, GridState};

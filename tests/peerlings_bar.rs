@@ -12,11 +12,12 @@
 //! (`kappa = 1`, continuous `eta_bar'`).
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::isotropic::peerlings::{Bar, Solution};
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Setup, TimeIntegration};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;

@@ -10,9 +10,10 @@ mod common;
 use common::material;
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::geometry::{BoxBody, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::model::{Setup, TimeIntegration};
-use mpm_concrete::particles::{BoxBody, Particles, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;

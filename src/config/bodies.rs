@@ -3,7 +3,7 @@
 //! history.csv columns.
 
 use super::{Check, ConfigError, density_ok, finite, time_ok};
-use crate::particles::Geometry;
+use crate::geometry::Geometry;
 use crate::material::MaterialConfig;
 use serde::Deserialize;
 

@@ -6,7 +6,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
 use super::*;
-use crate::particles::Seeding;
+use crate::geometry::Seeding;
 use crate::particles::tests::rect_geometry;
 
 const H: f64 = 0.5;

@@ -8,10 +8,11 @@
 #![allow(dead_code)]
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Method, Setup, TimeIntegration};
-use mpm_concrete::particles::{Geometry, Particles, Region, Seeding};
+use mpm_concrete::particles::Particles;
 use mpm_concrete::shape::ShapeKind;
 use nalgebra::Vector2;
 

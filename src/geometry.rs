@@ -1,0 +1,326 @@
+//! The bodies to seed, as regions of the plane (mm): rectangles, polygons and disks combined into a
+//! [`Geometry`] (the union of the `include` regions minus the `exclude` regions), boxes in any dimension
+//! ([`BoxBody`]), and the [`Body`] interface that [`crate::particles::Particles::seed`] fills with points
+//! (the solids of space are in [`crate::solids`]); the seeding parameters ([`Seeding`]).
+//!
+//! Boundaries: include regions are closed and exclude regions are open, i.e. a point exactly on a boundary
+//! (within [`BOUNDARY_TOL`]) counts as material: the body is the closure of the union of the includes minus
+//! the interiors of the excludes.
+
+use nalgebra::{SVector, Vector2};
+use serde::Deserialize;
+use thiserror::Error;
+
+/// Distance (mm) within which a point counts as lying on a region boundary.
+pub const BOUNDARY_TOL: f64 = 1e-9;
+
+/// A region of the plane (mm).
+///
+/// In TOML: `{ type = "rect", min = [0.0, 0.0], max = [200.0, 200.0] }`,
+/// `{ type = "polygon", vertices = [[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]] }` or
+/// `{ type = "disk", centre = [105.0, 100.0], radius = 5.0 }`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Region {
+    /// Axis-aligned rectangle `[min_x, max_x] x [min_y, max_y]` (mm).
+    Rect {
+        /// Lower-left corner (mm).
+        min: [f64; 2],
+        /// Upper-right corner (mm).
+        max: [f64; 2],
+    },
+    /// Simple polygon, vertices in either orientation, not repeated at the end (mm). Inside by the even-odd
+    /// rule.
+    Polygon {
+        /// At least three vertices (mm).
+        vertices: Vec<[f64; 2]>,
+    },
+    /// Disk `|x - centre| <= radius` (mm), e.g. the round tip of a sawn notch.
+    Disk {
+        /// Centre (mm).
+        centre: [f64; 2],
+        /// Radius (mm), positive.
+        radius: f64,
+    },
+}
+
+/// The body to seed: the union of `include` minus the union of `exclude`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Geometry {
+    /// Regions that hold material (at least one).
+    pub include: Vec<Region>,
+    /// Regions cut out of the material (e.g. a notch); optional.
+    #[serde(default)]
+    pub exclude: Vec<Region>,
+}
+
+/// Parameters of [`Particles::seed`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Seeding {
+    /// Background-grid cell size `h` (mm).
+    pub h: f64,
+    /// Points per cell and direction `n` (`n x n` points per cell), >= 1.
+    pub points_per_cell: usize,
+    /// Mass density `rho` (t/mm^3), e.g. 2.4e-9 for concrete.
+    pub density: f64,
+    /// Body tag of the seeded points (e.g. 0 concrete, 1 loading plate).
+    pub body: u16,
+}
+
+/// A malformed geometry: no include region, or a bad region.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum GeometryError {
+    /// The geometry has no include region.
+    #[error("empty geometry: at least one include region is needed")]
+    EmptyGeometry,
+    /// A region is malformed.
+    #[error("{list} region {index}: {reason}")]
+    InvalidRegion {
+        /// `"include"` or `"exclude"`.
+        list: &'static str,
+        /// Index in that list.
+        index: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl Region {
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        let finite = |p: &[f64; 2]| p[0].is_finite() && p[1].is_finite();
+        match self {
+            Region::Rect { min, max } => {
+                if !(finite(min) && finite(max)) {
+                    return Err("rect corners must be finite".into());
+                }
+                if !(min[0] < max[0] && min[1] < max[1]) {
+                    return Err(format!(
+                        "rect needs min < max, got min = {min:?}, max = {max:?}"
+                    ));
+                }
+            }
+            Region::Polygon { vertices } => {
+                if vertices.len() < 3 {
+                    return Err(format!(
+                        "polygon needs at least 3 vertices, got {}",
+                        vertices.len()
+                    ));
+                }
+                if !vertices.iter().all(finite) {
+                    return Err("polygon vertices must be finite".into());
+                }
+            }
+            Region::Disk { centre, radius } => {
+                if !(finite(centre) && radius.is_finite() && *radius > 0.0) {
+                    return Err(format!(
+                        "disk needs a finite centre and a positive radius, got centre = {centre:?}, \
+                         radius = {radius}"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Bounding box `(min, max)` (mm).
+    pub fn bounding_box(&self) -> (Vector2<f64>, Vector2<f64>) {
+        match self {
+            Region::Rect { min, max } => (Vector2::from(*min), Vector2::from(*max)),
+            Region::Polygon { vertices } => vertices.iter().fold(
+                (
+                    Vector2::repeat(f64::INFINITY),
+                    Vector2::repeat(f64::NEG_INFINITY),
+                ),
+                |(lo, hi), v| {
+                    let v = Vector2::from(*v);
+                    (lo.inf(&v), hi.sup(&v))
+                },
+            ),
+            Region::Disk { centre, radius } => (
+                Vector2::from(*centre).add_scalar(-radius),
+                Vector2::from(*centre).add_scalar(*radius),
+            ),
+        }
+    }
+
+    /// Whether `x` lies on the boundary, within [`BOUNDARY_TOL`].
+    pub fn on_boundary(&self, x: Vector2<f64>) -> bool {
+        match self {
+            Region::Rect { min, max } => {
+                let inside_tol =
+                    (0..2).all(|k| x[k] >= min[k] - BOUNDARY_TOL && x[k] <= max[k] + BOUNDARY_TOL);
+                let near_edge = (0..2).any(|k| {
+                    (x[k] - min[k]).abs() <= BOUNDARY_TOL || (x[k] - max[k]).abs() <= BOUNDARY_TOL
+                });
+                inside_tol && near_edge
+            }
+            Region::Polygon { vertices } => polygon_edges(vertices).any(|(a, b)| {
+                let ab = b - a;
+                let t = ((x - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+                let d = if t.is_finite() {
+                    (a + ab * t - x).norm()
+                } else {
+                    (a - x).norm()
+                };
+                d <= BOUNDARY_TOL
+            }),
+            Region::Disk { centre, radius } => {
+                ((x - Vector2::from(*centre)).norm() - radius).abs() <= BOUNDARY_TOL
+            }
+        }
+    }
+
+    /// Whether `x` lies in the open interior (boundary excluded).
+    pub fn in_interior(&self, x: Vector2<f64>) -> bool {
+        if self.on_boundary(x) {
+            return false;
+        }
+        match self {
+            Region::Rect { min, max } => (0..2).all(|k| x[k] > min[k] && x[k] < max[k]),
+            Region::Polygon { vertices } => {
+                // Even-odd crossing test along +x.
+                polygon_edges(vertices)
+                    .filter(|(a, b)| {
+                        (a.y > x.y) != (b.y > x.y)
+                            && x.x < a.x + (x.y - a.y) * (b.x - a.x) / (b.y - a.y)
+                    })
+                    .count()
+                    % 2
+                    == 1
+            }
+            Region::Disk { centre, radius } => (x - Vector2::from(*centre)).norm() < *radius,
+        }
+    }
+
+    /// Whether `x` lies in the closed region (boundary included).
+    pub fn in_closure(&self, x: Vector2<f64>) -> bool {
+        self.on_boundary(x) || self.in_interior(x)
+    }
+}
+
+fn polygon_edges(vertices: &[[f64; 2]]) -> impl Iterator<Item = (Vector2<f64>, Vector2<f64>)> + '_ {
+    let n = vertices.len();
+    (0..n).map(move |k| {
+        (
+            Vector2::from(vertices[k]),
+            Vector2::from(vertices[(k + 1) % n]),
+        )
+    })
+}
+
+impl Geometry {
+    /// Checks every region; an empty `include` list is an error.
+    pub fn validate(&self) -> Result<(), GeometryError> {
+        validate_lists(&self.include, &self.exclude, Region::validate)
+    }
+
+    /// Whether `x` is material: in the closure of some include region and in the interior of no exclude
+    /// region.
+    pub fn contains(&self, x: Vector2<f64>) -> bool {
+        self.include.iter().any(|r| r.in_closure(x))
+            && !self.exclude.iter().any(|r| r.in_interior(x))
+    }
+
+    /// Bounding box of the include regions (mm); `None` without include regions.
+    pub fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        self.include
+            .iter()
+            .map(Region::bounding_box)
+            .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
+    }
+}
+
+/// A body to seed in `D` dimensions: [`Geometry`] in the plane, [`crate::solids::Solids`] in space.
+pub trait Body<const D: usize> {
+    /// Checks every region; a body without include regions is an error.
+    fn validate(&self) -> Result<(), GeometryError>;
+    /// Whether `x` (mm) is material.
+    fn contains(&self, x: &SVector<f64, D>) -> bool;
+    /// Bounding box of the include regions (mm); `None` without include regions.
+    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)>;
+}
+
+/// A closed axis-aligned box `[min, max]` (mm) in `D` dimensions as a body to seed: a block, a bar, a
+/// column.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxBody<const D: usize> {
+    /// Lowest corner (mm).
+    pub min: SVector<f64, D>,
+    /// Highest corner (mm).
+    pub max: SVector<f64, D>,
+}
+
+impl<const D: usize> BoxBody<D> {
+    /// The box `[0, size]` (mm).
+    pub fn from_origin(size: SVector<f64, D>) -> Self {
+        Self {
+            min: SVector::zeros(),
+            max: size,
+        }
+    }
+}
+
+impl<const D: usize> Body<D> for BoxBody<D> {
+    fn validate(&self) -> Result<(), GeometryError> {
+        let ok = (0..D).all(|d| self.min[d].is_finite() && self.max[d].is_finite())
+            && (0..D).all(|d| self.min[d] < self.max[d]);
+        if ok {
+            Ok(())
+        } else {
+            Err(GeometryError::InvalidRegion {
+                list: "include",
+                index: 0,
+                reason: format!(
+                    "box needs finite corners with min < max, got min = {:?}, max = {:?}",
+                    self.min.as_slice(),
+                    self.max.as_slice()
+                ),
+            })
+        }
+    }
+
+    fn contains(&self, x: &SVector<f64, D>) -> bool {
+        (0..D).all(|d| x[d] >= self.min[d] - BOUNDARY_TOL && x[d] <= self.max[d] + BOUNDARY_TOL)
+    }
+
+    fn bounding_box(&self) -> Option<(SVector<f64, D>, SVector<f64, D>)> {
+        Some((self.min, self.max))
+    }
+}
+
+/// Checks the `include` (at least one) and `exclude` regions of a body with `check`, naming the list and
+/// the index of the first bad region.
+pub(crate) fn validate_lists<R>(
+    include: &[R],
+    exclude: &[R],
+    check: impl Fn(&R) -> Result<(), String>,
+) -> Result<(), GeometryError> {
+    if include.is_empty() {
+        return Err(GeometryError::EmptyGeometry);
+    }
+    for (list, regions) in [("include", include), ("exclude", exclude)] {
+        for (index, r) in regions.iter().enumerate() {
+            check(r).map_err(|reason| GeometryError::InvalidRegion {
+                list,
+                index,
+                reason,
+            })?;
+        }
+    }
+    Ok(())
+}
+
+impl Body<2> for Geometry {
+    fn validate(&self) -> Result<(), GeometryError> {
+        Geometry::validate(self)
+    }
+
+    fn contains(&self, x: &Vector2<f64>) -> bool {
+        Geometry::contains(self, *x)
+    }
+
+    fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        Geometry::bounding_box(self)
+    }
+}
