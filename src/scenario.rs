@@ -1,15 +1,16 @@
-//! Builds a run ([`Setup`]) from a configuration: seeds the bodies, the rigid bodies and the background
-//! grid, and the compact tension (CT) specimen of the source paper.
+//! Builds a run ([`Setup`]) from a checked configuration: seeds the bodies (with the materials the checks
+//! built), the rigid bodies and the background grid, and the compact tension (CT) specimen of the source
+//! paper; with `[extrusion]` the plane set-up is extruded to a plate ([`build_run`]).
 
 use crate::boundary::{NodalLoad, NodeBox, RigidBody};
 use crate::config::{
     ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction, LoadSection,
-    MotionSpec, NotchTip, RigidBodySection, RunConfig,
+    Materials, MotionSpec, NotchTip, RigidBodySection, RunConfig,
 };
 use crate::contact::Contact;
 use crate::geometry::{Geometry, Region, Seeding};
 use crate::grid::{Grid, GridError};
-use crate::material::{Material, MaterialError};
+use crate::material::Material;
 use crate::model::{Method, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles};
 use nalgebra::Vector2;
@@ -38,14 +39,16 @@ pub enum ScenarioError {
         /// Points per cell and direction.
         ppc: usize,
     },
-    /// Invalid material.
-    #[error("{what}: {source}")]
+    /// A body whose material the configuration's checks did not build (a configuration changed after
+    /// it was read).
+    #[error("{what}: no material was built for it (a configuration changed after it was checked)")]
     Material {
-        /// Which body.
+        /// Which material (`ct.material`, `body[0]`, ...).
         what: String,
-        /// Cause.
-        source: MaterialError,
     },
+    /// The plane set-up cannot be extruded to the plate of `[extrusion]`.
+    #[error("[extrusion]: {0}")]
+    Extrusion(String),
     /// Grid construction failed.
     #[error(transparent)]
     Grid(#[from] GridError),
@@ -111,12 +114,34 @@ struct BodyDef {
     own_field: bool,
 }
 
-/// The run described by `cfg` (options prefix: none, so plain `-snes_*` options apply).
+/// The set-up a configuration runs: the plane one, or the plate it is extruded to (`[extrusion]`).
+pub enum RunSetup {
+    /// Plane strain (no `[extrusion]`).
+    Plane(Setup<2>),
+    /// The plane set-up extruded to a plate of finite thickness, run in 3D.
+    Plate(Setup<3>),
+}
+
+/// The run described by `cfg` in the dimensions it runs in: [`build`], then with `[extrusion]` the
+/// extrusion to the plate.
+pub fn build_run(cfg: &RunConfig) -> Result<RunSetup, ScenarioError> {
+    let plane = build(cfg)?;
+    match &cfg.extrusion {
+        None => Ok(RunSetup::Plane(plane)),
+        Some(e) => plane
+            .extrude(e.thickness)
+            .map(RunSetup::Plate)
+            .map_err(ScenarioError::Extrusion),
+    }
+}
+
+/// The plane set-up described by `cfg` (options prefix: none, so plain `-snes_*` options apply).
 pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     let mut bodies = Vec::new();
     let mut rigid_defs: Vec<RigidBodySection> = cfg.rigid_body.clone();
+    let built = cfg.materials();
     if let Some(ct) = &cfg.ct {
-        let (ct_bodies, plates) = ct_specimen(ct)?;
+        let (ct_bodies, plates) = ct_specimen(ct, built)?;
         bodies.extend(ct_bodies);
         rigid_defs.extend(plates);
     }
@@ -125,13 +150,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             name: b.name.clone(),
             geometry: b.geometry.clone(),
             density: b.density,
-            material: b
-                .material
-                .build()
-                .map_err(|source| ScenarioError::Material {
-                    what: format!("body[{i}] ({})", b.name),
-                    source,
-                })?,
+            material: built_material(built.bodies.get(i), &format!("body[{i}] ({})", b.name))?,
             velocity: Vector2::new(b.initial_velocity[0], b.initial_velocity[1]),
             own_field: b.own_field,
         });
@@ -170,9 +189,19 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     })
 }
 
+/// A material the configuration's checks built (`what` names it in the error when there is none).
+fn built_material(material: Option<&Material>, what: &str) -> Result<Material, ScenarioError> {
+    material.cloned().ok_or_else(|| ScenarioError::Material {
+        what: what.to_owned(),
+    })
+}
+
 /// The CT specimen's deformable bodies (the concrete, and with `load_introduction = "inserts"` the two
-/// steel inserts) and its two plates, the loading plate first.
-fn ct_specimen(ct: &CtSection) -> Result<(Vec<BodyDef>, [RigidBodySection; 2]), ScenarioError> {
+/// steel inserts) and its two plates, the loading plate first; `built` holds their materials.
+fn ct_specimen(
+    ct: &CtSection,
+    built: &Materials,
+) -> Result<(Vec<BodyDef>, [RigidBodySection; 2]), ScenarioError> {
     let mut bodies = vec![BodyDef {
         name: "concrete".into(),
         geometry: Geometry {
@@ -183,17 +212,11 @@ fn ct_specimen(ct: &CtSection) -> Result<(Vec<BodyDef>, [RigidBodySection; 2]), 
             exclude: notch(ct),
         },
         density: ct.density,
-        material: ct
-            .material
-            .build()
-            .map_err(|source| ScenarioError::Material {
-                what: "ct.material".into(),
-                source,
-            })?,
+        material: built_material(built.concrete.as_ref(), "ct.material")?,
         velocity: Vector2::zeros(),
         own_field: false,
     }];
-    let (inserts, faces) = ct_inserts(ct)?;
+    let (inserts, faces) = ct_inserts(ct, built)?;
     let acts_on = [0, 1].map(|k| inserts.get(k).map(|b: &BodyDef| b.name.clone()));
     bodies.extend(inserts);
     Ok((bodies, ct_plates(ct, faces, acts_on)))
@@ -201,8 +224,11 @@ fn ct_specimen(ct: &CtSection) -> Result<(Vec<BodyDef>, [RigidBodySection; 2]), 
 
 /// The steel inserts on the notch faces (none unless `load_introduction = "inserts"`), each on its own
 /// velocity field, and the faces the plates then push on (y of the loading and the support face, mm): the
-/// inserts' inner faces, or the notch faces.
-fn ct_inserts(ct: &CtSection) -> Result<(Vec<BodyDef>, [f64; 2]), ScenarioError> {
+/// inserts' inner faces, or the notch faces; `built` holds the inserts' material.
+fn ct_inserts(
+    ct: &CtSection,
+    built: &Materials,
+) -> Result<(Vec<BodyDef>, [f64; 2]), ScenarioError> {
     let (mid, half) = (0.5 * ct.height, 0.5 * ct.notch_width);
     let (lower, upper) = (mid - half, mid + half);
     let ti = match ct.load_introduction {
@@ -225,13 +251,7 @@ fn ct_inserts(ct: &CtSection) -> Result<(Vec<BodyDef>, [f64; 2]), ScenarioError>
                     exclude: vec![],
                 },
                 density: ct.insert_density,
-                material: ct
-                    .insert_material
-                    .build()
-                    .map_err(|source| ScenarioError::Material {
-                        what: "ct.insert_material".into(),
-                        source,
-                    })?,
+                material: built_material(built.insert.as_ref(), "ct.insert_material")?,
                 velocity: Vector2::zeros(),
                 own_field: true,
             });

@@ -107,7 +107,7 @@ pub const FALLBACK: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -f
 /// The ratio `r = rho h^2 / (beta dt^2 M)` of the model, or `None` for a quasi-static model: the smallest
 /// over the bodies of their own `rho / M` (density, P-wave modulus `M = K + 4G/3`), so that a stiff and
 /// heavy second body (a steel insert) does not mix its modulus with the concrete's density.
-pub fn inertia_ratio(setup: &Setup) -> Option<f64> {
+pub fn inertia_ratio<const D: usize>(setup: &Setup<D>) -> Option<f64> {
     if setup.time.quasi_static {
         return None;
     }
@@ -133,7 +133,7 @@ pub fn inertia_ratio(setup: &Setup) -> Option<f64> {
 }
 
 /// The class of the model's steps.
-pub fn classify(setup: &Setup) -> StepClass {
+pub fn classify<const D: usize>(setup: &Setup<D>) -> StepClass {
     match inertia_ratio(setup) {
         None => StepClass::QuasiStatic,
         Some(ratio) if ratio >= STIFFNESS_DOMINATED_BELOW => StepClass::InertiaDominated { ratio },
@@ -160,12 +160,12 @@ pub fn main_options(class: StepClass, gradient: bool, dimension: usize) -> Strin
 /// e.g. `-ksp_type`, so that those a user's choice made irrelevant are not reported as unused. A lagged
 /// preconditioner only makes sense inside a Krylov method: under `-ksp_type preonly` (a user's direct
 /// solve) the default lag is withdrawn, so that Newton keeps a fresh factorisation every iteration.
-/// `setup` is the plane set-up; `dimension` (2 or 3) that of the run (3: the set-up extruded to a plate).
-pub fn apply(
+/// The dimension `D` of the set-up (3: a plate) chooses among the defaults.
+pub fn apply<const D: usize>(
     session: &SessionGuard,
-    setup: &mut Setup,
-    dimension: usize,
+    setup: &mut Setup<D>,
 ) -> Result<(StepClass, Vec<String>), petsc::PetscError> {
+    let dimension = D;
     setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
     let gradient = setup.materials.iter().any(|m| m.is_nonlocal());

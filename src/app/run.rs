@@ -12,11 +12,11 @@ use super::{bad, processes_per_node, share_cores};
 use crate::checkpoint;
 use crate::config::{self, RunConfig};
 use crate::io::RunOutput;
-use crate::model::Setup;
+use crate::model::{Setup, State};
 use crate::petsc::{self, Session, SessionGuard};
 use crate::preflight;
 use crate::rundir::{self, RunIdentity, RunRecord};
-use crate::scenario;
+use crate::scenario::{self, RunSetup};
 use crate::solver::{Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
 use anyhow::{Context, Result};
@@ -89,14 +89,13 @@ pub fn run(own_args: &[String], petsc_args: &[String], path: &Path, flags: RunFl
         quiet: flags.quiet,
         overwrite: flags.overwrite,
     };
+    let file = &invocation.file;
+    petsc::apply_default_options(&session, &prepared.cfg.run.petsc_options)
+        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
     // A plane set-up, or the plate it is extruded to ([extrusion]): the same run in 2D or 3D.
-    match prepared.cfg.extrusion.as_ref().map(|e| e.thickness) {
-        None => simulate::<2>(&session, &invocation, prepared, &Ok)?,
-        Some(thickness) => simulate::<3>(&session, &invocation, prepared, &|plane: Setup| {
-            plane
-                .extrude(thickness)
-                .map_err(|e| format!("[extrusion]: {e}"))
-        })?,
+    match scenario::build_run(&prepared.cfg).map_err(|e| bad(format!("{file}: {e}")))? {
+        RunSetup::Plane(setup) => simulate(&session, &invocation, prepared, setup)?,
+        RunSetup::Plate(setup) => simulate(&session, &invocation, prepared, setup)?,
     }
     Session::finalize(session)?;
     Ok(())
@@ -174,17 +173,19 @@ fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
     Ok(())
 }
 
-/// The run of a prepared configuration: `lift` turns the plane set-up the configuration describes into
-/// the one of `D` dimensions that runs (2D: itself; 3D: its extrusion).
+/// The run of a prepared configuration from its `setup` in `D` dimensions.
 fn simulate<const D: usize>(
     session: &SessionGuard,
     invocation: &Invocation,
     prepared: Prepared,
-    lift: &dyn Fn(Setup) -> Result<Setup<D>, String>,
+    setup: Setup<D>,
 ) -> Result<()> {
     let (cfg, file) = (&prepared.cfg, &invocation.file);
     let root = session.rank() == 0;
-    let (mut sim, defaults) = build(session, cfg, file, lift)?;
+    let (mut sim, defaults) = build(session, setup, file)?;
+    // The output's reference state (initial positions, the step-0 fields) is the state at step 0 as
+    // built, also for a resumed run, on the process that writes (the others keep the records only).
+    let initial = root.then(|| sim.state.clone());
     if prepared.resume_from.is_some() {
         checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
         if root {
@@ -215,11 +216,7 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
-    let model = || {
-        let plane = scenario::build(cfg).map_err(|e| bad(format!("{file}: {e}")))?;
-        lift(plane).map_err(|e| bad(format!("{file}: {e}")))
-    };
-    let mut records = open_output(invocation, &prepared, &sim, root, model)?;
+    let mut records = open_output(invocation, &prepared, &sim, root, initial)?;
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
     let steps = Steps {
         session,
@@ -245,21 +242,16 @@ fn simulate<const D: usize>(
     report_unused_fallback(session, &defaults)
 }
 
-/// The simulation of `cfg` (the file `file`) in `D` dimensions with its solver defaults applied, and the
-/// defaults' option names: those a user's solver choice makes irrelevant (e.g. the MUMPS option under
-/// -pc_type hypre) must not be reported as unused.
+/// The simulation of `setup` (of the file `file`) with its solver defaults applied, and the defaults'
+/// option names: those a user's solver choice makes irrelevant (e.g. the MUMPS option under -pc_type
+/// hypre) must not be reported as unused.
 fn build<const D: usize>(
     session: &SessionGuard,
-    cfg: &RunConfig,
+    mut setup: Setup<D>,
     file: &str,
-    lift: &dyn Fn(Setup) -> Result<Setup<D>, String>,
 ) -> Result<(Simulation<D>, Vec<String>)> {
-    petsc::apply_default_options(session, &cfg.run.petsc_options)
-        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
-    let mut setup = scenario::build(cfg).map_err(|e| bad(format!("{file}: {e}")))?;
     // The solver defaults follow the kind of step (docs/solvers.md).
-    let (_, defaults) = solver_defaults::apply(session, &mut setup, D)?;
-    let setup = lift(setup).map_err(|e| bad(format!("{file}: {e}")))?;
+    let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
     let sim = Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")))?;
     Ok((sim, defaults))
 }
@@ -352,14 +344,14 @@ fn check_first_step(
 }
 
 /// The output: the directory now belongs to this run. Removes an earlier run's files (--overwrite),
-/// writes the effective configuration, the reference state (or restores the records of a resumed run)
-/// and run.json; `model` builds the model again for the reference state on process 0.
+/// writes the effective configuration, the reference state `initial` (the state at step 0, on process 0;
+/// a resumed run restores its records instead) and run.json.
 fn open_output<'a, const D: usize>(
     invocation: &Invocation,
     prepared: &'a Prepared,
     sim: &Simulation<D>,
     root: bool,
-    model: impl Fn() -> Result<Setup<D>>,
+    initial: Option<State<D>>,
 ) -> Result<Records<'a>> {
     let Prepared { cfg, dir, .. } = prepared;
     if invocation.overwrite && root {
@@ -377,18 +369,8 @@ fn open_output<'a, const D: usize>(
         config::source_label(&invocation.file, &prepared.overrides),
         prepared.effective
     );
-    // The output's reference state (initial positions, the step-0 fields) is the model as built, on the
-    // process that writes (the others keep the records only).
-    let initial = if root {
-        let file = &invocation.file;
-        Some(crate::model::Model::new(model()?).map_err(|e| bad(format!("{file}: {e}")))?)
-    } else {
-        None
-    };
     let mut out = match &initial {
-        Some((initial_model, initial)) => {
-            RunOutput::create(dir, &cfg.run.name, &config_copy, initial_model, initial)?
-        }
+        Some(initial) => RunOutput::create(dir, &cfg.run.name, &config_copy, &sim.model, initial)?,
         None => RunOutput::mirror(dir, &cfg.run.name, &config_copy, cfg.grid.cell_size),
     };
     if let Some(z) = cfg.extrusion.as_ref().and_then(|e| e.section_z) {
@@ -408,7 +390,7 @@ fn open_output<'a, const D: usize>(
         (Some(header), _) => header
             .restore_records(&mut out)
             .context("restoring the output's records from the checkpoint")?,
-        (None, Some((_, initial))) => out.snapshot(initial)?,
+        (None, Some(initial)) => out.snapshot(initial)?,
         (None, None) => {}
     }
     Ok(Records {

@@ -4,7 +4,7 @@
 
 use super::{Check, ConfigError, density_ok, finite, time_ok};
 use crate::geometry::Geometry;
-use crate::material::MaterialConfig;
+use crate::material::{Material, MaterialConfig};
 use serde::Deserialize;
 
 /// `[[body]]`
@@ -157,13 +157,14 @@ pub struct ContactSection {
     pub pin: Option<[f64; 2]>,
 }
 
-/// Checks the `[[body]]` sections; `ct`: the run has a `[ct]` section (whose bodies' names are taken, and
-/// whose concrete is the specimen).
+/// Checks the `[[body]]` sections and returns their materials; `ct`: the run has a `[ct]` section (whose
+/// bodies' names are taken, and whose concrete is the specimen).
 pub(super) fn validate_bodies(
     bodies: &[BodySection],
     ct: bool,
     c: Check,
-) -> Result<(), ConfigError> {
+) -> Result<Vec<Material>, ConfigError> {
+    let mut materials = Vec::with_capacity(bodies.len());
     for (i, b) in bodies.iter().enumerate() {
         if b.name.trim().is_empty() {
             return Err(c.bad(&format!("body[{i}].name"), "\"\"".into(), "a name"));
@@ -202,13 +203,13 @@ pub(super) fn validate_bodies(
                 &e.to_string(),
             )
         })?;
-        b.material.build().map_err(|e| {
+        materials.push(b.material.build().map_err(|e| {
             c.bad(
                 &format!("body[{i}].material"),
                 String::new(),
                 &e.to_string(),
             )
-        })?;
+        })?);
         if b.own_field && i == 0 && !ct {
             return Err(c.bad(
                 "body[0].own_field",
@@ -218,7 +219,7 @@ pub(super) fn validate_bodies(
             ));
         }
     }
-    Ok(())
+    Ok(materials)
 }
 
 /// Checks the motions `x` and `y` of the section `field` and the time `rise_time` over which they rise.

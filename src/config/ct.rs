@@ -2,7 +2,7 @@
 
 use super::choice::Choice;
 use super::{Check, ConfigError, density_ok, time_ok};
-use crate::material::{ElasticConfig, MaterialConfig};
+use crate::material::{ElasticConfig, Material, MaterialConfig};
 use serde::Deserialize;
 
 /// How the CT specimen is loaded (`[ct] load_introduction`).
@@ -192,11 +192,16 @@ fn ct_insert_material() -> MaterialConfig {
 
 /// The checks of `[ct]`, in the order their errors are reported.
 impl CtSection {
-    /// Checks the section; `h` is the grid's cell size (mm).
-    pub(super) fn validate(&self, c: Check, h: f64) -> Result<(), ConfigError> {
+    /// Checks the section and returns the materials of the concrete and of the inserts (with
+    /// `load_introduction = "inserts"`); `h` is the grid's cell size (mm).
+    pub(super) fn validate(
+        &self,
+        c: Check,
+        h: f64,
+    ) -> Result<(Material, Option<Material>), ConfigError> {
         self.validate_notch(c)?;
         self.validate_plates(c)?;
-        self.validate_inserts(c, h)?;
+        let insert = self.validate_inserts(c, h)?;
         if !density_ok(self.density) {
             return Err(c.bad(
                 "ct.density",
@@ -218,10 +223,11 @@ impl CtSection {
                 "a time >= 0 (s)",
             ));
         }
-        self.material
+        let concrete = self
+            .material
             .build()
             .map_err(|e| c.bad("ct.material", String::new(), &e.to_string()))?;
-        Ok(())
+        Ok((concrete, insert))
     }
 
     /// The plate, the notch and the zones on its faces where the plates bear.
@@ -339,9 +345,9 @@ impl CtSection {
         Ok(())
     }
 
-    /// The steel inserts of `load_introduction = "inserts"` (and their absence otherwise); `h` is the cell
-    /// size (mm).
-    fn validate_inserts(&self, c: Check, h: f64) -> Result<(), ConfigError> {
+    /// The steel inserts of `load_introduction = "inserts"` (and their absence otherwise), with their
+    /// material; `h` is the cell size (mm).
+    fn validate_inserts(&self, c: Check, h: f64) -> Result<Option<Material>, ConfigError> {
         let inserts = self.load_introduction == LoadIntroduction::Inserts;
         match (inserts, self.insert_thickness) {
             (false, Some(ti)) => {
@@ -375,22 +381,23 @@ impl CtSection {
             }
             (false, None) => {}
         }
-        if inserts {
-            if !density_ok(self.insert_density) {
-                return Err(c.bad(
-                    "ct.insert_density",
-                    self.insert_density.to_string(),
-                    "a density > 0 (t/mm^3)",
-                ));
-            }
-            self.insert_material.build().map_err(|e| {
-                c.bad(
-                    "ct.insert_material",
-                    format!("{:?}", self.insert_material),
-                    &e.to_string(),
-                )
-            })?;
+        if !inserts {
+            return Ok(None);
         }
-        Ok(())
+        if !density_ok(self.insert_density) {
+            return Err(c.bad(
+                "ct.insert_density",
+                self.insert_density.to_string(),
+                "a density > 0 (t/mm^3)",
+            ));
+        }
+        let steel = self.insert_material.build().map_err(|e| {
+            c.bad(
+                "ct.insert_material",
+                format!("{:?}", self.insert_material),
+                &e.to_string(),
+            )
+        })?;
+        Ok(Some(steel))
     }
 }

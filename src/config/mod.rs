@@ -33,6 +33,7 @@ pub use choice::Choice;
 pub use control::{ExtrusionSection, GridSection, RunSection, ShapeSection, TimeSection};
 pub use ct::{CtSection, LoadIntroduction, NotchTip};
 
+use crate::material::Material;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -139,6 +140,20 @@ pub struct RunConfig {
     pub load: Vec<LoadSection>,
     /// The plane set-up extruded to a plate and run in 3D (`[extrusion]`); absent: plane strain.
     pub extrusion: Option<ExtrusionSection>,
+    /// The materials, built by the checks (which so validate them) and kept for the scenario.
+    #[serde(skip)]
+    materials: Materials,
+}
+
+/// The constitutive laws of a configuration, built once when it is checked.
+#[derive(Debug, Clone, Default)]
+pub struct Materials {
+    /// `[ct]`: the concrete (`ct.material`).
+    pub concrete: Option<Material>,
+    /// `[ct]` with `load_introduction = "inserts"`: the inserts' steel (`ct.insert_material`).
+    pub insert: Option<Material>,
+    /// Each `[[body]]`'s material, in the order of the file.
+    pub bodies: Vec<Material>,
 }
 
 /// How errors name a configuration file read with `overrides`: `configs/x.toml (with --set a=1)`.
@@ -248,12 +263,18 @@ impl RunConfig {
             file: file.to_owned(),
             message: toml_message(&e, text, position),
         })?;
-        cfg.validate(file)?;
+        let mut cfg = cfg;
+        cfg.materials = cfg.validate(file)?;
         Ok(cfg)
     }
 
-    /// Checks every section, then what spans sections.
-    fn validate(&self, file: &str) -> Result<(), ConfigError> {
+    /// The materials as the checks built them (`[ct]`'s, then each `[[body]]`'s).
+    pub fn materials(&self) -> &Materials {
+        &self.materials
+    }
+
+    /// Checks every section, then what spans sections; returns the materials built on the way.
+    fn validate(&self, file: &str) -> Result<Materials, ConfigError> {
         let c = Check { file };
         self.run.validate(c)?;
         self.time.validate(c)?;
@@ -276,7 +297,7 @@ impl RunConfig {
                 "a time >= 0 (s)",
             ));
         }
-        bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
+        let bodies = bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
         for (i, s) in self.constraint.iter().enumerate() {
             s.validate(c, i)?;
         }
@@ -286,8 +307,11 @@ impl RunConfig {
         for (i, l) in self.load.iter().enumerate() {
             l.validate(c, i)?;
         }
-        match &self.ct {
-            Some(ct) => ct.validate(c, self.grid.cell_size)?,
+        let (concrete, insert) = match &self.ct {
+            Some(ct) => {
+                let (concrete, insert) = ct.validate(c, self.grid.cell_size)?;
+                (Some(concrete), insert)
+            }
             None if self.body.is_empty() => {
                 return Err(c.bad(
                     "body",
@@ -295,9 +319,14 @@ impl RunConfig {
                     "at least one [[body]] (or a [ct] section)",
                 ));
             }
-            None => {}
-        }
-        bodies::validate_names(c, &self.history_names())
+            None => (None, None),
+        };
+        bodies::validate_names(c, &self.history_names())?;
+        Ok(Materials {
+            concrete,
+            insert,
+            bodies,
+        })
     }
 
     /// The sets that name history.csv columns, (section, name) in the order of the file: [ct]'s two
