@@ -40,6 +40,7 @@ pub mod preflight;
 pub mod rundir;
 pub mod scenario;
 pub mod schema;
+pub mod seeding;
 pub mod shape;
 pub mod solids;
 pub mod solver;

@@ -1,0 +1,264 @@
+//! The crack's records of a run: crack.json, the crack plots, the section layer of a plate whose points
+//! the crack is measured on, and the re-measurement of a finished run from its snapshots.
+
+use super::{OutputError, file, io_err, write_atomic};
+use crate::crack::{self, CrackCriteria, CrackState};
+use crate::plot::LinePlot;
+use nalgebra::Vector2;
+use std::path::Path;
+
+/// Writes `crack.json` of the crack states `cracks` into `dir` (write, then rename).
+pub(super) fn write_crack_json(
+    dir: &Path,
+    plate: bool,
+    tip: Vector2<f64>,
+    criteria: &CrackCriteria,
+    cracks: &[CrackState],
+) -> Result<(), OutputError> {
+    let speeds: Vec<f64> = cracks
+        .windows(2)
+        .map(|w| {
+            if w[1].time > w[0].time {
+                (w[1].length - w[0].length) / (w[1].time - w[0].time)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let json = serde_json::json!({
+        "units": format!("length mm, time s, speed mm/s, angles degrees against the notch axis (+x), \
+                  counter-clockwise positive, energies {}", if plate {
+                      "N mm (of the whole plate; the other metrics of its section layer)"
+                  } else {
+                      "N mm per mm of thickness"
+                  }),
+        "notch_tip": [tip.x, tip.y],
+        "criteria": criteria,
+        "states": cracks,
+        "tip_speed_between_states": speeds,
+        "final_classification": cracks.last().map(|c| c.classification.clone()),
+    });
+    let path = dir.join(file::CRACK);
+    let text = serde_json::to_string_pretty(&json).map_err(|e| OutputError::Plot {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    write_atomic(&path, text.as_bytes())?;
+    crack_plots(dir, cracks)
+}
+
+/// Draws `plot` into the PNG `path`, naming the file in an error.
+pub(super) fn save_line_plot(plot: &LinePlot, path: &Path) -> Result<(), OutputError> {
+    plot.save_png(path).map_err(|e| OutputError::Plot {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })
+}
+
+/// `crack_length.png` and `band_width.png`: the crack length and the width of the `d >= 0.9` zone across
+/// the bands (median and largest crossing) at the output steps.
+fn crack_plots(dir: &Path, cracks: &[CrackState]) -> Result<(), OutputError> {
+    let points = |value: fn(&CrackState) -> f64| -> Vec<(f64, f64)> {
+        cracks.iter().map(|c| (c.time * 1e6, value(c))).collect()
+    };
+    let save = |plot: LinePlot, file: &str| save_line_plot(&plot, &dir.join(file));
+    save(
+        LinePlot::new(
+            "crack length",
+            "time [us]",
+            "length of the d >= 0.9 zone [mm]",
+        )
+        .with_series("", points(|c| c.length)),
+        file::CRACK_LENGTH,
+    )?;
+    save(
+        LinePlot::new(
+            "width of the damage bands (d >= 0.9 across the band)",
+            "time [us]",
+            "width [mm]",
+        )
+        .with_series("median of the stations", points(|c| c.band_width))
+        .with_series("largest crossing", points(|c| c.band_width_max)),
+        file::BAND_WIDTH,
+    )
+}
+
+/// Re-measures the crack metrics of a finished CT run in `dir` from its snapshots `fields_*.h5` with the
+/// criteria of this version (`config.toml` of the run gives the notch and the grid) and rewrites
+/// `crack.json`. The specimen's dissipation totals need the points' volumes, which the snapshots do not
+/// hold: they are kept from the old `crack.json` (matched by time) when it has them.
+pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
+    let run_err = |path: &Path, message: String| OutputError::Run {
+        path: path.display().to_string(),
+        message,
+    };
+    let config_path = dir.join(file::CONFIG);
+    let text = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
+    let cfg = crate::config::RunConfig::from_str_named(&text, &config_path.display().to_string())
+        .map_err(|e| run_err(&config_path, e.to_string()))?;
+    let Some(ct) = &cfg.ct else {
+        return Err(run_err(
+            &config_path,
+            "not a CT run (no [ct] section): crack metrics need the notch".into(),
+        ));
+    };
+    let h = cfg.grid.cell_size;
+    let how = Measure {
+        tip: Vector2::new(ct.notch_length, 0.5 * ct.height),
+        h,
+        spacing: h / cfg.shape.points_per_cell as f64,
+        criteria: CrackCriteria::for_notch(ct.notch_width, h),
+        section_z: cfg.extrusion.as_ref().map(|e| e.section_z),
+    };
+    let old: Vec<CrackState> = std::fs::read_to_string(dir.join(file::CRACK))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| serde_json::from_value(v["states"].clone()).ok())
+        .unwrap_or_default();
+    let mut states = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io_err(dir))? {
+        let path = entry.map_err(io_err(dir))?.path();
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+        if !name.is_some_and(|n| n.starts_with(file::FIELDS.0) && n.ends_with(file::FIELDS.1)) {
+            continue;
+        }
+        let mut state = measure_snapshot(&path, &how)?;
+        let time = state.time;
+        if let Some(o) = old
+            .iter()
+            .find(|o| (o.time - time).abs() <= 1e-12 * time.abs().max(1.0))
+        {
+            state.dissipated = o.dissipated;
+        }
+        states.push(state);
+    }
+    if states.is_empty() {
+        return Err(run_err(dir, "no snapshots fields_*.h5".into()));
+    }
+    states.sort_by(|a, b| a.time.total_cmp(&b.time));
+    write_crack_json(
+        dir,
+        cfg.extrusion.is_some(),
+        how.tip,
+        &how.criteria,
+        &states,
+    )?;
+    Ok(states)
+}
+
+/// How the crack is measured on a run's snapshots: the notch tip (mm), the cell size h and the point
+/// spacing (mm), the criteria, and for a plate the z of the section (`Some(None)`: the mid-plane).
+struct Measure {
+    tip: Vector2<f64>,
+    h: f64,
+    spacing: f64,
+    criteria: CrackCriteria,
+    section_z: Option<Option<f64>>,
+}
+
+/// The crack state of the snapshot `path` (its time, damage and positions; for a plate on the section
+/// layer), measured as `how` says.
+fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
+    let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let file = hdf5_metno::File::open(path).map_err(h5)?;
+    let time: f64 = file
+        .attr("time_s")
+        .and_then(|a| a.read_scalar())
+        .map_err(h5)?;
+    let position: Vec<f64> = file
+        .dataset("position")
+        .and_then(|d| d.read_raw())
+        .map_err(h5)?;
+    let damage: Vec<f64> = file
+        .dataset("damage")
+        .and_then(|d| d.read_raw())
+        .map_err(h5)?;
+    let width = (position.len() / damage.len().max(1)).max(1);
+    // A plate (3D run): the layer of the section, found by the points' initial z.
+    let section: Vec<usize> = match how.section_z {
+        Some(section_z) => {
+            let displacement: Vec<f64> = file
+                .dataset("displacement")
+                .and_then(|d| d.read_raw())
+                .map_err(h5)?;
+            let z0: Vec<f64> = position
+                .chunks_exact(width)
+                .zip(displacement.chunks_exact(width))
+                .map(|(x, u)| x[2] - u[2])
+                .collect();
+            section_layer(&z0, section_z.unwrap_or_else(|| mid_z(&z0))).1
+        }
+        None => (0..damage.len()).collect(),
+    };
+    let x: Vec<Vector2<f64>> = section
+        .iter()
+        .map(|&k| Vector2::new(position[width * k], position[width * k + 1]))
+        .collect();
+    let layer_damage: Vec<f64> = section.iter().map(|&k| damage[k]).collect();
+    let mut state = crack::measure(
+        &x,
+        &layer_damage,
+        how.tip,
+        how.h,
+        how.spacing,
+        &how.criteria,
+        time,
+    );
+    if let Ok(nonlocal) = file
+        .dataset("nonlocal_damage")
+        .and_then(|d| d.read_raw::<f64>())
+    {
+        state.nonlocal_points = section
+            .iter()
+            .filter(|&&k| {
+                damage[k] >= how.criteria.damage_threshold && nonlocal[k] >= 0.5 * damage[k]
+            })
+            .count();
+    }
+    Ok(state)
+}
+
+/// The middle of the z range of `z0` (mm): the default section of a plate.
+pub(super) fn mid_z(z0: &[f64]) -> f64 {
+    let (lo, hi) = z0
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| {
+            (a.min(z), b.max(z))
+        });
+    0.5 * (lo + hi)
+}
+
+/// The layer of points seeded nearest the plane `z` (mm), from the points' initial z `z0`: its z and the
+/// points within a quarter of the layer spacing of it (the layers of a seeded plate are a point spacing
+/// apart).
+pub(super) fn section_layer(z0: &[f64], z: f64) -> (f64, Vec<usize>) {
+    // Of two layers equally near (the mid-plane of an even number of layers), the lower one: "equally"
+    // within 1e-9 mm, so that round-off in the seeded z does not decide.
+    let nearest = z0
+        .iter()
+        .map(|w| (w - z).abs())
+        .fold(f64::INFINITY, f64::min);
+    let layer = z0
+        .iter()
+        .copied()
+        .filter(|w| (w - z).abs() <= nearest + 1e-9)
+        .fold(f64::INFINITY, f64::min);
+    let layer = if layer.is_finite() { layer } else { z };
+    let spacing = z0
+        .iter()
+        .map(|&w| (w - layer).abs())
+        .filter(|&d| d > 1e-9 * layer.abs().max(1.0))
+        .fold(f64::INFINITY, f64::min);
+    let tol = if spacing.is_finite() {
+        0.25 * spacing
+    } else {
+        1e-9
+    };
+    let points = (0..z0.len())
+        .filter(|&k| (z0[k] - layer).abs() < tol)
+        .collect();
+    (layer, points)
+}

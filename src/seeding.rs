@@ -1,0 +1,404 @@
+//! Seeding: the material points of a body ([`crate::geometry`]) on the lattice of grid cells, for the
+//! material point method ([`Particles::seed`]) and for the FEM mode ([`Particles::seed_gauss`])
+//! (spec `01-model.md`, Sec. 2; `03-ct-test.md` for the CT plate).
+//!
+//! [`Particles::seed`] fills the cells `[i h, (i + 1) h] x [j h, (j + 1) h]` of the lattice of multiples of
+//! `h` (the lattice [`crate::grid::Grid::covering`] snaps to) with `n x n` points at
+//! `((i + (a + 1/2)/n) h, (j + (b + 1/2)/n) h)`, `a, b = 0..n`, each with volume `V_p^0 = h^2 / n^2`, mass
+//! `m_p = rho V_p^0` and the initial CPDI domain = its square sub-cell: `r1^0 = (h/(2n), 0)`,
+//! `r2^0 = (0, h/(2n))`.
+//!
+//! A point is kept if it lies in the union of the `include` regions and in none of the `exclude` regions
+//! (boundaries within [`crate::geometry::BOUNDARY_TOL`] count as material, [`crate::geometry`]). With region edges on grid
+//! lines (the CT plate and notch) no seeded point lies on a boundary, so the rule only matters for unusual
+//! geometry.
+
+use crate::geometry::{Body, GeometryError, Seeding};
+use crate::particles::{ParticleError, Particles, lattice};
+use nalgebra::{SMatrix, SVector};
+
+impl<const D: usize> Particles<D> {
+    /// Seeds `n^D` points per cell of the lattice of multiples of `h` (module docs) into the material of
+    /// `geometry`: points at `(i + (a + 1/2)/n) h` per direction, volume `(h/n)^D`, half-edges `h/(2n)`
+    /// along the axes. Errors for an invalid geometry or seeding, and when no point is material.
+    pub fn seed<B: Body<D>>(geometry: &B, seeding: &Seeding) -> Result<Self, ParticleError> {
+        let Seeding {
+            h,
+            points_per_cell: n,
+            density,
+            body,
+        } = *seeding;
+        let (first, counts) = cell_lattice(geometry, seeding)?;
+        let nf = n as f64;
+        let vol0 = (h / nf).powi(D as i32);
+        let r0 = SMatrix::<f64, D, D>::identity() * (h / (2.0 * nf));
+        let mut particles = Self::new();
+        for cell in lattice::<D>(counts) {
+            for sub in lattice::<D>([n; D]) {
+                let x = SVector::from_fn(|d, _| {
+                    (first[d] + cell[d] as f64 + (sub[d] as f64 + 0.5) / nf) * h
+                });
+                if geometry.contains(&x) {
+                    particles.push(x, vol0, density * vol0, r0, body);
+                }
+            }
+        }
+        if particles.is_empty() {
+            return Err(ParticleError::NoPoints);
+        }
+        Ok(particles)
+    }
+
+    /// FEM mode seeding: the `n^D` Gauss points (`n` = 1, 2 or 3) of every lattice cell whose centre is
+    /// material, with the Gauss weights times the cell's volume as `V_p^0` (so that sums over points
+    /// integrate polynomials of degree `2n - 1` per direction exactly). Half-edges `h/(2n)`.
+    pub fn seed_gauss<B: Body<D>>(geometry: &B, seeding: &Seeding) -> Result<Self, ParticleError> {
+        let Seeding {
+            h,
+            points_per_cell: n,
+            density,
+            body,
+        } = *seeding;
+        let (first, counts) = cell_lattice(geometry, seeding)?;
+        let g = 1.0 / 3.0_f64.sqrt();
+        let q = 0.6_f64.sqrt();
+        let rule: &[(f64, f64)] = match n {
+            1 => &[(0.0, 2.0)],
+            2 => &[(-g, 1.0), (g, 1.0)],
+            3 => &[(-q, 5.0 / 9.0), (0.0, 8.0 / 9.0), (q, 5.0 / 9.0)],
+            _ => {
+                return Err(ParticleError::InvalidSeeding {
+                    reason: format!("{n} Gauss points per direction: 1, 2 or 3 are available"),
+                });
+            }
+        };
+        let r0 = SMatrix::<f64, D, D>::identity() * (h / (2.0 * n as f64));
+        let mut particles = Self::new();
+        for cell in lattice::<D>(counts) {
+            let centre = SVector::from_fn(|d, _| (first[d] + cell[d] as f64 + 0.5) * h);
+            if !geometry.contains(&centre) {
+                continue;
+            }
+            for sub in lattice::<D>([n; D]) {
+                let x = centre + SVector::from_fn(|d, _| 0.5 * h * rule[sub[d]].0);
+                let vol = (0..D).map(|d| rule[sub[d]].1 * 0.5 * h).product::<f64>();
+                particles.push(x, vol, density * vol, r0, body);
+            }
+        }
+        if particles.is_empty() {
+            return Err(ParticleError::NoPoints);
+        }
+        Ok(particles)
+    }
+}
+
+/// The cells of the lattice of multiples of `h` that cover the body's bounding box: the first cell (in cell
+/// units) and the cell count per direction. Checks the body and the seeding parameters.
+fn cell_lattice<const D: usize, B: Body<D>>(
+    geometry: &B,
+    seeding: &Seeding,
+) -> Result<([f64; D], [usize; D]), ParticleError> {
+    geometry.validate()?;
+    let Seeding {
+        h,
+        points_per_cell: n,
+        density,
+        ..
+    } = *seeding;
+    let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
+    if !(h.is_finite() && h > 0.0) {
+        return bad(format!("cell size h = {h} mm must be positive"));
+    }
+    if n == 0 {
+        return bad("points_per_cell must be at least 1".into());
+    }
+    if !(density.is_finite() && density > 0.0) {
+        return bad(format!("density = {density} t/mm^3 must be positive"));
+    }
+    let (lo, hi) = geometry
+        .bounding_box()
+        .ok_or(GeometryError::EmptyGeometry)?;
+    let first: [f64; D] = std::array::from_fn(|d| (lo[d] / h).floor());
+    let counts: [f64; D] = std::array::from_fn(|d| (hi[d] / h).ceil() - first[d]);
+    let candidates = counts.iter().product::<f64>() * (n as f64).powi(D as i32);
+    if candidates.is_nan() || candidates > u32::MAX as f64 {
+        return bad(format!(
+            "{candidates} candidate points: cell size too small for the geometry"
+        ));
+    }
+    Ok((first, counts.map(|c| c as usize)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Geometry, Region};
+    use crate::particles::tests::{rect, rect_geometry};
+    use nalgebra::{Matrix2, Vector2};
+
+    /// The CT default plate: 200 x 200 mm minus a 110 x 10 mm notch from the left edge at mid-height.
+    fn ct_geometry() -> Geometry {
+        toml::from_str(
+            r#"
+            include = [{ type = "rect", min = [0.0, 0.0], max = [200.0, 200.0] }]
+            exclude = [{ type = "rect", min = [0.0, 95.0], max = [110.0, 105.0] }]
+            "#,
+        )
+        .unwrap()
+    }
+
+    fn seeding(h: f64, n: usize) -> Seeding {
+        Seeding {
+            h,
+            points_per_cell: n,
+            density: 2.4e-9,
+            body: 0,
+        }
+    }
+
+    #[test]
+    fn particles_seed_ct_plate_count_volume_and_mass() {
+        let p = Particles::seed(&ct_geometry(), &seeding(1.0, 2)).unwrap();
+        assert_eq!(p.len(), 4 * (40_000 - 1_100));
+        assert_eq!(p.len(), 155_600);
+        let vol: f64 = p.vol0.iter().sum();
+        assert!((vol - (40_000.0 - 1_100.0)).abs() < 1e-8);
+        let mass: f64 = p.mass.iter().sum();
+        assert!((mass / (2.4e-9 * 38_900.0) - 1.0).abs() < 1e-10);
+        assert!(
+            p.x.iter()
+                .all(|x| !(x.x < 110.0 && x.y > 95.0 && x.y < 105.0))
+        );
+        assert_eq!(p.x[0], Vector2::new(0.25, 0.25));
+        assert_eq!(p.x[3], Vector2::new(0.75, 0.75));
+        assert_eq!(p.r[0], Matrix2::identity() * 0.25);
+        assert_eq!(
+            p.corners(0),
+            [
+                Vector2::new(0.0, 0.0),
+                Vector2::new(0.5, 0.0),
+                Vector2::new(0.5, 0.5),
+                Vector2::new(0.0, 0.5)
+            ]
+        );
+        assert!(p.f.iter().all(|f| *f == Matrix2::identity()));
+        let (lo, hi) = p.bounding_box().unwrap();
+        assert_eq!(
+            (lo, hi),
+            (Vector2::new(0.0, 0.0), Vector2::new(200.0, 200.0))
+        );
+    }
+
+    #[test]
+    fn particles_seed_disk_counts_and_boundary_rule() {
+        // A disk of radius 10 mm seeded at 0.25 mm spacing holds pi r^2 of material to the staircase error.
+        let disk = Geometry {
+            include: vec![Region::Disk {
+                centre: [0.0, 0.0],
+                radius: 10.0,
+            }],
+            exclude: vec![],
+        };
+        let p = Particles::seed(&disk, &seeding(0.5, 2)).unwrap();
+        let area: f64 = p.vol.iter().sum();
+        assert!(
+            (area / (std::f64::consts::PI * 100.0) - 1.0).abs() < 0.01,
+            "{area}"
+        );
+        assert!(p.x.iter().all(|x| x.norm() <= 10.0));
+        // Include regions are closed, exclude regions open: a point on the circle stays either way.
+        let on = Vector2::new(3.0, 4.0);
+        let r = Region::Disk {
+            centre: [0.0, 0.0],
+            radius: 5.0,
+        };
+        assert!(r.on_boundary(on) && r.in_closure(on) && !r.in_interior(on));
+        assert!(r.in_interior(Vector2::new(3.0, 3.9)) && !r.in_closure(Vector2::new(3.0, 4.1)));
+        let bad = Region::Disk {
+            centre: [0.0, 0.0],
+            radius: -1.0,
+        };
+        assert!(bad.validate().unwrap_err().contains("positive radius"));
+    }
+
+    #[test]
+    fn particles_seed_polygon_and_boundary_rule() {
+        // Right triangle with legs 4 mm: 1 point per cell at cell centres.
+        let tri = Geometry {
+            include: vec![Region::Polygon {
+                vertices: vec![[0.0, 0.0], [4.0, 0.0], [0.0, 4.0]],
+            }],
+            exclude: vec![],
+        };
+        let p = Particles::seed(&tri, &seeding(1.0, 1)).unwrap();
+        // Centres (i + 0.5, j + 0.5) with i + j + 1 <= 4: strictly inside for i + j <= 2 (6 points), on the
+        // hypotenuse for i + j = 3 (4 points, kept because include regions are closed).
+        assert_eq!(p.len(), 10);
+        // A thin exclude strip whose boundary passes through point centres removes nothing on its boundary.
+        let strip = Geometry {
+            include: vec![rect([0.0, 0.0], [4.0, 4.0])],
+            exclude: vec![rect([0.5, 0.0], [1.5, 4.0])],
+        };
+        let p = Particles::seed(&strip, &seeding(1.0, 1)).unwrap();
+        assert_eq!(p.len(), 16);
+        let strip = Geometry {
+            include: vec![rect([0.0, 0.0], [4.0, 4.0])],
+            exclude: vec![rect([0.4, 0.0], [1.6, 4.0])],
+        };
+        assert_eq!(Particles::seed(&strip, &seeding(1.0, 1)).unwrap().len(), 8);
+    }
+
+    #[test]
+    fn particles_seed_errors() {
+        let empty = Geometry {
+            include: vec![],
+            exclude: vec![],
+        };
+        assert_eq!(
+            Particles::seed(&empty, &seeding(1.0, 2)),
+            Err(ParticleError::Geometry(GeometryError::EmptyGeometry))
+        );
+        let all_cut = Geometry {
+            include: vec![rect([0.0, 0.0], [2.0, 2.0])],
+            exclude: vec![rect([-1.0, -1.0], [3.0, 3.0])],
+        };
+        assert_eq!(
+            Particles::seed(&all_cut, &seeding(1.0, 2)),
+            Err(ParticleError::NoPoints)
+        );
+        let bad_rect = rect_geometry([0.0, 0.0], [0.0, 2.0]);
+        assert!(matches!(
+            Particles::seed(&bad_rect, &seeding(1.0, 2)),
+            Err(ParticleError::Geometry(GeometryError::InvalidRegion {
+                list: "include",
+                index: 0,
+                ..
+            }))
+        ));
+        let bad_poly = Geometry {
+            include: vec![rect([0.0, 0.0], [1.0, 1.0])],
+            exclude: vec![Region::Polygon {
+                vertices: vec![[0.0, 0.0], [1.0, 1.0]],
+            }],
+        };
+        assert!(matches!(
+            Particles::seed(&bad_poly, &seeding(1.0, 2)),
+            Err(ParticleError::Geometry(GeometryError::InvalidRegion {
+                list: "exclude",
+                index: 0,
+                ..
+            }))
+        ));
+        let g = ct_geometry();
+        assert!(matches!(
+            Particles::seed(&g, &seeding(0.0, 2)),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+        assert!(matches!(
+            Particles::seed(&g, &seeding(1.0, 0)),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+        assert!(matches!(
+            Particles::seed(&g, &seeding(1e-9, 2)),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+    }
+
+    #[test]
+    fn particles_geometry_rejects_unknown_fields() {
+        let unknown_region: Result<Geometry, _> = toml::from_str(
+            r#"include = [{ type = "rect", min = [0.0, 0.0], max = [1.0, 1.0], maxx = 3 }]"#,
+        );
+        assert!(unknown_region.is_err());
+        let unknown_top: Result<Geometry, _> = toml::from_str(
+            r#"include = [{ type = "rect", min = [0.0, 0.0], max = [1.0, 1.0] }]
+            excluded = []"#,
+        );
+        assert!(unknown_top.is_err());
+        let unknown_kind: Result<Geometry, _> =
+            toml::from_str(r#"include = [{ type = "circle", r = 1.0 }]"#);
+        assert!(unknown_kind.is_err());
+    }
+
+    #[test]
+    fn particles_append_and_history() {
+        let g = ct_geometry();
+        let mut concrete = Particles::seed(&g, &seeding(2.0, 1)).unwrap();
+        let plate_geom = rect_geometry([0.0, 90.0], [30.0, 95.0]);
+        let plate = Particles::seed(
+            &plate_geom,
+            &Seeding {
+                body: 1,
+                density: 7.85e-9,
+                ..seeding(1.0, 2)
+            },
+        )
+        .unwrap();
+        assert_eq!(plate.len(), 30 * 5 * 4);
+        concrete.resize_history(3, 1.25e-3);
+        assert_eq!(
+            concrete.append(&plate),
+            Err(ParticleError::HistoryStrideMismatch { this: 3, other: 0 })
+        );
+        concrete.resize_history(0, 0.0);
+        let n0 = concrete.len();
+        concrete.append(&plate).unwrap();
+        assert_eq!(concrete.len(), n0 + 600);
+        assert_eq!(concrete.body.iter().filter(|&&b| b == 1).count(), 600);
+        concrete.resize_history(2, 7.0);
+        assert_eq!(concrete.history.len(), 2 * concrete.len());
+        concrete.history_mut(5)[1] = 3.0;
+        assert_eq!(concrete.history(5), &[7.0, 3.0]);
+        assert_eq!(concrete.vol.len(), concrete.len());
+        assert_eq!(concrete.stress.len(), concrete.len());
+    }
+
+    #[test]
+    fn gauss_seeding_fills_whole_cells_with_exact_weights() {
+        let g = ct_geometry();
+        let h = 5.0;
+        let area = 200.0 * 200.0 - 110.0 * 10.0;
+        for n in 1..=3 {
+            let p = Particles::seed_gauss(
+                &g,
+                &Seeding {
+                    h,
+                    points_per_cell: n,
+                    density: 2.0,
+                    body: 0,
+                },
+            )
+            .unwrap();
+            assert_eq!(p.len(), (area / (h * h)) as usize * n * n);
+            let vol: f64 = p.vol0.iter().sum();
+            assert!((vol - area).abs() < 1e-9 * area, "n = {n}: {vol}");
+            // The rule integrates x^2 y^2 exactly over every cell (degree 2 per direction for n >= 2).
+            if n >= 2 {
+                let cells = [(0.0, 0.0), (195.0, 195.0)];
+                for (x0, y0) in cells {
+                    let exact = ((x0 + h).powi(3) - x0.powi(3)) / 3.0
+                        * ((y0 + h).powi(3) - y0.powi(3))
+                        / 3.0;
+                    let q: f64 = (0..p.len())
+                        .filter(|&i| {
+                            let x = p.x[i];
+                            x.x > x0 && x.x < x0 + h && x.y > y0 && x.y < y0 + h
+                        })
+                        .map(|i| p.vol0[i] * p.x[i].x.powi(2) * p.x[i].y.powi(2))
+                        .sum();
+                    assert!((q - exact).abs() < 1e-9 * exact, "n = {n}: {q} vs {exact}");
+                }
+            }
+        }
+        let four = Seeding {
+            h,
+            points_per_cell: 4,
+            density: 2.0,
+            body: 0,
+        };
+        assert!(matches!(
+            Particles::seed_gauss(&g, &four),
+            Err(ParticleError::InvalidSeeding { .. })
+        ));
+    }
+}
