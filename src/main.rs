@@ -29,35 +29,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Run a simulation described by a TOML configuration (see configs/ and docs/configuration.md).
-    Run {
-        /// Configuration file.
-        config: PathBuf,
-        /// Override `run.steps`.
-        #[arg(long)]
-        steps: Option<usize>,
-        /// Override the output directory.
-        #[arg(long)]
-        output: Option<PathBuf>,
-        /// No progress bar (log lines instead).
-        #[arg(long)]
-        quiet: bool,
-        /// Continue from the checkpoint in the output directory (written at every output step, on Ctrl-C
-        /// and when a step fails for good). Only the `[run]` section (steps, output cadence, PETSc options)
-        /// may differ from the checkpointed run.
-        #[arg(long, conflicts_with = "overwrite")]
-        resume: bool,
-        /// Replace the results of another run in the output directory (removes the files the program
-        /// writes there, nothing else) instead of refusing to start.
-        #[arg(long)]
-        overwrite: bool,
-        /// Start even if the estimated memory need exceeds the memory available.
-        #[arg(long)]
-        allow_large: bool,
-        /// Override a config value, `key=value` with a dotted key and a TOML value (repeatable), e.g.
-        /// `--set shape.method=fem --set shape.kind=linear --set grid.cell_size=2.5`.
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        set: Vec<String>,
-    },
+    Run(RunFlags),
     /// Solver-comparison study: runs a configuration for a few steps with several PETSc option sets (each in
     /// its own process) and writes a table (Markdown, CSV) and charts.
     Study {
@@ -198,29 +170,7 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
         ),
         // handled in main, without PETSc
         Command::Compare(_) => Ok(()),
-        Command::Run {
-            config,
-            steps,
-            output,
-            quiet,
-            resume,
-            overwrite,
-            allow_large,
-            set,
-        } => run::run(
-            own_args,
-            petsc_args,
-            &config,
-            RunFlags {
-                steps,
-                output,
-                quiet,
-                resume,
-                overwrite,
-                allow_large,
-                set,
-            },
-        ),
+        Command::Run(flags) => run::run(own_args, petsc_args, flags),
         Command::Smoke {
             n,
             load,

@@ -29,21 +29,35 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// range, unsupported, incompatible, unknown type).
 const PETSC_INPUT_ERRORS: [i32; 5] = [56, 62, 63, 75, 86];
 
-/// Command-line flags of `run`.
+/// The arguments of `run`.
+#[derive(clap::Args)]
 pub struct RunFlags {
-    /// `--steps`: overrides `run.steps`.
+    /// Configuration file.
+    pub config: PathBuf,
+    /// Override `run.steps`.
+    #[arg(long)]
     pub steps: Option<usize>,
-    /// `--output`: overrides the output directory.
+    /// Override the output directory.
+    #[arg(long)]
     pub output: Option<PathBuf>,
-    /// `--quiet`: log lines instead of a progress bar.
+    /// No progress bar (log lines instead).
+    #[arg(long)]
     pub quiet: bool,
-    /// `--resume`: continue from the checkpoint in the output directory.
+    /// Continue from the checkpoint in the output directory (written at every output step, on Ctrl-C
+    /// and when a step fails for good). Only the `[run]` section (steps, output cadence, PETSc options)
+    /// may differ from the checkpointed run.
+    #[arg(long, conflicts_with = "overwrite")]
     pub resume: bool,
-    /// `--overwrite`: replace the results of another run in the output directory.
+    /// Replace the results of another run in the output directory (removes the files the program
+    /// writes there, nothing else) instead of refusing to start.
+    #[arg(long)]
     pub overwrite: bool,
-    /// `--allow-large`: start even if the estimated memory need exceeds the memory available.
+    /// Start even if the estimated memory need exceeds the memory available.
+    #[arg(long)]
     pub allow_large: bool,
-    /// `--set KEY=VALUE` overrides of the configuration.
+    /// Override a config value, `key=value` with a dotted key and a TOML value (repeatable), e.g.
+    /// `--set shape.method=fem --set shape.kind=linear --set grid.cell_size=2.5`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
 }
 
@@ -78,7 +92,8 @@ struct Prepared {
 
 /// `run CONFIG`: checks the input (`own_args` the program's arguments, `petsc_args` PETSc's, starting with
 /// the program name), starts PETSc and runs the simulation in 2D, or in 3D with `[extrusion]`.
-pub fn run(own_args: &[String], petsc_args: &[String], path: &Path, flags: RunFlags) -> Result<()> {
+pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Result<()> {
+    let path = flags.config.as_path();
     let prepared = prepare(path, &flags, petsc_args)?;
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
     share_cores(&session);
