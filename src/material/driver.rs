@@ -18,7 +18,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 
-use super::{Constitutive, Material, MaterialError, Response};
+use super::{Constitutive, Material, MaterialError, PointUpdate, Response};
 
 /// Load path of the material-point driver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -204,12 +204,12 @@ pub fn run_path(
             }
             eta_bar = match eta_bar_path {
                 EtaBarPath::Local => {
-                    material.update(&f, 0.0, &h_n, &mut h_trial, &mut out)?;
+                    material.update(PointUpdate::new(&f, 0.0, &h_n, &mut h_trial), &mut out)?;
                     out.eta
                 }
                 EtaBarPath::Prescribed { max } => max * eps.abs() / max_strain,
             };
-            material.update(&f, eta_bar, &h_n, &mut h_trial, &mut out)?;
+            material.update(PointUpdate::new(&f, eta_bar, &h_n, &mut h_trial), &mut out)?;
             let r = DVector::from_iterator(nfree, free.iter().map(|&(a, b)| out.p[(a, b)]));
             let tol = 1e-9 + 1e-12 * out.p.norm();
             let res = r.amax();
@@ -388,7 +388,8 @@ mod tests {
                 m.init_history(&mut h);
                 let mut ht = h.clone();
                 let mut out = Response::zeros();
-                m.update(&f, 0.0, &h, &mut ht, &mut out).unwrap();
+                m.update(PointUpdate::new(&f, 0.0, &h, &mut ht), &mut out)
+                    .unwrap();
                 out.eta / 1e-7
             };
             let onset_ratio = onset(1.0) / onset(-1.0);
