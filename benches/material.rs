@@ -6,7 +6,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use mpm_concrete::material::{
-    Constitutive, MaterialConfig, MicroplaneConfig, Preset, Quadrature, Response,
+    Constitutive, MaterialConfig, MicroplaneConfig, PointUpdate, Preset, Quadrature, Response,
 };
 use nalgebra::Matrix3;
 
@@ -25,7 +25,7 @@ fn bench_microplane(c: &mut Criterion) {
         m.init_history(&mut h_n);
         let mut h_trial = h_n.clone();
         let mut out = Response::zeros();
-        m.update(&f, 0.0, &h_n, &mut h_trial, &mut out)
+        m.update(PointUpdate::new(&f, 0.0, &h_n, &mut h_trial), &mut out)
             .expect("update");
         let eta = out.eta;
         // elastic state (eta_bar below gamma_0) and a loading state (local eta_bar = eta, planes damaging)
@@ -33,10 +33,7 @@ fn bench_microplane(c: &mut Criterion) {
             c.bench_function(&format!("microplane_{q:?}_{label}").to_lowercase(), |b| {
                 b.iter(|| {
                     m.update(
-                        black_box(&f),
-                        black_box(eta_bar),
-                        &h_n,
-                        &mut h_trial,
+                        PointUpdate::new(black_box(&f), black_box(eta_bar), &h_n, &mut h_trial),
                         &mut out,
                     )
                     .expect("update");
@@ -57,7 +54,7 @@ fn bench_elastic(c: &mut Criterion) {
     let mut out = Response::zeros();
     c.bench_function("neo_hookean", |b| {
         b.iter(|| {
-            m.update(black_box(&f), 0.0, &[], &mut [], &mut out)
+            m.update(PointUpdate::new(black_box(&f), 0.0, &[], &mut []), &mut out)
                 .expect("update");
             black_box(&out);
         })

@@ -34,7 +34,7 @@
 //! `D x D` blocks of its stress and tangent.
 
 use crate::dofs::{DofMap, FieldLayout};
-use crate::material::{Constitutive, Material, MaterialError, Response};
+use crate::material::{Constitutive, Material, MaterialError, PointUpdate, Response};
 use crate::particles::Particles;
 use crate::petsc::{BlockCsr, BlockLayout};
 use crate::shape::ShapeTable;
@@ -755,7 +755,7 @@ fn evaluate_point<const D: usize>(
     };
     if nonlocal {
         material
-            .update(&f3, ebp, h_n, h_trial, &mut r)
+            .update(PointUpdate::new(&f3, ebp, h_n, h_trial), &mut r)
             .map_err(err)?;
     } else {
         local_update(material, &f3, h_n, h_trial, &mut r).map_err(err)?;
@@ -909,12 +909,12 @@ pub fn local_update(
     h_trial: &mut [f64],
     out: &mut Response,
 ) -> Result<(), MaterialError> {
-    material.update(f, 0.0, h_n, h_trial, out)?;
+    material.update(PointUpdate::new(f, 0.0, h_n, h_trial), out)?;
     if out.dp_deta_bar.iter().all(|v| *v == 0.0) && out.eta == 0.0 {
         return Ok(());
     }
     let eta = out.eta;
-    material.update(f, eta, h_n, h_trial, out)?;
+    material.update(PointUpdate::new(f, eta, h_n, h_trial), out)?;
     for ij in 0..9 {
         for kl in 0..9 {
             out.a[(ij, kl)] += out.dp_deta_bar[(ij / 3, ij % 3)] * out.deta_df[(kl / 3, kl % 3)];

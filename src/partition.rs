@@ -212,6 +212,27 @@ fn send_buffer<const D: usize>(
     (counts, per.concat())
 }
 
+/// Sends every point `p` to the processes `destinations(p, ..)` pushes and returns the number of
+/// records sent and the records received. Collective.
+fn exchange_points<const D: usize>(
+    session: &SessionGuard,
+    particles: &Particles<D>,
+    destinations: impl FnMut(usize, &mut Vec<usize>),
+) -> Result<(usize, Vec<f64>), PetscError> {
+    let (counts, send) = send_buffer(particles, session.size(), destinations);
+    let received = session.exchange(particles.record_width(), &counts, &send)?;
+    Ok((counts.iter().sum(), received))
+}
+
+/// Appends the points of `records` (packed by [`Particles::pack`]); returns how many.
+fn unpack_all<const D: usize>(particles: &mut Particles<D>, records: &[f64]) -> usize {
+    let width = particles.record_width();
+    for record in records.chunks_exact(width) {
+        particles.unpack(record);
+    }
+    records.len() / width
+}
+
 /// Sends this process's points that moved into another process's band to it and appends the points
 /// it receives. Returns the number of points that left.
 pub fn migrate<const D: usize>(
@@ -219,22 +240,18 @@ pub fn migrate<const D: usize>(
     partition: &Partition,
     particles: &mut Particles<D>,
 ) -> Result<usize, PetscError> {
-    let width = particles.record_width();
     let owners: Vec<usize> = particles.x.iter().map(|&x| partition.owner(x)).collect();
-    let (counts, send) = send_buffer(particles, session.size(), |p, to| {
+    let (sent, received) = exchange_points(session, particles, |p, to| {
         if owners[p] != partition.rank {
             to.push(owners[p]);
         }
-    });
-    let received = session.exchange(width, &counts, &send)?;
-    if !send.is_empty() {
+    })?;
+    if sent > 0 {
         let keep: Vec<bool> = owners.iter().map(|&r| r == partition.rank).collect();
         particles.retain(&keep);
     }
-    for record in received.chunks_exact(width) {
-        particles.unpack(record);
-    }
-    Ok(counts.iter().sum())
+    unpack_all(particles, &received);
+    Ok(sent)
 }
 
 /// Appends copies of the other processes' points whose support may reach this process's node rows
@@ -244,15 +261,10 @@ pub fn add_ghosts<const D: usize>(
     partition: &Partition,
     particles: &mut Particles<D>,
 ) -> Result<usize, PetscError> {
-    let width = particles.record_width();
-    let (counts, send) = send_buffer(particles, session.size(), |p, to| {
+    let (_, received) = exchange_points(session, particles, |p, to| {
         to.extend(partition.ranks_meeting(&partition.reach(particles, p)));
-    });
-    let received = session.exchange(width, &counts, &send)?;
-    for record in received.chunks_exact(width) {
-        particles.unpack(record);
-    }
-    Ok(received.len() / width)
+    })?;
+    Ok(unpack_all(particles, &received))
 }
 
 /// The whole set of points on process 0, in the order of their ids (the order of the serial run), from

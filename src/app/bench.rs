@@ -9,7 +9,9 @@
 
 use crate::app::study::{self, OptionSet, SetResult};
 use crate::io::write_atomic;
-use crate::material::{Constitutive, MaterialConfig, MicroplaneConfig, Preset, Response};
+use crate::material::{
+    Constitutive, MaterialConfig, MicroplaneConfig, PointUpdate, Preset, Response,
+};
 use nalgebra::Matrix3;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -237,7 +239,7 @@ pub fn microplane_throughput(seconds: f64) -> Result<f64, String> {
     m.init_history(&mut h_n);
     let mut h_trial = h_n.clone();
     let mut out = Response::zeros();
-    m.update(&f, 0.0, &h_n, &mut h_trial, &mut out)
+    m.update(PointUpdate::new(&f, 0.0, &h_n, &mut h_trial), &mut out)
         .map_err(|e| e.to_string())?;
     let eta_bar = out.eta;
     let start = std::time::Instant::now();
@@ -245,10 +247,12 @@ pub fn microplane_throughput(seconds: f64) -> Result<f64, String> {
     while start.elapsed().as_secs_f64() < seconds {
         for _ in 0..1000 {
             m.update(
-                std::hint::black_box(&f),
-                std::hint::black_box(eta_bar),
-                &h_n,
-                &mut h_trial,
+                PointUpdate::new(
+                    std::hint::black_box(&f),
+                    std::hint::black_box(eta_bar),
+                    &h_n,
+                    &mut h_trial,
+                ),
                 &mut out,
             )
             .map_err(|e| e.to_string())?;

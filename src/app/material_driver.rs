@@ -97,32 +97,33 @@ pub fn write_csv(points: &[PathPoint], path: &Path) -> Result<(), DriverError> {
     )
     .map_err(io)?;
     for (k, p) in points.iter().enumerate() {
-        writeln!(
-            w,
-            "{k},{:e},{:.12},{:.12},{:.12},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{}",
-            p.control,
-            p.f[(0, 0)],
-            p.f[(1, 1)],
-            p.f[(2, 2)],
-            p.f[(0, 1)],
-            p.p[(0, 0)],
-            p.p[(1, 1)],
-            p.p[(2, 2)],
-            p.p[(0, 1)],
-            p.sigma[(0, 0)],
-            p.sigma[(1, 1)],
-            p.sigma[(2, 2)],
-            p.sigma[(0, 1)],
-            p.eta,
-            p.eta_bar,
-            p.damage,
-            p.energy,
-            p.iterations
-        )
-        .map_err(io)?;
+        // F11, F22, F33 in full precision (stretches near 1), every other component as {:e}.
+        write!(w, "{k},{:e}", p.control).map_err(io)?;
+        for (i, j) in COMPONENTS {
+            let f = p.f[(i, j)];
+            if i == j {
+                write!(w, ",{f:.12}")
+            } else {
+                write!(w, ",{f:e}")
+            }
+            .map_err(io)?;
+        }
+        for m in [&p.p, &p.sigma] {
+            for ij in COMPONENTS {
+                write!(w, ",{:e}", m[ij]).map_err(io)?;
+            }
+        }
+        let scalars = [p.eta, p.eta_bar, p.damage, p.energy];
+        for v in scalars {
+            write!(w, ",{v:e}").map_err(io)?;
+        }
+        writeln!(w, ",{}", p.iterations).map_err(io)?;
     }
     w.flush().map_err(io)
 }
+
+/// The tensor components written per point, in column order: 11, 22, 33, 12.
+const COMPONENTS: [(usize, usize); 4] = [(0, 0), (1, 1), (2, 2), (0, 1)];
 
 /// Command-line arguments of the `material-driver` subcommand.
 #[derive(clap::Args, Clone, Debug)]

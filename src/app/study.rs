@@ -321,38 +321,28 @@ fn report_tables(config: &Path, steps: usize, results: &[SetResult]) -> (String,
         } else {
             f64::NAN
         };
-        let _ = writeln!(
-            md,
-            "| {} | {} | {} | {:.2} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} | {} |",
-            r.set.name,
-            if r.completed { "yes" } else { "**no**" },
-            r.steps,
-            newton,
-            r.linear_per_newton,
-            r.setup,
-            r.assembly,
-            r.solve,
-            r.total,
-            r.peak_mb,
-            r.retries
-        );
-        let _ = writeln!(
-            csv,
-            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.1},{},\"{}\",\"{}\"",
-            r.set.name,
-            r.completed,
-            r.steps,
-            newton,
-            r.linear_per_newton,
-            r.setup,
-            r.assembly,
-            r.solve,
-            r.total,
-            r.peak_mb,
-            r.retries,
-            r.set.options,
-            r.error.clone().unwrap_or_default().replace('"', "'")
-        );
+        // The figures with their decimals in the report and in the CSV: Newton/step, KSP/Newton, the
+        // set-up, assembly, solve and total times (s) and the peak memory (MB).
+        let figures = [
+            (newton, 2, 4),
+            (r.linear_per_newton, 1, 4),
+            (r.setup, 2, 4),
+            (r.assembly, 2, 4),
+            (r.solve, 2, 4),
+            (r.total, 2, 4),
+            (r.peak_mb, 0, 1),
+        ];
+        let (name, steps, retries) = (&r.set.name, r.steps, r.retries);
+        let converged = if r.completed { "yes" } else { "**no**" };
+        let _ = write!(md, "| {name} | {converged} | {steps} |");
+        let _ = write!(csv, "{name},{},{steps}", r.completed);
+        for (v, md_decimals, csv_decimals) in figures {
+            let _ = write!(md, " {v:.md_decimals$} |");
+            let _ = write!(csv, ",{v:.csv_decimals$}");
+        }
+        let _ = writeln!(md, " {retries} |");
+        let error = r.error.clone().unwrap_or_default().replace('"', "'");
+        let _ = writeln!(csv, ",{retries},\"{}\",\"{error}\"", r.set.options);
     }
     md.push_str("\nOption sets:\n\n");
     for r in results {
@@ -461,5 +451,39 @@ mod tests {
             "{e}"
         );
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn report_rows_have_fixed_decimals() {
+        let row = |name: &str, steps: usize, error: Option<&str>| SetResult {
+            set: OptionSet {
+                name: name.into(),
+                options: "-pc_type lu".into(),
+            },
+            steps,
+            completed: error.is_none(),
+            newton: vec![3.0, 4.0],
+            linear_per_newton: 2.345,
+            wall: vec![0.1, 0.2],
+            setup: 0.125,
+            assembly: 1.0 / 3.0,
+            solve: 2.5,
+            total: 4.0,
+            peak_mb: 106.06,
+            retries: 1,
+            unknowns: 100.0,
+            new_patterns: 0,
+            error: error.map(str::to_string),
+        };
+        let results = [row("lu", 2, None), row("ilu", 0, Some("diverged \"x\""))];
+        let (md, csv) = report_tables(Path::new("c.toml"), 2, &results);
+        assert!(md.contains(
+            "| lu | yes | 2 | 3.50 | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 |\n\
+             | ilu | **no** | 0 | NaN | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 |\n"
+        ));
+        assert!(csv.ends_with(
+            "lu,true,2,3.5000,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,\"-pc_type lu\",\"\"\n\
+             ilu,false,0,NaN,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,\"-pc_type lu\",\"diverged 'x'\"\n"
+        ));
     }
 }

@@ -18,7 +18,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 
-use super::{Constitutive, Material, MaterialError, Response};
+use super::{Constitutive, Material, MaterialError, PointUpdate, Response};
 
 /// Load path of the material-point driver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -204,12 +204,12 @@ pub fn run_path(
             }
             eta_bar = match eta_bar_path {
                 EtaBarPath::Local => {
-                    material.update(&f, 0.0, &h_n, &mut h_trial, &mut out)?;
+                    material.update(PointUpdate::new(&f, 0.0, &h_n, &mut h_trial), &mut out)?;
                     out.eta
                 }
                 EtaBarPath::Prescribed { max } => max * eps.abs() / max_strain,
             };
-            material.update(&f, eta_bar, &h_n, &mut h_trial, &mut out)?;
+            material.update(PointUpdate::new(&f, eta_bar, &h_n, &mut h_trial), &mut out)?;
             let r = DVector::from_iterator(nfree, free.iter().map(|&(a, b)| out.p[(a, b)]));
             let tol = 1e-9 + 1e-12 * out.p.norm();
             let res = r.amax();
@@ -313,6 +313,11 @@ mod tests {
     use super::*;
     use crate::material::{ElasticConfig, MaterialConfig, MicroplaneConfig, Preset};
 
+    /// The path of `kind` driven with the local `eta_bar = eta` (panics on error).
+    fn local_path(m: &Material, kind: PathKind, max: f64, steps: usize) -> Vec<PathPoint> {
+        run_path(m, kind, max, steps, EtaBarPath::Local).unwrap()
+    }
+
     fn paper(preset: Preset) -> Material {
         MaterialConfig::Microplane(MicroplaneConfig::preset(preset))
             .build()
@@ -322,7 +327,7 @@ mod tests {
     #[test]
     fn uniaxial_stress_path_has_zero_lateral_stress_and_elastic_start() {
         let m = paper(Preset::Paper);
-        let pts = run_path(&m, PathKind::UniaxialTension, 5e-4, 10, EtaBarPath::Local).unwrap();
+        let pts = local_path(&m, PathKind::UniaxialTension, 5e-4, 10);
         let e_mod = 9.0 * 18750.0 * 15254.0 / (3.0 * 18750.0 + 15254.0);
         for p in &pts[1..] {
             assert!(p.p[(1, 1)].abs() < 1e-8 && p.p[(2, 2)].abs() < 1e-8);
@@ -343,7 +348,7 @@ mod tests {
         // Elastic limit: the plane normal to the load reaches gamma_0 at eps = gamma_0 / 1.0630.
         let m = paper(Preset::PaperGamma0Low);
         let (max, steps) = (3e-3, 600);
-        let pts = run_path(&m, PathKind::UniaxialTension, max, steps, EtaBarPath::Local).unwrap();
+        let pts = local_path(&m, PathKind::UniaxialTension, max, steps);
         let (peak_s, peak_e) = peak(&pts, PathKind::UniaxialTension);
         let onset = pts.iter().find(|p| p.damage > 0.0).unwrap().control;
         let expected = 1.25e-4 / 1.0630;
@@ -388,7 +393,8 @@ mod tests {
                 m.init_history(&mut h);
                 let mut ht = h.clone();
                 let mut out = Response::zeros();
-                m.update(&f, 0.0, &h, &mut ht, &mut out).unwrap();
+                m.update(PointUpdate::new(&f, 0.0, &h, &mut ht), &mut out)
+                    .unwrap();
                 out.eta / 1e-7
             };
             let onset_ratio = onset(1.0) / onset(-1.0);
@@ -411,7 +417,7 @@ mod tests {
     #[test]
     fn cyclic_path_unloads_secantly_to_zero_stress() {
         let m = paper(Preset::PaperGamma0Low);
-        let pts = run_path(&m, PathKind::CyclicTension, 1e-3, 300, EtaBarPath::Local).unwrap();
+        let pts = local_path(&m, PathKind::CyclicTension, 1e-3, 300);
         // unloading branches end at zero strain with zero stress
         for p in pts.iter().skip(1).filter(|p| p.control == 0.0) {
             assert!(p.p.norm() < 1e-8, "stress at zero strain {}", p.p.norm());
@@ -442,14 +448,7 @@ mod tests {
         })
         .build()
         .unwrap();
-        let pts = run_path(
-            &m,
-            PathKind::CyclicCompression,
-            3e-3,
-            200,
-            EtaBarPath::Local,
-        )
-        .unwrap();
+        let pts = local_path(&m, PathKind::CyclicCompression, 3e-3, 200);
         let d_max = pts.iter().map(|p| p.damage).fold(0.0, f64::max);
         assert!(d_max > 0.1 && d_max < 1.0);
         assert!(pts.iter().all(|p| p.iterations < 20));
@@ -468,7 +467,7 @@ mod tests {
         .unwrap();
         assert!((pts.last().unwrap().eta_bar - 5e-3).abs() < 1e-15);
         assert!(pts.iter().all(|p| p.p[(2, 2)].abs() < 1e-8));
-        let pts = run_path(&m, PathKind::PureShear, 2e-3, 20, EtaBarPath::Local).unwrap();
+        let pts = local_path(&m, PathKind::PureShear, 2e-3, 20);
         let g = 15254.0;
         assert!((pts[1].p[(0, 1)] / (g * pts[1].control) - 1.0).abs() < 1e-3);
         let elastic = MaterialConfig::NeoHookean(ElasticConfig {
@@ -478,14 +477,7 @@ mod tests {
         })
         .build()
         .unwrap();
-        let pts = run_path(
-            &elastic,
-            PathKind::UniaxialCompression,
-            0.2,
-            20,
-            EtaBarPath::Local,
-        )
-        .unwrap();
+        let pts = local_path(&elastic, PathKind::UniaxialCompression, 0.2, 20);
         assert!(pts.last().unwrap().p[(1, 1)].abs() < 1e-8);
         assert!(uniaxial_strengths(&elastic, 10).unwrap().is_none());
         assert!(

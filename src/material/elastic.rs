@@ -8,8 +8,8 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    Constitutive, MaterialError, Response, Sym6, check_finite, first_piola_from_pk2,
-    green_lagrange, invalid, positive_jacobian,
+    Constitutive, MaterialError, PointUpdate, Response, Sym6, first_piola_from_pk2, green_lagrange,
+    invalid, positive_jacobian,
 };
 
 /// Elastic parameters of the `linear_elastic`, `svk` and `neo_hookean` config sections: give either
@@ -170,16 +170,9 @@ trait ElasticLaw {
 }
 
 impl<T: ElasticLaw + Send + Sync> Constitutive for T {
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        _h_n: &[f64],
-        _h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError> {
-        check_finite(f, eta_bar)?;
-        self.stress(f, out)?;
+    fn update(&self, p: PointUpdate<'_>, out: &mut Response) -> Result<(), MaterialError> {
+        p.check_finite()?;
+        self.stress(p.f, out)?;
         clear_nonlocal(out);
         Ok(())
     }
@@ -368,7 +361,9 @@ mod tests {
         let m = NeoHookean::new(moduli());
         let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, -0.5, 1.0));
         let mut out = Response::zeros();
-        let err = m.update(&f, 0.0, &[], &mut [], &mut out).unwrap_err();
+        let err = m
+            .update(PointUpdate::new(&f, 0.0, &[], &mut []), &mut out)
+            .unwrap_err();
         assert!(matches!(err, MaterialError::NonPositiveJacobian { det } if det == -0.5));
     }
 }

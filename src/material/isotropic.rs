@@ -36,9 +36,8 @@ use serde::{Deserialize, Serialize};
 use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::{
-    Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, Response, Sym6,
-    check_history_len, check_jacobian, first_piola_from_pk2, green_lagrange, invalid,
-    sym_to_matrix,
+    Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, PointUpdate, Response, Sym6,
+    check_softening, first_piola_from_pk2, green_lagrange, invalid, sym_to_matrix,
 };
 
 /// Definition of the local equivalent strain `eta`.
@@ -122,15 +121,7 @@ impl IsotropicDamageConfig {
             return invalid("poisson_ratio", nu, "-1 < nu < 0.5");
         }
         positive("gamma_0", self.gamma_0)?;
-        if !(0.0..=1.0).contains(&self.alpha) {
-            return invalid("alpha", self.alpha, "0 <= alpha <= 1");
-        }
-        if !(self.beta.is_finite() && self.beta >= 0.0) {
-            return invalid("beta", self.beta, "a finite value >= 0");
-        }
-        if !(self.c.is_finite() && self.c >= 0.0) {
-            return invalid("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
-        }
+        check_softening(self.alpha, self.beta, self.c)?;
         self.gradient_activity.validate()?;
         Ok(IsotropicDamage {
             config: self.clone(),
@@ -203,16 +194,10 @@ impl Constitutive for IsotropicDamage {
         h.fill(self.config.gamma_0);
     }
 
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError> {
-        check_history_len(1, h_n, h_trial)?;
-        check_jacobian(f, eta_bar)?;
+    fn update(&self, p: PointUpdate<'_>, out: &mut Response) -> Result<(), MaterialError> {
+        p.check_history_len(1)?;
+        p.check_jacobian()?;
+        let (f, eta_bar, g_n) = (p.f, p.eta_bar, p.h_n[0]);
         let (lam, mu) = (self.moduli.lambda(), self.moduli.shear);
         let gamma_0 = self.config.gamma_0;
         let small = self.config.kinematics == Kinematics::Small;
@@ -232,10 +217,9 @@ impl Constitutive for IsotropicDamage {
         let tr = e[0] + e[1] + e[2];
         let (eta, g_eta) = self.equivalent_strain(&e);
 
-        let g_n = h_n[0];
         let loading = eta_bar > g_n && eta_bar > gamma_0;
         let gamma = gamma_0.max(g_n).max(eta_bar);
-        h_trial[0] = gamma;
+        p.h_trial[0] = gamma;
         let (d, dd) = self.damage_law(gamma);
         let omd = 1.0 - d;
 

@@ -42,14 +42,13 @@
 //! undamaged energy at the same `E` (i.e. the `psi_0`-weighted mean of `d_I`); at `Psi_0 = 0`
 //! (`E = 0`) the plain sphere average `2 sum_I w_I d_I` is reported instead.
 
-use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 use super::activity::GradientActivity;
 use super::elastic::positive;
 use super::quadrature::Quadrature;
 use super::{
-    Constitutive, MaterialError, PAIRS, Response, Sym6, check_history_len, check_jacobian,
+    Constitutive, MaterialError, PAIRS, PointUpdate, Response, Sym6, check_softening,
     first_piola_from_pk2, green_lagrange, invalid,
 };
 
@@ -274,15 +273,7 @@ impl MicroplaneParams {
         if !(self.k_r.is_finite() && self.k_r > 1.0) {
             return invalid("k_r", self.k_r, "a finite value > 1");
         }
-        if !(0.0..=1.0).contains(&self.alpha) {
-            return invalid("alpha", self.alpha, "0 <= alpha <= 1");
-        }
-        if !(self.beta.is_finite() && self.beta >= 0.0) {
-            return invalid("beta", self.beta, "a finite value >= 0");
-        }
-        if !(self.c.is_finite() && self.c >= 0.0) {
-            return invalid("c", self.c, "a finite value >= 0 (mm^2; 0 = local)");
-        }
+        check_softening(self.alpha, self.beta, self.c)?;
         if let Some(de) = self.erosion_damage
             && !(de > 0.0 && de < 1.0)
         {
@@ -602,23 +593,16 @@ impl Constitutive for Microplane {
         h.fill(self.params.gamma_0);
     }
 
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError> {
-        check_history_len(self.planes.count(), h_n, h_trial)?;
-        check_jacobian(f, eta_bar)?;
+    fn update(&self, p: PointUpdate<'_>, out: &mut Response) -> Result<(), MaterialError> {
+        p.check_history_len(self.planes.count())?;
+        p.check_jacobian()?;
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the processor supports AVX2 (checked on the line above).
-            unsafe { self.update_avx2(f, eta_bar, h_n, h_trial, out) };
+            unsafe { self.update_avx2(p, out) };
             return Ok(());
         }
-        self.update_any(f, eta_bar, h_n, h_trial, out);
+        self.update_any(p, out);
         Ok(())
     }
 }
@@ -631,32 +615,18 @@ impl Microplane {
     /// The processor must support AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn update_avx2(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
-        out: &mut Response,
-    ) {
-        self.update_any(f, eta_bar, h_n, h_trial, out);
+    unsafe fn update_avx2(&self, p: PointUpdate<'_>, out: &mut Response) {
+        self.update_any(p, out);
     }
 
     /// The update for the padded plane set of the rule; inputs already checked.
     #[inline(always)]
-    fn update_any(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
-        out: &mut Response,
-    ) {
+    fn update_any(&self, p: PointUpdate<'_>, out: &mut Response) {
         match &self.planes {
-            PlaneSet::P24(p) => self.update_planes(p, f, eta_bar, h_n, h_trial, out),
-            PlaneSet::P28(p) => self.update_planes(p, f, eta_bar, h_n, h_trial, out),
-            PlaneSet::P36(p) => self.update_planes(p, f, eta_bar, h_n, h_trial, out),
-            PlaneSet::P64(p) => self.update_planes(p, f, eta_bar, h_n, h_trial, out),
+            PlaneSet::P24(planes) => self.update_planes(planes, p, out),
+            PlaneSet::P28(planes) => self.update_planes(planes, p, out),
+            PlaneSet::P36(planes) => self.update_planes(planes, p, out),
+            PlaneSet::P64(planes) => self.update_planes(planes, p, out),
         }
     }
 
@@ -671,12 +641,15 @@ impl Microplane {
     fn update_planes<const N: usize>(
         &self,
         p: &Planes<N>,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
+        point: PointUpdate<'_>,
         out: &mut Response,
     ) {
+        let PointUpdate {
+            f,
+            eta_bar,
+            h_n,
+            h_trial,
+        } = point;
         let nd = p.count;
         let (k1, k2, k_mic, g_mic) = (self.k1, self.k2, self.k_mic, self.g_mic);
         let gamma_0 = self.params.gamma_0;
@@ -897,6 +870,7 @@ mod tests {
     use super::*;
     use crate::material::fdcheck::{eval, generic_f, rel_err, rotation, tangent_errors};
     use crate::material::sym_to_matrix;
+    use nalgebra::Matrix3;
 
     fn paper() -> Microplane {
         Microplane::new(Preset::Paper.params()).unwrap()
@@ -986,9 +960,9 @@ mod tests {
             for (label, f, eb, h) in states(&m, 2.5e-3) {
                 let (mut r1, mut r2) = (Response::zeros(), Response::zeros());
                 let (mut h1, mut h2) = (h.clone(), h.clone());
-                m.update_any(&f, eb, &h, &mut h1, &mut r1);
+                m.update_any(PointUpdate::new(&f, eb, &h, &mut h1), &mut r1);
                 // SAFETY: AVX2 is available (checked above).
-                unsafe { m.update_avx2(&f, eb, &h, &mut h2, &mut r2) };
+                unsafe { m.update_avx2(PointUpdate::new(&f, eb, &h, &mut h2), &mut r2) };
                 assert_eq!(h1, h2, "{label}");
                 assert_eq!(
                     (r1.p, r1.a, r1.dp_deta_bar),

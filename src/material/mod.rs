@@ -170,6 +170,22 @@ pub(crate) fn invalid<T>(
     })
 }
 
+/// Checks the parameters of the damage law (eq. 11) and of the Helmholtz equation shared by the damage
+/// models: maximum degradation `0 <= alpha <= 1`, softening `beta >= 0` (-) and the gradient parameter
+/// `c >= 0` (mm^2; 0 = local).
+pub(crate) fn check_softening(alpha: f64, beta: f64, c: f64) -> Result<(), MaterialError> {
+    if !(0.0..=1.0).contains(&alpha) {
+        return invalid("alpha", alpha, "0 <= alpha <= 1");
+    }
+    if !(beta.is_finite() && beta >= 0.0) {
+        return invalid("beta", beta, "a finite value >= 0");
+    }
+    if !(c.is_finite() && c >= 0.0) {
+        return invalid("c", c, "a finite value >= 0 (mm^2; 0 = local)");
+    }
+    Ok(())
+}
+
 /// A constitutive law in first-Piola form (see [`Response`]).
 pub trait Constitutive: Send + Sync {
     /// Number of f64 history slots per material point (microplane: one `gamma` per direction); none
@@ -179,16 +195,64 @@ pub trait Constitutive: Send + Sync {
     }
     /// Initial (virgin) history; nothing unless the law keeps a history.
     fn init_history(&self, _h: &mut [f64]) {}
-    /// Pure in the committed history `h_n`; writes the trial history to `h_trial` (committed by the
-    /// caller only after the step converges).
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError>;
+    /// Pure in the committed history `p.h_n`; writes the trial history to `p.h_trial` (committed by
+    /// the caller only after the step converges).
+    fn update(&self, p: PointUpdate<'_>, out: &mut Response) -> Result<(), MaterialError>;
+}
+
+/// The arguments of one constitutive evaluation at a material point.
+pub struct PointUpdate<'a> {
+    /// Deformation gradient `F` (3x3; plane strain: `F33 = 1`, no out-of-plane shear).
+    pub f: &'a Matrix3<f64>,
+    /// Nonlocal equivalent strain `eta_bar` (-) at the point (0 for a local evaluation).
+    pub eta_bar: f64,
+    /// Committed history `h_n` (read only).
+    pub h_n: &'a [f64],
+    /// Trial history `h_trial` (written; committed by the caller only after the step converged).
+    pub h_trial: &'a mut [f64],
+}
+
+impl<'a> PointUpdate<'a> {
+    /// The arguments `F`, `eta_bar`, `h_n`, `h_trial` bundled.
+    pub fn new(f: &'a Matrix3<f64>, eta_bar: f64, h_n: &'a [f64], h_trial: &'a mut [f64]) -> Self {
+        Self {
+            f,
+            eta_bar,
+            h_n,
+            h_trial,
+        }
+    }
+
+    /// Checks `F` and `eta_bar` for NaN/inf.
+    pub(crate) fn check_finite(&self) -> Result<(), MaterialError> {
+        if !self.f.iter().all(|x| x.is_finite()) {
+            return Err(MaterialError::NonFiniteInput {
+                what: "deformation gradient F",
+            });
+        }
+        if !self.eta_bar.is_finite() {
+            return Err(MaterialError::NonFiniteInput { what: "eta_bar" });
+        }
+        Ok(())
+    }
+
+    /// [`PointUpdate::check_finite`], then `det F > 0` ([`MaterialError::NonPositiveJacobian`]
+    /// otherwise): the checks of the laws that need an invertible `F`. Returns `J = det F`.
+    pub(crate) fn check_jacobian(&self) -> Result<f64, MaterialError> {
+        self.check_finite()?;
+        positive_jacobian(self.f)
+    }
+
+    /// Refuses history slices `h_n`, `h_trial` that do not both have `expected` entries
+    /// ([`MaterialError::HistoryLength`], naming the first that differs).
+    pub(crate) fn check_history_len(&self, expected: usize) -> Result<(), MaterialError> {
+        for got in [self.h_n.len(), self.h_trial.len()] {
+            if got != expected {
+                return Err(MaterialError::HistoryLength { expected, got });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The materials of the project (enum dispatch).
@@ -305,24 +369,19 @@ impl Constitutive for Material {
         }
     }
 
-    fn update(
-        &self,
-        f: &Matrix3<f64>,
-        eta_bar: f64,
-        h_n: &[f64],
-        h_trial: &mut [f64],
-        out: &mut Response,
-    ) -> Result<(), MaterialError> {
+    fn update(&self, p: PointUpdate<'_>, out: &mut Response) -> Result<(), MaterialError> {
+        p.check_history_len(self.history_len())?;
         let n = self.law_history_len();
-        check_history_len(self.history_len(), h_n, h_trial)?;
-        let (law_n, act_n) = h_n.split_at(n);
-        let (law_trial, act_trial) = h_trial.split_at_mut(n);
+        let (law_n, act_n) = p.h_n.split_at(n);
+        let (law_trial, act_trial) = p.h_trial.split_at_mut(n);
+        let (f, eta_bar) = (p.f, p.eta_bar);
+        let law = PointUpdate::new(f, eta_bar, law_n, law_trial);
         match self {
-            Material::LinearElastic(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
-            Material::StVenantKirchhoff(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
-            Material::NeoHookean(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
-            Material::Microplane(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
-            Material::IsotropicDamage(m) => m.update(f, eta_bar, law_n, law_trial, out)?,
+            Material::LinearElastic(m) => m.update(law, out)?,
+            Material::StVenantKirchhoff(m) => m.update(law, out)?,
+            Material::NeoHookean(m) => m.update(law, out)?,
+            Material::Microplane(m) => m.update(law, out)?,
+            Material::IsotropicDamage(m) => m.update(law, out)?,
         }
         out.activity = self.gradient_activity().evaluate(
             self.gradient_parameter(),
@@ -501,26 +560,6 @@ pub(crate) fn first_piola_from_pk2(
     }
 }
 
-/// Checks `F` and `eta_bar` for NaN/inf.
-pub(crate) fn check_finite(f: &Matrix3<f64>, eta_bar: f64) -> Result<(), MaterialError> {
-    if !f.iter().all(|x| x.is_finite()) {
-        return Err(MaterialError::NonFiniteInput {
-            what: "deformation gradient F",
-        });
-    }
-    if !eta_bar.is_finite() {
-        return Err(MaterialError::NonFiniteInput { what: "eta_bar" });
-    }
-    Ok(())
-}
-
-/// [`check_finite`], then `det F > 0` ([`MaterialError::NonPositiveJacobian`] otherwise): the checks of the
-/// laws that need an invertible `F`. Returns `J = det F`.
-pub(crate) fn check_jacobian(f: &Matrix3<f64>, eta_bar: f64) -> Result<f64, MaterialError> {
-    check_finite(f, eta_bar)?;
-    positive_jacobian(f)
-}
-
 /// `J = det F` of a finite `F`, or [`MaterialError::NonPositiveJacobian`] where `J <= 0`.
 pub(crate) fn positive_jacobian(f: &Matrix3<f64>) -> Result<f64, MaterialError> {
     let det = f.determinant();
@@ -528,21 +567,6 @@ pub(crate) fn positive_jacobian(f: &Matrix3<f64>) -> Result<f64, MaterialError> 
         return Err(MaterialError::NonPositiveJacobian { det });
     }
     Ok(det)
-}
-
-/// Refuses history slices `h_n`, `h_trial` that do not both have `expected` entries
-/// ([`MaterialError::HistoryLength`], naming the first that differs).
-pub(crate) fn check_history_len(
-    expected: usize,
-    h_n: &[f64],
-    h_trial: &[f64],
-) -> Result<(), MaterialError> {
-    for got in [h_n.len(), h_trial.len()] {
-        if got != expected {
-            return Err(MaterialError::HistoryLength { expected, got });
-        }
-    }
-    Ok(())
 }
 
 /// Finite-difference helpers shared by the material tests.
@@ -572,7 +596,7 @@ pub(crate) mod fdcheck {
     ) -> (Response, Vec<f64>) {
         let mut out = Response::zeros();
         let mut h = vec![0.0; m.history_len()];
-        m.update(f, eta_bar, h_n, &mut h, &mut out)
+        m.update(PointUpdate::new(f, eta_bar, h_n, &mut h), &mut out)
             .expect("material update");
         (out, h)
     }
@@ -728,19 +752,19 @@ mod tests {
         let mut out = Response::zeros();
         let f = Matrix3::identity();
         assert!(matches!(
-            m.update(&f, 0.0, &h, &mut ht, &mut out),
+            m.update(PointUpdate::new(&f, 0.0, &h, &mut ht), &mut out),
             Err(MaterialError::HistoryLength { .. })
         ));
         let mut ht = h.clone();
         let mut fnan = f;
         fnan[(0, 1)] = f64::NAN;
         assert!(matches!(
-            m.update(&fnan, 0.0, &h, &mut ht, &mut out),
+            m.update(PointUpdate::new(&fnan, 0.0, &h, &mut ht), &mut out),
             Err(MaterialError::NonFiniteInput { .. })
         ));
         let finv = Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, -1.0));
         assert!(matches!(
-            m.update(&finv, 0.0, &h, &mut ht, &mut out),
+            m.update(PointUpdate::new(&finv, 0.0, &h, &mut ht), &mut out),
             Err(MaterialError::NonPositiveJacobian { .. })
         ));
     }

@@ -10,6 +10,12 @@ pub struct Vector {
     owned: bool,
 }
 
+/// A PETSc call that lends out (or takes back) the local array of a vector, with its name for errors.
+type ArrayCall<P> = (
+    unsafe extern "C" fn(sys::PetscVec, *mut P) -> sys::PetscErrorCode,
+    &'static str,
+);
+
 impl Vector {
     /// A vector on PETSc's world communicator with `local` entries on this process (a multiple of
     /// `block_size`), e.g. 3 unknowns (u_x, u_y, eta_bar) per grid node.
@@ -111,45 +117,48 @@ impl Vector {
 
     /// Read access to the locally owned entries.
     pub fn read<R>(&self, f: impl FnOnce(&[f64]) -> R) -> Result<R> {
-        let n = self.local_size()?;
-        let mut ptr: *const f64 = std::ptr::null();
-        // SAFETY: PETSc returns a pointer to n contiguous values, valid until restored.
-        check(
-            unsafe { sys::VecGetArrayRead(self.raw, &mut ptr) },
-            "VecGetArrayRead",
-        )?;
-        let slice = if n == 0 {
-            &[][..]
-        } else {
-            unsafe { std::slice::from_raw_parts(ptr, n) }
-        };
-        let r = f(slice);
-        check(
-            unsafe { sys::VecRestoreArrayRead(self.raw, &mut ptr) },
-            "VecRestoreArrayRead",
-        )?;
-        Ok(r)
+        let get: ArrayCall<*const f64> = (sys::VecGetArrayRead, "VecGetArrayRead");
+        let restore: ArrayCall<*const f64> = (sys::VecRestoreArrayRead, "VecRestoreArrayRead");
+        self.with_array(get, restore, std::ptr::null(), |ptr, n| {
+            // SAFETY: `ptr` points to the `n` local values until the array is restored.
+            f(if n == 0 {
+                &[]
+            } else {
+                unsafe { std::slice::from_raw_parts(ptr, n) }
+            })
+        })
     }
 
     /// Write access to the locally owned entries.
     pub fn write<R>(&mut self, f: impl FnOnce(&mut [f64]) -> R) -> Result<R> {
+        let get: ArrayCall<*mut f64> = (sys::VecGetArray, "VecGetArray");
+        let restore: ArrayCall<*mut f64> = (sys::VecRestoreArray, "VecRestoreArray");
+        self.with_array(get, restore, std::ptr::null_mut(), |ptr, n| {
+            // SAFETY: as in `read`, with exclusive access guaranteed by &mut self.
+            f(if n == 0 {
+                &mut []
+            } else {
+                unsafe { std::slice::from_raw_parts_mut(ptr, n) }
+            })
+        })
+    }
+
+    /// Takes the local array with `get`, hands its pointer and length to `f` and gives the array back
+    /// with `restore` (`null`: the pointer's initial value).
+    fn with_array<P: Copy, R>(
+        &self,
+        get: ArrayCall<P>,
+        restore: ArrayCall<P>,
+        null: P,
+        f: impl FnOnce(P, usize) -> R,
+    ) -> Result<R> {
         let n = self.local_size()?;
-        let mut ptr: *mut f64 = std::ptr::null_mut();
-        // SAFETY: as in `read`, with exclusive access guaranteed by &mut self.
-        check(
-            unsafe { sys::VecGetArray(self.raw, &mut ptr) },
-            "VecGetArray",
-        )?;
-        let slice = if n == 0 {
-            &mut [][..]
-        } else {
-            unsafe { std::slice::from_raw_parts_mut(ptr, n) }
-        };
-        let r = f(slice);
-        check(
-            unsafe { sys::VecRestoreArray(self.raw, &mut ptr) },
-            "VecRestoreArray",
-        )?;
+        let mut ptr = null;
+        // SAFETY: valid vector; PETSc returns a pointer to n contiguous values, valid until restored.
+        check(unsafe { (get.0)(self.raw, &mut ptr) }, get.1)?;
+        let r = f(ptr, n);
+        // SAFETY: gives back the pointer taken above.
+        check(unsafe { (restore.0)(self.raw, &mut ptr) }, restore.1)?;
         Ok(r)
     }
 

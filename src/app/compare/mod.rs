@@ -102,36 +102,29 @@ pub fn compare(run_dir: &Path, references: &[PathBuf], s: &Settings) -> Result<R
     let mut checked = 0;
     let tol = s.tolerance;
     for r in &parsed {
-        match r {
+        let report = match r {
             Reference::History(h) => {
                 let run = match &mut history {
                     Some(run) => run,
                     None => history.insert(RunHistory::read(run_dir)?),
                 };
                 let columns = compare_history(h, run, s)?;
-                for c in &columns {
-                    checked += 2;
-                    failures.extend(report::column_failures(&h.file, c, tol));
-                }
-                reports.push(ReferenceReport::History {
-                    file: h.file.clone(),
-                    rows: h.rows.len(),
+                let (file, rows) = (h.file.clone(), h.rows.len());
+                ReferenceReport::History {
+                    file,
+                    rows,
                     columns,
-                });
+                }
             }
             Reference::Point(p) => {
                 let groups = compare_points(p, &mut snaps, s)?;
-                for g in &groups {
-                    checked += 2;
-                    failures.extend(report::group_failures(&p.file, g, tol));
-                }
-                reports.push(ReferenceReport::Point {
-                    file: p.file.clone(),
-                    rows: p.rows.len(),
-                    groups,
-                });
+                let (file, rows) = (p.file.clone(), p.rows.len());
+                ReferenceReport::Point { file, rows, groups }
             }
-        }
+        };
+        checked += report.checked();
+        failures.extend(report.failures(tol));
+        reports.push(report);
     }
     Ok(Report {
         run: run_dir.display().to_string(),

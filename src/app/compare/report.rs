@@ -110,6 +110,30 @@ pub enum ReferenceReport {
     },
 }
 
+impl ReferenceReport {
+    /// Relative errors this reference checked: two (L2 and max) per column or group.
+    pub(super) fn checked(&self) -> usize {
+        match self {
+            ReferenceReport::History { columns, .. } => 2 * columns.len(),
+            ReferenceReport::Point { groups, .. } => 2 * groups.len(),
+        }
+    }
+
+    /// The messages of every relative error above `tol`, in the order of the columns or groups.
+    pub(super) fn failures(&self, tol: f64) -> Vec<String> {
+        match self {
+            ReferenceReport::History { file, columns, .. } => columns
+                .iter()
+                .flat_map(|c| column_failures(file, c, tol))
+                .collect(),
+            ReferenceReport::Point { file, groups, .. } => groups
+                .iter()
+                .flat_map(|g| group_failures(file, g, tol))
+                .collect(),
+        }
+    }
+}
+
 /// Everything `compare` measured.
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
@@ -157,7 +181,7 @@ fn ok(passed: bool) -> &'static str {
 }
 
 /// The failure lines of one history column of `file` (none when both errors are within `tol`).
-pub(super) fn column_failures(file: &str, c: &ColumnReport, tol: f64) -> Vec<String> {
+fn column_failures(file: &str, c: &ColumnReport, tol: f64) -> Vec<String> {
     let mut failures = Vec::new();
     if c.rel_l2 > tol || c.rel_l2.is_nan() {
         failures.push(format!(
@@ -184,7 +208,7 @@ pub(super) fn column_failures(file: &str, c: &ColumnReport, tol: f64) -> Vec<Str
 }
 
 /// The failure lines of one point group of `file` (none when both errors are within `tol`).
-pub(super) fn group_failures(file: &str, g: &GroupReport, tol: f64) -> Vec<String> {
+fn group_failures(file: &str, g: &GroupReport, tol: f64) -> Vec<String> {
     let mut failures = Vec::new();
     let worst = g.points.iter().max_by(|a, b| a.error.total_cmp(&b.error));
     let what = format!(
