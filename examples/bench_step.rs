@@ -17,7 +17,7 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
@@ -83,36 +83,38 @@ fn run(
         toml::from_str("model = \"neo_hookean\"\nbulk_modulus = 18750.0\nshear_modulus = 15254.0")?;
     let far = 1e6;
     let dt = 1e-6;
-    let setup = Setup {
-        boxes: vec![
-            NodeBox {
-                name: "base".into(),
-                min: Vector2::new(-far, -far),
-                max: Vector2::new(far, 0.0),
-                motion: [Motion::Free, Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-            NodeBox {
-                name: "top".into(),
-                min: Vector2::new(-far, side),
-                max: Vector2::new(far, far),
-                motion: [Motion::Free, Motion::Velocity(-4300.0)],
-                rise_time: 0.0,
-            },
-        ],
-        options_prefix: Some(format!("{solver}_")),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material.build()?],
-            ShapeKind::Cpdi1,
-            TimeIntegration {
-                dt,
-                dt_min: dt,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes: vec![
+                NodeBox {
+                    name: "base".into(),
+                    min: Vector2::new(-far, -far),
+                    max: Vector2::new(far, 0.0),
+                    motion: [Motion::Free, Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+                NodeBox {
+                    name: "top".into(),
+                    min: Vector2::new(-far, side),
+                    max: Vector2::new(far, far),
+                    motion: [Motion::Free, Motion::Velocity(-4300.0)],
+                    rise_time: 0.0,
+                },
+            ],
+            options_prefix: Some(format!("{solver}_")),
+            ..Parameters::new(
+                grid,
+                vec![material.build()?],
+                ShapeKind::Cpdi1,
+                TimeIntegration {
+                    dt,
+                    dt_min: dt,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup)?;
     let reports: Vec<StepReport> = (0..steps)
         .map(|_| sim.advance(s))

@@ -26,7 +26,7 @@ use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::material::isotropic::peerlings::Bar;
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::LinePlot;
@@ -130,34 +130,37 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
         ..TimeIntegration::default()
     };
     let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2)?;
-    let setup = Setup {
-        // Grips: every node at x >= L moves with the end, every node at x <= 0 is fixed. A grip that holds
-        // only the nodes on x = L leaves the node beyond it free, with the small mass of the end points'
-        // CPDI corners that have crossed x = L: it relaxes the last column of points to zero stress
-        // (F = I) and doubles the strain of the column before it.
-        boxes: vec![
-            bx(
-                "pulled end",
-                [L - 1e-6, -far],
-                [far, far],
-                [Motion::Velocity(case.dl / case.steps as f64), Motion::Free],
-            ),
-            bx(
-                "fixed end",
-                [-far, -far],
-                [1e-6, far],
-                [Motion::Velocity(0.0), Motion::Free],
-            ),
-            bx(
-                "rollers",
-                [-far, -far],
-                [far, far],
-                [Motion::Free, Motion::Velocity(0.0)],
-            ),
-        ],
-        options_prefix: Some(case.prefix.into()),
-        ..Setup::new(grid, particles, vec![cfg.build()?], ShapeKind::Cpdi1, time)
-    };
+    let setup = Setup::of(
+        Parameters {
+            // Grips: every node at x >= L moves with the end, every node at x <= 0 is fixed. A grip that holds
+            // only the nodes on x = L leaves the node beyond it free, with the small mass of the end points'
+            // CPDI corners that have crossed x = L: it relaxes the last column of points to zero stress
+            // (F = I) and doubles the strain of the column before it.
+            boxes: vec![
+                bx(
+                    "pulled end",
+                    [L - 1e-6, -far],
+                    [far, far],
+                    [Motion::Velocity(case.dl / case.steps as f64), Motion::Free],
+                ),
+                bx(
+                    "fixed end",
+                    [-far, -far],
+                    [1e-6, far],
+                    [Motion::Velocity(0.0), Motion::Free],
+                ),
+                bx(
+                    "rollers",
+                    [-far, -far],
+                    [far, far],
+                    [Motion::Free, Motion::Velocity(0.0)],
+                ),
+            ],
+            options_prefix: Some(case.prefix.into()),
+            ..Parameters::new(grid, vec![cfg.build()?], ShapeKind::Cpdi1, time)
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup)?;
     let t0 = Instant::now();
     let (mut curve, mut dissipated) = (vec![(0.0, 0.0)], vec![(0.0, 0.0)]);

@@ -195,8 +195,8 @@ fn run_case(s: &SessionGuard, h: f64, c: f64, rate: Rate) -> Result<RunResult> {
     let name = format!("notched h = {h}, c = {c}, {}", rate.label());
     let cfg = RunConfig::from_str_named(&text, &name)?;
     let mut setup = scenario::build(&cfg)?;
-    setup.options_prefix = Some("nq_".into());
-    setup.fallback_prefix = None;
+    setup.params.options_prefix = Some("nq_".into());
+    setup.params.fallback_prefix = None;
     let mut sim = Simulation::new(setup)?;
     let points = sim.state.particles.len();
     let pulled = |names: &[(String, Vec<f64>)]| names.iter().position(|n| n.0 == "pulled_end");

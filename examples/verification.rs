@@ -13,7 +13,7 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::{LinePlot, Series};
@@ -68,10 +68,13 @@ fn setup(
     time: TimeIntegration,
     prefix: &str,
 ) -> Setup {
-    Setup {
-        options_prefix: Some(prefix.into()),
-        ..Setup::new(grid, particles, vec![material], shape, time)
-    }
+    Setup::of(
+        Parameters {
+            options_prefix: Some(prefix.into()),
+            ..Parameters::new(grid, vec![material], shape, time)
+        },
+        particles,
+    )
 }
 
 /// Slope of log(err) against log(h) between the last two sizes.
@@ -132,7 +135,7 @@ fn v1(s: &SessionGuard, out: &Path) -> Result<Value> {
             },
             "v1_",
         );
-        st.boxes = vec![
+        st.params.boxes = vec![
             node_box(
                 "rollers",
                 [-FAR, -FAR],
@@ -237,9 +240,9 @@ fn column(
         },
         "v2_",
     );
-    st.body_force = Vector2::new(0.0, -c.g);
-    st.body_force_ramp = load_steps as f64;
-    st.boxes = vec![
+    st.params.body_force = Vector2::new(0.0, -c.g);
+    st.params.body_force_ramp = load_steps as f64;
+    st.params.boxes = vec![
         node_box(
             "side rollers",
             [-FAR, -FAR],
@@ -457,7 +460,7 @@ fn v3(s: &SessionGuard, out: &Path) -> Result<Value> {
             },
             "v3_",
         );
-        st.boxes = vec![
+        st.params.boxes = vec![
             node_box(
                 "rollers",
                 [-FAR, -FAR],
@@ -582,7 +585,7 @@ fn v6(s: &SessionGuard, out: &Path) -> Result<Value> {
                 },
                 "v6_",
             );
-            st.boxes = vec![node_box(
+            st.params.boxes = vec![node_box(
                 "clamp",
                 [-FAR, -FAR],
                 [1e-9, FAR],

@@ -21,7 +21,7 @@
 //! `sum_p V^0 P G_I` equals `sum_p v_p sigma_p grad_x S_Ip` of the spec (with `v_p = det F V^0`), and its
 //! derivative through `A` contains both the material and the geometric stiffness with gradients on the
 //! current iterate, so Newton converges quadratically at finite strain. The Helmholtz terms are evaluated
-//! on the configuration at `t_n` (the spec's [choice]; `K^eb,eb` is constant within a step); `s_eb`
+//! on the configuration at `t_n` (the spec's \[choice\]; `K^eb,eb` is constant within a step); `s_eb`
 //! scales those rows to the magnitude of the momentum rows.
 //!
 //! Assembly is a gather: every active node sums over the particles in its support (the node-to-particle

@@ -140,7 +140,7 @@ pub struct RigidBody<const D: usize = 2> {
     pub rise_time: f64,
     /// Unilateral contact instead of gluing (both motion components must then be prescribed).
     pub contact: Option<Contact>,
-    /// The velocity field it holds or pushes ([`Setup::fields`](crate::model::Setup::fields); 0: the
+    /// The velocity field it holds or pushes ([`Parameters::fields`](crate::model::Parameters::fields); 0: the
     /// specimen's).
     pub field: u16,
 }

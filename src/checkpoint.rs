@@ -252,7 +252,7 @@ pub fn load<const D: usize>(
         path: shown.clone(),
         detail,
     };
-    let fem = model.method == Method::Fem && data.contains_key("fem_nodal_velocity");
+    let fem = model.params.method == Method::Fem && data.contains_key("fem_nodal_velocity");
     check_fits(&header, &data, model, state, fem).map_err(&unusable)?;
     let mut take = |name: &str| data.remove(name).unwrap_or_default();
     let p = &mut state.particles;
@@ -357,7 +357,7 @@ fn check_fits<const D: usize>(
         }
     }
     if fem {
-        let nodes = model.grid.num_nodes();
+        let nodes = model.params.grid.num_nodes();
         expected.push(("fem_nodal_velocity".into(), D * nodes));
         expected.push(("fem_nodal_acceleration".into(), D * nodes));
     }

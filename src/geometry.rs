@@ -55,7 +55,7 @@ pub struct Geometry {
     pub exclude: Vec<Region>,
 }
 
-/// Parameters of [`Particles::seed`].
+/// Parameters of [`Particles::seed`](crate::particles::Particles::seed).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Seeding {
     /// Background-grid cell size `h` (mm).

@@ -92,89 +92,19 @@ pub enum Method {
     Fem,
 }
 
-/// A run as a scenario builds it: the model's parameters and the bodies at t = 0.
-/// [`Model::new`] splits it into [`Model`] and [`State`].
-pub struct Setup<const D: usize = 2> {
+/// What defines a run and stays fixed while it runs, apart from the points: the grid, the materials,
+/// the interpolator, time integration, constraints, devices, loads and solver prefixes. A scenario fills
+/// it in [`Setup`]; [`Model`] keeps it.
+pub struct Parameters<const D: usize = 2> {
     /// Background grid.
     pub grid: Grid<D>,
-    /// Deformable material points (body tag = index into `materials`).
-    pub particles: Particles<D>,
     /// One constitutive law per body tag.
     pub materials: Vec<Material>,
     /// The velocity field of each body tag on the grid (multi-velocity-field contact): bodies of field
     /// 0 share the grid's nodes (bonded), a body of a field `f >= 1` has its own copies of the nodes and
     /// meets the bodies of field 0 through frictionless unilateral contact (`docs/theory.md`, "Contact
-    /// between bodies"). Empty: every body on field 0.
-    pub fields: Vec<u16>,
-    /// Interpolator.
-    pub shape: ShapeKind,
-    /// Time integration.
-    pub time: TimeIntegration,
-    /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
-    pub body_force: SVector<f64, D>,
-    /// Quasi-static runs ramp the body force linearly to its full value over this time (s); 0 = at once.
-    pub body_force_ramp: f64,
-    /// Node-box constraints.
-    pub boxes: Vec<NodeBox<D>>,
-    /// Rigid loading bodies.
-    pub rigid: Vec<RigidBody<D>>,
-    /// The points of each rigid body at t = 0 (one per entry of `rigid`; only positions and domains are
-    /// used).
-    pub rigid_points: Vec<Particles<D>>,
-    /// Applied forces.
-    pub loads: Vec<NodalLoad<D>>,
-    /// MPM or FEM on the grid cells.
-    pub method: Method,
-    /// Options prefix of the SNES (None: plain `-snes_*`).
-    pub options_prefix: Option<String>,
-    /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
-    pub mass_tolerance: f64,
-    /// Options prefix of a fallback SNES (e.g. with a direct solver) tried at the same time step when the
-    /// main one fails, before the time step is halved; None: halve at once.
-    pub fallback_prefix: Option<String>,
-}
-
-impl<const D: usize> Setup<D> {
-    /// A model of the deformable points `particles` (body tag = index into `materials`) on `grid`, with
-    /// the defaults of a configuration file for the rest: no constraints, rigid bodies, loads or body
-    /// force, MPM, nodes with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a
-    /// prefix and no fallback solver. Set the other fields with struct-update syntax:
-    /// `Setup { boxes, ..Setup::new(grid, particles, materials, shape, time) }`.
-    pub fn new(
-        grid: Grid<D>,
-        particles: Particles<D>,
-        materials: Vec<Material>,
-        shape: ShapeKind,
-        time: TimeIntegration,
-    ) -> Self {
-        Self {
-            grid,
-            particles,
-            materials,
-            fields: Vec::new(),
-            shape,
-            time,
-            body_force: SVector::zeros(),
-            body_force_ramp: 0.0,
-            boxes: Vec::new(),
-            rigid: Vec::new(),
-            rigid_points: Vec::new(),
-            loads: Vec::new(),
-            method: Method::Mpm,
-            options_prefix: None,
-            mass_tolerance: 1e-6,
-            fallback_prefix: None,
-        }
-    }
-}
-
-/// What defines a run and stays fixed while it runs.
-pub struct Model<const D: usize = 2> {
-    /// Background grid.
-    pub grid: Grid<D>,
-    /// One constitutive law per body tag.
-    pub materials: Vec<Material>,
-    /// The velocity field of each body tag (one entry per material; see [`Setup::fields`]).
+    /// between bodies"). Empty in a [`Setup`]: every body on field 0; in a [`Model`] one entry per
+    /// material.
     pub fields: Vec<u16>,
     /// Interpolator.
     pub shape: ShapeKind,
@@ -196,9 +126,81 @@ pub struct Model<const D: usize = 2> {
     pub options_prefix: Option<String>,
     /// Nodes with `m_I <= mass_tolerance * max_J m_J` carry no unknowns.
     pub mass_tolerance: f64,
-    /// Options prefix of a fallback SNES tried at the same time step when the main one's linear solver
-    /// fails, before the time step is halved; None: halve at once.
+    /// Options prefix of a fallback SNES (e.g. with a direct solver) tried at the same time step when the
+    /// main one's linear solver fails, before the time step is halved; None: halve at once.
     pub fallback_prefix: Option<String>,
+}
+
+impl<const D: usize> Parameters<D> {
+    /// The parameters of a run on `grid` with `materials` (one per body tag), with the defaults of a
+    /// configuration file for the rest: no constraints, rigid bodies, loads or body force, MPM, nodes
+    /// with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a prefix and no
+    /// fallback solver. Set the other fields with struct-update syntax:
+    /// `Parameters { boxes, ..Parameters::new(grid, materials, shape, time) }`.
+    pub fn new(
+        grid: Grid<D>,
+        materials: Vec<Material>,
+        shape: ShapeKind,
+        time: TimeIntegration,
+    ) -> Self {
+        Self {
+            grid,
+            materials,
+            fields: Vec::new(),
+            shape,
+            time,
+            body_force: SVector::zeros(),
+            body_force_ramp: 0.0,
+            boxes: Vec::new(),
+            rigid: Vec::new(),
+            loads: Vec::new(),
+            method: Method::Mpm,
+            options_prefix: None,
+            mass_tolerance: 1e-6,
+            fallback_prefix: None,
+        }
+    }
+}
+
+/// A run as a scenario builds it: the model's parameters and the bodies at t = 0.
+/// [`Model::new`] splits it into [`Model`] and [`State`].
+pub struct Setup<const D: usize = 2> {
+    /// Everything but the points (kept by the [`Model`]).
+    pub params: Parameters<D>,
+    /// Deformable material points (body tag = index into `params.materials`).
+    pub particles: Particles<D>,
+    /// The points of each rigid body at t = 0 (one per entry of `params.rigid`; only positions and
+    /// domains are used).
+    pub rigid_points: Vec<Particles<D>>,
+}
+
+impl<const D: usize> Setup<D> {
+    /// The deformable points `particles` (body tag = index into `materials`) on `grid`, with the
+    /// defaults of [`Parameters::new`] and no rigid bodies.
+    pub fn new(
+        grid: Grid<D>,
+        particles: Particles<D>,
+        materials: Vec<Material>,
+        shape: ShapeKind,
+        time: TimeIntegration,
+    ) -> Self {
+        Self::of(Parameters::new(grid, materials, shape, time), particles)
+    }
+
+    /// The deformable points `particles` with `params`, and no rigid bodies' points.
+    pub fn of(params: Parameters<D>, particles: Particles<D>) -> Self {
+        Self {
+            params,
+            particles,
+            rigid_points: Vec::new(),
+        }
+    }
+}
+
+/// What defines a run and stays fixed while it runs: the parameters and what the model derives from them.
+pub struct Model<const D: usize = 2> {
+    /// The run's parameters (those of the [`Setup`], with one velocity field per material).
+    pub params: Parameters<D>,
     /// Node shares of every load (see [`NodalLoad::shares`]).
     pub(crate) load_shares: Vec<Vec<(usize, f64)>>,
     /// FEM mode: the shape functions of the reference configuration (that of t = 0).
@@ -218,12 +220,13 @@ impl<const D: usize> Model<D> {
     /// The unknowns of a node: the `D` displacement components, and `eta_bar` if any material is
     /// gradient-enhanced.
     pub fn layout(&self) -> FieldLayout {
-        FieldLayout::new(D, self.materials.iter().any(Material::is_nonlocal))
+        FieldLayout::new(D, self.params.materials.iter().any(Material::is_nonlocal))
     }
 
     /// Number of velocity fields (1 without contact between deformable bodies).
     pub fn num_fields(&self) -> usize {
-        self.fields
+        self.params
+            .fields
             .iter()
             .map(|&f| f as usize + 1)
             .max()
@@ -233,22 +236,23 @@ impl<const D: usize> Model<D> {
     /// Grid node copies over all fields: field `f`'s copy of grid node `I` is node `I + f N` (the
     /// node ids of the shape-function table, the grid state and the unknowns).
     pub fn field_nodes(&self) -> usize {
-        self.grid.num_nodes() * self.num_fields()
+        self.params.grid.num_nodes() * self.num_fields()
     }
 
-    /// The constraint set of rigid body `k` (index into [`Model::rigid`]): its entry in the per-set lists
+    /// The constraint set of rigid body `k` (index into [`Parameters::rigid`]): its entry in the per-set lists
     /// of reactions and displacements (report order: node boxes, rigid bodies, loads).
     pub fn rigid_set(&self, k: usize) -> usize {
-        self.boxes.len() + k
+        self.params.boxes.len() + k
     }
 
     /// Names of the constraint sets in report order: node boxes, rigid bodies, loads.
     pub fn set_names(&self) -> Vec<String> {
-        self.boxes
+        self.params
+            .boxes
             .iter()
             .map(|b| b.name.clone())
-            .chain(self.rigid.iter().map(|r| r.name.clone()))
-            .chain(self.loads.iter().map(|l| l.name.clone()))
+            .chain(self.params.rigid.iter().map(|r| r.name.clone()))
+            .chain(self.params.loads.iter().map(|l| l.name.clone()))
             .collect()
     }
 }
@@ -275,33 +279,22 @@ impl<const D: usize> Model<D> {
     /// uses the linear interpolator, bodies on their own velocity fields use an interpolator that keeps
     /// the fields apart.
     pub fn new(mut setup: Setup<D>) -> Result<(Self, State<D>), ModelError> {
-        setup.fields = setup.checked_fields()?;
+        setup.params.fields = setup.checked_fields()?;
         setup.check_devices()?;
-        let load_shares = setup
+        let params = &setup.params;
+        let load_shares = params
             .loads
             .iter()
-            .map(|l| l.shares(&setup.grid))
+            .map(|l| l.shares(&params.grid))
             .collect::<Result<Vec<_>, _>>()
             .map_err(ModelError::Invalid)?;
         let fem = setup.fem_reference()?;
         let Setup {
-            grid,
+            params,
             mut particles,
-            materials,
-            fields,
-            shape,
-            time,
-            body_force,
-            body_force_ramp,
-            boxes,
-            rigid,
             rigid_points,
-            loads,
-            method,
-            options_prefix,
-            mass_tolerance,
-            fallback_prefix,
         } = setup;
+        let materials = &params.materials;
         let stride = materials.iter().map(|m| m.history_len()).max().unwrap_or(0);
         particles.resize_history(stride, 0.0);
         for p in 0..particles.len() {
@@ -309,27 +302,14 @@ impl<const D: usize> Model<D> {
             let h = particles.history_mut(p);
             m.init_history(&mut h[..m.history_len()]);
         }
-        let nsets = boxes.len() + rigid.len() + loads.len();
-        let mut state = State::new(particles, rigid_points, nsets, time.dt);
-        if time.quasi_static {
+        let nsets = params.boxes.len() + params.rigid.len() + params.loads.len();
+        let mut state = State::new(particles, rigid_points, nsets, params.time.dt);
+        if params.time.quasi_static {
             // Without inertia the points' velocities carry no energy (they are zeroed after the first step).
             state.initial_energy = 0.0;
         }
         let model = Self {
-            grid,
-            materials,
-            fields,
-            shape,
-            time,
-            body_force,
-            body_force_ramp,
-            boxes,
-            rigid,
-            loads,
-            method,
-            options_prefix,
-            mass_tolerance,
-            fallback_prefix,
+            params,
             load_shares,
             fem,
         };
@@ -345,7 +325,7 @@ impl<const D: usize> Setup<D> {
         if self.particles.is_empty() {
             return Err(ModelError::Empty);
         }
-        let (rigid, materials) = (&self.rigid, &self.materials);
+        let (rigid, materials) = (&self.params.rigid, &self.params.materials);
         if self.rigid_points.len() != rigid.len() {
             return Err(ModelError::Invalid(format!(
                 "{} rigid bodies but {} sets of rigid-body points",
@@ -353,9 +333,9 @@ impl<const D: usize> Setup<D> {
                 self.rigid_points.len()
             )));
         }
-        let fields = match self.fields.is_empty() {
+        let fields = match self.params.fields.is_empty() {
             true => vec![0; materials.len()],
-            false => self.fields.clone(),
+            false => self.params.fields.clone(),
         };
         if fields.len() != materials.len() {
             return Err(ModelError::Invalid(format!(
@@ -365,7 +345,9 @@ impl<const D: usize> Setup<D> {
             )));
         }
         let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
-        if nfields > 1 && (self.shape == ShapeKind::Cpdi2 || self.method == Method::Fem) {
+        if nfields > 1
+            && (self.params.shape == ShapeKind::Cpdi2 || self.params.method == Method::Fem)
+        {
             return Err(ModelError::Invalid(
                 "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
                  GIMP, CPDI1 or B-spline interpolator (CPDI2 moves its corners on one field)"
@@ -384,7 +366,7 @@ impl<const D: usize> Setup<D> {
     /// Devices in contact need both motion components prescribed, a unit normal and a friction
     /// coefficient >= 0.
     fn check_devices(&self) -> Result<(), ModelError> {
-        for rb in &self.rigid {
+        for rb in &self.params.rigid {
             if let Some(c) = &rb.contact {
                 let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
                 let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
@@ -403,18 +385,19 @@ impl<const D: usize> Setup<D> {
     /// The FEM mode's reference shape functions (of the configuration at construction; the rigid bodies'
     /// nodes are fixed there too); `None` in MPM mode. FEM needs the linear interpolator.
     fn fem_reference(&self) -> Result<Option<FemReference<D>>, ModelError> {
-        if self.method == Method::Mpm {
+        if self.params.method == Method::Mpm {
             return Ok(None);
         }
-        if self.shape != ShapeKind::Linear {
+        if self.params.shape != ShapeKind::Linear {
             return Err(ModelError::Invalid(format!(
                 "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
-                self.shape.name()
+                self.params.shape.name()
             )));
         }
         let table = |points: &Particles<D>| {
             let mut t = ShapeTable::new();
-            t.compute(ShapeKind::Linear, &self.grid, points).map(|()| t)
+            t.compute(ShapeKind::Linear, &self.params.grid, points)
+                .map(|()| t)
         };
         let points = table(&self.particles)?;
         let rigid = self
@@ -429,9 +412,9 @@ impl<const D: usize> Setup<D> {
 /// What a checkpoint holds: everything of a run that changes from step to step.
 #[derive(Debug, Clone)]
 pub struct State<const D: usize = 2> {
-    /// Deformable material points with their history (body tag = index into [`Model::materials`]).
+    /// Deformable material points with their history (body tag = index into [`Parameters::materials`]).
     pub particles: Particles<D>,
-    /// The points of each rigid body of [`Model::rigid`] where the body has moved them.
+    /// The points of each rigid body of [`Parameters::rigid`] where the body has moved them.
     pub rigid: Vec<Particles<D>>,
     /// Time reached (s).
     pub time: f64,
@@ -632,7 +615,12 @@ impl Setup<2> {
     /// size; FEM mode, nodal loads along grid lines (2D segments) and a quasi-static plate that nothing
     /// holds in z (no glued rigid body) are refused.
     pub fn extrude(self, thickness: f64) -> Result<Setup<3>, String> {
-        let h = self.grid.cell_size();
+        let Setup {
+            params: plane,
+            particles,
+            rigid_points,
+        } = self;
+        let h = plane.grid.cell_size();
         let layers = (thickness / h).round();
         if !(thickness.is_finite() && thickness > 0.0 && layers >= 1.0)
             || (layers * h - thickness).abs() > 1e-9 * thickness
@@ -641,10 +629,10 @@ impl Setup<2> {
                 "thickness {thickness} mm: a positive multiple of the cell size h = {h} mm"
             ));
         }
-        if self.method == Method::Fem {
+        if plane.method == Method::Fem {
             return Err("the FEM mode is plane only; extrude an MPM set-up".into());
         }
-        if !self.loads.is_empty() {
+        if !plane.loads.is_empty() {
             return Err(
                 "nodal loads along grid lines are plane; load a plate with boxes or rigid bodies"
                     .into(),
@@ -652,14 +640,14 @@ impl Setup<2> {
         }
         // The faces are free and devices in contact push in the plane: only a glued rigid body holds the
         // plate in z. Inertia does that in a dynamic run; a quasi-static one would be singular.
-        if self.time.quasi_static && self.rigid.iter().all(|r| r.contact.is_some()) {
+        if plane.time.quasi_static && plane.rigid.iter().all(|r| r.contact.is_some()) {
             return Err(
                 "a quasi-static plate needs its motion in z held: glue a loading plate (no contact) or \
                  run dynamically"
                     .into(),
             );
         }
-        let g = &self.grid;
+        let g = &plane.grid;
         let origin = g.origin();
         let margin = EXTRUSION_MARGIN as f64 * h;
         let grid = Grid::new(
@@ -668,14 +656,12 @@ impl Setup<2> {
             [g.nx(), g.ny(), layers as usize + 2 * EXTRUSION_MARGIN],
         )
         .map_err(|e| e.to_string())?;
-        let particles = extrude_points(&self.particles, thickness)?;
-        let rigid_points = self
-            .rigid_points
+        let rigid_points = rigid_points
             .iter()
             .map(|p| extrude_points(p, thickness))
             .collect::<Result<Vec<_>, _>>()?;
         let far = f64::INFINITY;
-        let boxes = self
+        let boxes = plane
             .boxes
             .into_iter()
             .map(|b| NodeBox {
@@ -686,7 +672,7 @@ impl Setup<2> {
                 rise_time: b.rise_time,
             })
             .collect();
-        let rigid = self
+        let rigid = plane
             .rigid
             .into_iter()
             .map(|r| RigidBody {
@@ -697,23 +683,27 @@ impl Setup<2> {
                 field: r.field,
             })
             .collect();
-        Ok(Setup {
+        let params = Parameters {
             grid,
-            particles,
-            materials: self.materials,
-            fields: self.fields,
-            shape: self.shape,
-            time: self.time,
-            body_force: SVector::from([self.body_force.x, self.body_force.y, 0.0]),
-            body_force_ramp: self.body_force_ramp,
+            materials: plane.materials,
+            fields: plane.fields,
+            shape: plane.shape,
+            time: plane.time,
+            body_force: SVector::from([plane.body_force.x, plane.body_force.y, 0.0]),
+            body_force_ramp: plane.body_force_ramp,
             boxes,
             rigid,
-            rigid_points,
             loads: Vec::new(),
-            method: self.method,
-            options_prefix: self.options_prefix,
-            mass_tolerance: self.mass_tolerance,
-            fallback_prefix: self.fallback_prefix,
+            method: plane.method,
+            options_prefix: plane.options_prefix,
+            mass_tolerance: plane.mass_tolerance,
+            fallback_prefix: plane.fallback_prefix,
+        };
+        let particles = extrude_points(&particles, thickness)?;
+        Ok(Setup {
+            params,
+            particles,
+            rigid_points,
         })
     }
 }

@@ -6,7 +6,7 @@
 //! Every step, points that moved into another process's band migrate to it, and every process receives
 //! copies (ghosts) of the other processes' points whose support may reach its node rows, so that it can
 //! evaluate its rows completely. Points travel as records ([`Particles::pack`]) through a PETSc star
-//! forest (`PetscSF`, [`SessionGuard::exchange`]). Units: mm.
+//! forest (`PetscSF`, [`Session::exchange`](crate::petsc::Session::exchange)). Units: mm.
 
 use crate::grid::{Grid, SLOWEST_AXIS};
 use crate::model::State;
@@ -149,7 +149,7 @@ impl Partition {
     }
 
     /// Checks that the support of each of the first `owned` points in `table` lies within the node rows
-    /// its ghosts were sent for (a domain stretched beyond [`REACH_ROWS`] rows of its corners would leave
+    /// its ghosts were sent for (a domain stretched beyond `REACH_ROWS` rows of its corners would leave
     /// another process without the point).
     pub fn check_reach<const D: usize>(
         &self,

@@ -11,7 +11,7 @@ use crate::contact::Contact;
 use crate::geometry::{Geometry, Region, Seeding};
 use crate::grid::{Grid, GridError};
 use crate::material::Material;
-use crate::model::{Method, Setup, TimeIntegration};
+use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles};
 use nalgebra::Vector2;
 use std::collections::HashMap;
@@ -163,29 +163,31 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
     let t = &cfg.time;
     Ok(Setup {
-        grid,
-        particles,
-        materials,
-        fields,
-        shape: cfg.shape.kind,
-        time: TimeIntegration {
-            dt: t.dt,
-            dt_min: t.dt_min.unwrap_or(t.dt / 64.0),
-            beta: t.beta,
-            gamma: t.gamma,
-            quasi_static: t.quasi_static,
-            initial_acceleration: t.initial_acceleration,
+        params: Parameters {
+            grid,
+            materials,
+            fields,
+            shape: cfg.shape.kind,
+            time: TimeIntegration {
+                dt: t.dt,
+                dt_min: t.dt_min.unwrap_or(t.dt / 64.0),
+                beta: t.beta,
+                gamma: t.gamma,
+                quasi_static: t.quasi_static,
+                initial_acceleration: t.initial_acceleration,
+            },
+            body_force: Vector2::new(cfg.body_force[0], cfg.body_force[1]),
+            body_force_ramp: cfg.body_force_ramp,
+            boxes,
+            rigid,
+            loads: cfg.load.iter().map(nodal_load).collect(),
+            method: cfg.shape.method,
+            options_prefix: None,
+            mass_tolerance: cfg.grid.mass_tolerance,
+            fallback_prefix: None,
         },
-        body_force: Vector2::new(cfg.body_force[0], cfg.body_force[1]),
-        body_force_ramp: cfg.body_force_ramp,
-        boxes,
-        rigid,
+        particles,
         rigid_points,
-        loads: cfg.load.iter().map(nodal_load).collect(),
-        method: cfg.shape.method,
-        options_prefix: None,
-        mass_tolerance: cfg.grid.mass_tolerance,
-        fallback_prefix: None,
     })
 }
 

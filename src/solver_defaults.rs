@@ -108,16 +108,17 @@ pub const FALLBACK: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -f
 /// over the bodies of their own `rho / M` (density, P-wave modulus `M = K + 4G/3`), so that a stiff and
 /// heavy second body (a steel insert) does not mix its modulus with the concrete's density.
 pub fn inertia_ratio<const D: usize>(setup: &Setup<D>) -> Option<f64> {
-    if setup.time.quasi_static {
+    if setup.params.time.quasi_static {
         return None;
     }
     let p = &setup.particles;
-    let mut rho = vec![f64::INFINITY; setup.materials.len()];
+    let mut rho = vec![f64::INFINITY; setup.params.materials.len()];
     for i in (0..p.len()).filter(|&i| p.vol0[i] > 0.0) {
         let b = p.body[i] as usize;
         rho[b] = rho[b].min(p.mass[i] / p.vol0[i]);
     }
     let ratio = setup
+        .params
         .materials
         .iter()
         .zip(&rho)
@@ -127,9 +128,9 @@ pub fn inertia_ratio<const D: usize>(setup: &Setup<D>) -> Option<f64> {
             r / (e.bulk + 4.0 * e.shear / 3.0)
         })
         .fold(f64::INFINITY, f64::min);
-    let h = setup.grid.cell_size();
-    let dt = setup.time.dt;
-    Some(ratio * h * h / (setup.time.beta * dt * dt))
+    let h = setup.params.grid.cell_size();
+    let dt = setup.params.time.dt;
+    Some(ratio * h * h / (setup.params.time.beta * dt * dt))
 }
 
 /// The class of the model's steps.
@@ -166,9 +167,9 @@ pub fn apply<const D: usize>(
     setup: &mut Setup<D>,
 ) -> Result<(StepClass, Vec<String>), petsc::PetscError> {
     let dimension = D;
-    setup.fallback_prefix = Some(FALLBACK_PREFIX.into());
+    setup.params.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
-    let gradient = setup.materials.iter().any(|m| m.is_nonlocal());
+    let gradient = setup.params.materials.iter().any(|m| m.is_nonlocal());
     let options = main_options(class, gradient, dimension);
     let mut applied: Vec<String> = petsc::apply_default_options(session, &options)?
         .into_iter()

@@ -99,7 +99,7 @@ struct ChunkBuffer {
 
 /// Deterministic parallel scatter of per-(point, node) contributions onto grid nodes.
 ///
-/// The points are split into [`SCATTER_CHUNKS`] fixed contiguous ranges. Each range accumulates, in point
+/// The points are split into `SCATTER_CHUNKS` fixed contiguous ranges. Each range accumulates, in point
 /// order, into its own buffer covering only the node band it touches (points are seeded cell by cell and
 /// move little, so bands are narrow); the buffers are then added node by node in range order. The result is
 /// therefore independent of the thread count and scheduling. Buffers are kept between calls: no allocation

@@ -55,7 +55,7 @@ fn session() -> mpm_concrete::petsc::SessionGuard {
 fn setup(toml: &str) -> mpm_concrete::model::Setup {
     let cfg = RunConfig::from_str_named(toml, "bars.toml").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("bodies_".into());
+    setup.params.options_prefix = Some("bodies_".into());
     setup
 }
 

@@ -28,7 +28,7 @@ material = { model = "microplane", preset = "paper" }
 
 fn simulation(cfg: &RunConfig) -> Simulation {
     let mut setup = scenario::build(cfg).expect("model");
-    setup.options_prefix = Some("ck_".into());
+    setup.params.options_prefix = Some("ck_".into());
     Simulation::new(setup).expect("simulation")
 }
 

@@ -51,7 +51,7 @@ fn session() -> mpm_concrete::petsc::SessionGuard {
 fn simulation(toml: &str) -> Simulation {
     let cfg = RunConfig::from_str_named(toml, "contact.toml").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("contact_".into());
+    setup.params.options_prefix = Some("contact_".into());
     Simulation::new(setup).expect("simulation")
 }
 

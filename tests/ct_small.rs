@@ -36,7 +36,7 @@ fn damage_starts_at_the_notch_tip_and_the_opening_force_is_positive() {
         .expect("options");
     let cfg = RunConfig::from_str_named(CONFIG, "ct-small").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("ct_".into());
+    setup.params.options_prefix = Some("ct_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     assert_eq!(
         sim.model.layout().per_node(),
@@ -134,7 +134,7 @@ fn eroded_points_carry_no_stress_and_keep_their_deformation_gradient() {
     );
     let cfg = RunConfig::from_str_named(&text, "ct-small-erosion").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("er_".into());
+    setup.params.options_prefix = Some("er_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     // F of each point when it first counts as eroded (committed damage >= 0.9).
     let mut frozen: Vec<Option<nalgebra::Matrix2<f64>>> = vec![None; sim.state.particles.len()];
@@ -192,7 +192,7 @@ fn contact_plates_do_no_more_work_than_the_specimen_takes_up() {
     );
     let cfg = RunConfig::from_str_named(&text, "ct-small-contact").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("en_".into());
+    setup.params.options_prefix = Some("en_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     let mut pushed = false;
     for _ in 0..120 {
@@ -223,7 +223,7 @@ fn steel_inserts_push_the_notch_faces_without_overlap_or_pull() {
     let ct = cfg.ct.clone().expect("ct");
     let (lower, [a, b]) = (0.5 * (ct.height - ct.notch_width), ct.load_zone);
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("ins_".into());
+    setup.params.options_prefix = Some("ins_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     assert_eq!(sim.model.num_fields(), 3, "concrete and two inserts");
     let mut pushed = false;

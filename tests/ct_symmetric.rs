@@ -46,7 +46,7 @@ fn mirror_error(load_introduction: &str, steps: usize) -> (f64, f64, f64) {
     .expect("options");
     let cfg = RunConfig::from_str_named(&config(load_introduction), "sym").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("sym_".into());
+    setup.params.options_prefix = Some("sym_".into());
     let x0 = setup.particles.x.clone();
     let mut sim = Simulation::new(setup).expect("simulation");
     for _ in 0..steps {

@@ -18,7 +18,7 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::shape::ShapeKind;
@@ -160,30 +160,33 @@ fn run_bar_with(
         ..TimeIntegration::default()
     };
     let material = cfg.build().expect("valid material");
-    let setup = Setup {
-        boxes: vec![
-            bx(
-                "pulled end",
-                [L - 1e-6, -far],
-                [far, far],
-                [Motion::Velocity(SPEED), Motion::Free],
-            ),
-            bx(
-                "fixed end",
-                [-far, -far],
-                [1e-6, far],
-                [Motion::Velocity(0.0), Motion::Free],
-            ),
-            bx(
-                "rollers",
-                [-far, -far],
-                [far, far],
-                [Motion::Free, Motion::Velocity(0.0)],
-            ),
-        ],
-        options_prefix: Some("evg_".into()),
-        ..Setup::new(grid, particles, vec![material], ShapeKind::Cpdi1, time)
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes: vec![
+                bx(
+                    "pulled end",
+                    [L - 1e-6, -far],
+                    [far, far],
+                    [Motion::Velocity(SPEED), Motion::Free],
+                ),
+                bx(
+                    "fixed end",
+                    [-far, -far],
+                    [1e-6, far],
+                    [Motion::Velocity(0.0), Motion::Free],
+                ),
+                bx(
+                    "rollers",
+                    [-far, -far],
+                    [far, far],
+                    [Motion::Free, Motion::Velocity(0.0)],
+                ),
+            ],
+            options_prefix: Some("evg_".into()),
+            ..Parameters::new(grid, vec![material], ShapeKind::Cpdi1, time)
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     let profile = |sim: &Simulation| {
         let mut pts: Vec<(f64, f64)> = x0

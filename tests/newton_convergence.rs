@@ -10,7 +10,7 @@ use common::material;
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
@@ -55,31 +55,33 @@ fn one_step(kind: ShapeKind, prefix: &str, extra: &str, load: f64) -> (Vec<f64>,
         Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(size, size), h, 2).expect("grid");
     let far = 1e6;
     let g = load * e / (rho * size);
-    let setup = Setup {
-        body_force: Vector2::new(0.5 * g, -g),
-        boxes: vec![NodeBox {
-            name: "base".into(),
-            min: Vector2::new(-far, -far),
-            max: Vector2::new(far, 0.0),
-            motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
-            rise_time: 0.0,
-        }],
-        options_prefix: Some(prefix.into()),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(&format!(
-                "model = \"neo_hookean\"\nyoungs_modulus = {e}\npoisson_ratio = 0.3"
-            ))],
-            kind,
-            TimeIntegration {
-                dt: 1.0,
-                dt_min: 1.0,
-                quasi_static: true,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            body_force: Vector2::new(0.5 * g, -g),
+            boxes: vec![NodeBox {
+                name: "base".into(),
+                min: Vector2::new(-far, -far),
+                max: Vector2::new(far, 0.0),
+                motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
+                rise_time: 0.0,
+            }],
+            options_prefix: Some(prefix.into()),
+            ..Parameters::new(
+                grid,
+                vec![material(&format!(
+                    "model = \"neo_hookean\"\nyoungs_modulus = {e}\npoisson_ratio = 0.3"
+                ))],
+                kind,
+                TimeIntegration {
+                    dt: 1.0,
+                    dt_min: 1.0,
+                    quasi_static: true,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     let r = sim.advance(&s).expect("step");
     let strain = sim

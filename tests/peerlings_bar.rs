@@ -16,7 +16,7 @@ use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::isotropic::peerlings::{Bar, Solution};
 use mpm_concrete::material::{Material, MaterialConfig};
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
@@ -93,36 +93,39 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
         ..TimeIntegration::default()
     };
     let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2).expect("grid");
-    let setup = Setup {
-        // Grips: every node at x >= L moves with the end, every node at x <= 0 is fixed (a grip on the
-        // nodes of x = L only leaves the next node free with the tiny mass of the CPDI corners that crossed
-        // x = L; it relaxes the last column of points to F = I and doubles the strain of the one before).
-        boxes: vec![
-            NodeBox {
-                name: "pulled end".into(),
-                min: Vector2::new(L - 1e-6, -far),
-                max: Vector2::new(far, far),
-                motion: [Motion::Velocity(dl / steps as f64), Motion::Free],
-                rise_time: 0.0,
-            },
-            NodeBox {
-                name: "fixed end".into(),
-                min: Vector2::new(-far, -far),
-                max: Vector2::new(1e-6, far),
-                motion: [Motion::Velocity(0.0), Motion::Free],
-                rise_time: 0.0,
-            },
-            NodeBox {
-                name: "rollers".into(),
-                min: Vector2::new(-far, -far),
-                max: Vector2::new(far, far),
-                motion: [Motion::Free, Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-        ],
-        options_prefix: Some(prefix.into()),
-        ..Setup::new(grid, particles, vec![material], ShapeKind::Cpdi1, time)
-    };
+    let setup = Setup::of(
+        Parameters {
+            // Grips: every node at x >= L moves with the end, every node at x <= 0 is fixed (a grip on the
+            // nodes of x = L only leaves the next node free with the tiny mass of the CPDI corners that crossed
+            // x = L; it relaxes the last column of points to F = I and doubles the strain of the one before).
+            boxes: vec![
+                NodeBox {
+                    name: "pulled end".into(),
+                    min: Vector2::new(L - 1e-6, -far),
+                    max: Vector2::new(far, far),
+                    motion: [Motion::Velocity(dl / steps as f64), Motion::Free],
+                    rise_time: 0.0,
+                },
+                NodeBox {
+                    name: "fixed end".into(),
+                    min: Vector2::new(-far, -far),
+                    max: Vector2::new(1e-6, far),
+                    motion: [Motion::Velocity(0.0), Motion::Free],
+                    rise_time: 0.0,
+                },
+                NodeBox {
+                    name: "rollers".into(),
+                    min: Vector2::new(-far, -far),
+                    max: Vector2::new(far, far),
+                    motion: [Motion::Free, Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+            ],
+            options_prefix: Some(prefix.into()),
+            ..Parameters::new(grid, vec![material], ShapeKind::Cpdi1, time)
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     assert_eq!(
         sim.model.layout().per_node(),

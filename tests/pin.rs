@@ -57,7 +57,7 @@ fn pin_loaded_cantilever_turns_like_beam_theory() {
     .expect("options");
     let cfg = RunConfig::from_str_named(&config(true), "pin").expect("config");
     let mut setup = scenario::build(&cfg).expect("model");
-    setup.options_prefix = Some("pin_".into());
+    setup.params.options_prefix = Some("pin_".into());
     let mut sim = Simulation::new(setup).expect("simulation");
     let mut last = None;
     for _ in 0..4 {

@@ -12,7 +12,7 @@ use common::material;
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{BoxBody, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
@@ -69,26 +69,28 @@ fn bar_3d(kind: ShapeKind, cells: usize, periods: usize) -> (f64, f64) {
     let period = 2.0 * std::f64::consts::PI / w1;
     let steps_per_period = 100;
     let dt = period / steps_per_period as f64;
-    let setup = Setup {
-        boxes: vec![
-            slab("rollers", 0, -1e6, 1e6, [FREE, FIXED, FIXED]),
-            slab("fixed end", 0, -1e-6, 1e-6, [FIXED; 3]),
-        ],
-        options_prefix: Some("v1z_".into()),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(
-                "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
-            )],
-            kind,
-            TimeIntegration {
-                dt,
-                dt_min: dt / 8.0,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes: vec![
+                slab("rollers", 0, -1e6, 1e6, [FREE, FIXED, FIXED]),
+                slab("fixed end", 0, -1e-6, 1e-6, [FIXED; 3]),
+            ],
+            options_prefix: Some("v1z_".into()),
+            ..Parameters::new(
+                grid,
+                vec![material(
+                    "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
+                )],
+                kind,
+                TimeIntegration {
+                    dt,
+                    dt_min: dt / 8.0,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     let p = &sim.state.particles;
     let mass: f64 = p.mass.iter().sum();
@@ -165,29 +167,31 @@ fn v2_column_in_3d_settles_as_the_closed_form() {
     let h = height / cells as f64;
     let (grid, particles) = seeded(SVector::from([h, height, h]), h, rho);
     let y0: Vec<f64> = particles.x.iter().map(|x| x.y).collect();
-    let setup = Setup {
-        body_force: SVector::from([0.0, -g, 0.0]),
-        body_force_ramp: load_steps as f64,
-        boxes: vec![
-            slab("side rollers", 1, -1e6, 1e6, [FIXED, FREE, FIXED]),
-            slab("base", 1, -1e6, 0.0, [FIXED; 3]),
-        ],
-        options_prefix: Some("v2z_".into()),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(&format!(
-                "model = \"neo_hookean\"\nyoungs_modulus = {e}\npoisson_ratio = 0.0"
-            ))],
-            ShapeKind::Cpdi1,
-            TimeIntegration {
-                dt: 1.0,
-                dt_min: 1.0 / 16.0,
-                quasi_static: true,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            body_force: SVector::from([0.0, -g, 0.0]),
+            body_force_ramp: load_steps as f64,
+            boxes: vec![
+                slab("side rollers", 1, -1e6, 1e6, [FIXED, FREE, FIXED]),
+                slab("base", 1, -1e6, 0.0, [FIXED; 3]),
+            ],
+            options_prefix: Some("v2z_".into()),
+            ..Parameters::new(
+                grid,
+                vec![material(&format!(
+                    "model = \"neo_hookean\"\nyoungs_modulus = {e}\npoisson_ratio = 0.0"
+                ))],
+                ShapeKind::Cpdi1,
+                TimeIntegration {
+                    dt: 1.0,
+                    dt_min: 1.0 / 16.0,
+                    quasi_static: true,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     while sim.state.time < load_steps as f64 + 1.0 - 1e-9 {
         assert!(sim.advance(&s).expect("step").solve.converged());
@@ -252,22 +256,24 @@ fn plane_strain_block<const D: usize>(
         boxes.push(slab("back", 2, -1e6, 0.0, motion(2, FIXED)));
         boxes.push(slab("front", 2, thickness, 1e6, motion(2, FIXED)));
     }
-    let setup = Setup {
-        boxes,
-        options_prefix: Some("psb_".into()),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(law)],
-            kind,
-            TimeIntegration {
-                dt: 1.0,
-                dt_min: 1.0 / 64.0,
-                quasi_static: true,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes,
+            options_prefix: Some("psb_".into()),
+            ..Parameters::new(
+                grid,
+                vec![material(law)],
+                kind,
+                TimeIntegration {
+                    dt: 1.0,
+                    dt_min: 1.0 / 64.0,
+                    quasi_static: true,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     let per_thickness = if D == 3 { thickness } else { 1.0 };
     let mut forces = Vec::new();
@@ -358,47 +364,53 @@ fn a_3d_block_between_rollers_reproduces_the_plane_strain_result() {
 #[test]
 fn an_extruded_plane_setup_is_the_plate_seeded_in_3d() {
     let (grid, particles) = seeded(SVector::from([4.0, 8.0]), 1.0, 2.4e-9);
-    let plane = Setup {
-        boxes: vec![slab("base", 1, -1e6, 0.0, [FREE, FIXED])],
-        body_force: SVector::from([0.0, -9810.0]),
-        ..Setup::new(
-            grid,
-            particles.clone(),
-            vec![material(
-                "model = \"neo_hookean\"\nyoungs_modulus = 30000.0\npoisson_ratio = 0.25",
-            )],
-            ShapeKind::Cpdi1,
-            TimeIntegration::default(),
-        )
-    };
-    let bad = Setup {
-        boxes: vec![],
-        ..Setup::new(
-            plane.grid.clone(),
-            particles.clone(),
-            vec![],
-            ShapeKind::Cpdi1,
-            TimeIntegration::default(),
-        )
-    };
+    let plane = Setup::of(
+        Parameters {
+            boxes: vec![slab("base", 1, -1e6, 0.0, [FREE, FIXED])],
+            body_force: SVector::from([0.0, -9810.0]),
+            ..Parameters::new(
+                grid,
+                vec![material(
+                    "model = \"neo_hookean\"\nyoungs_modulus = 30000.0\npoisson_ratio = 0.25",
+                )],
+                ShapeKind::Cpdi1,
+                TimeIntegration::default(),
+            )
+        },
+        particles.clone(),
+    );
+    let bad = Setup::of(
+        Parameters {
+            boxes: vec![],
+            ..Parameters::new(
+                plane.params.grid.clone(),
+                vec![],
+                ShapeKind::Cpdi1,
+                TimeIntegration::default(),
+            )
+        },
+        particles.clone(),
+    );
     let e = bad
         .extrude(2.5)
         .err()
         .expect("2.5 mm is no multiple of 1 mm");
     assert!(e.contains("multiple of the cell size"), "{e}");
-    let quasi_static = Setup {
-        time: TimeIntegration {
-            quasi_static: true,
-            ..TimeIntegration::default()
+    let quasi_static = Setup::of(
+        Parameters {
+            time: TimeIntegration {
+                quasi_static: true,
+                ..TimeIntegration::default()
+            },
+            ..Parameters::new(
+                plane.params.grid.clone(),
+                vec![],
+                ShapeKind::Cpdi1,
+                TimeIntegration::default(),
+            )
         },
-        ..Setup::new(
-            plane.grid.clone(),
-            particles.clone(),
-            vec![],
-            ShapeKind::Cpdi1,
-            TimeIntegration::default(),
-        )
-    };
+        particles.clone(),
+    );
     let e = quasi_static.extrude(3.0).err().expect("nothing holds z");
     assert!(e.contains("held"), "{e}");
     let plate = plane.extrude(3.0).expect("extrude");
@@ -421,8 +433,8 @@ fn an_extruded_plane_setup_is_the_plate_seeded_in_3d() {
     assert!((p.mass.iter().sum::<f64>() / (2.4e-9 * volume) - 1.0).abs() < 1e-12);
     assert_eq!(p.r0[0], direct.r0[0]);
     assert!(p.corners.iter().all(|c| c.z >= 0.0 && c.z <= 3.0));
-    assert_eq!(plate.grid.cells()[2], 3 + 4);
-    assert_eq!(plate.grid.origin().z, -2.0);
-    assert_eq!(plate.boxes[0].motion, [FREE, FIXED, FREE]);
-    assert_eq!(plate.body_force, SVector::from([0.0, -9810.0, 0.0]));
+    assert_eq!(plate.params.grid.cells()[2], 3 + 4);
+    assert_eq!(plate.params.grid.origin().z, -2.0);
+    assert_eq!(plate.params.boxes[0].motion, [FREE, FIXED, FREE]);
+    assert_eq!(plate.params.body_force, SVector::from([0.0, -9810.0, 0.0]));
 }

@@ -7,7 +7,7 @@ use common::{Column, material};
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::model::{InitialAcceleration, Method, Setup, TimeIntegration};
+use mpm_concrete::model::{InitialAcceleration, Method, Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
@@ -66,39 +66,41 @@ fn axial_bar_with(
     let period = 2.0 * std::f64::consts::PI / w1;
     let dt = period / steps_per_period as f64;
     let far = 1e3;
-    let setup = Setup {
-        boxes: vec![
-            NodeBox {
-                name: "rollers".into(),
-                min: Vector2::new(-far, -far),
-                max: Vector2::new(far, far),
-                motion: [Motion::Free, Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-            NodeBox {
-                name: "fixed end".into(),
-                min: Vector2::new(-1e-6, -far),
-                max: Vector2::new(1e-6, far),
-                motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-        ],
-        options_prefix: Some("v1_".into()),
-        method,
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(
-                "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
-            )],
-            kind,
-            TimeIntegration {
-                dt,
-                dt_min: dt / 8.0,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes: vec![
+                NodeBox {
+                    name: "rollers".into(),
+                    min: Vector2::new(-far, -far),
+                    max: Vector2::new(far, far),
+                    motion: [Motion::Free, Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+                NodeBox {
+                    name: "fixed end".into(),
+                    min: Vector2::new(-1e-6, -far),
+                    max: Vector2::new(1e-6, far),
+                    motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+            ],
+            options_prefix: Some("v1_".into()),
+            method,
+            ..Parameters::new(
+                grid,
+                vec![material(
+                    "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
+                )],
+                kind,
+                TimeIntegration {
+                    dt,
+                    dt_min: dt / 8.0,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     let mass: f64 = sim.state.particles.mass.iter().sum();
     let amplitude = v0 / (b1 * l);

@@ -37,7 +37,7 @@ fn column(
         ..TimeIntegration::default()
     };
     let mut setup = c.setup(law, kind, Method::Mpm, cells, time, "v2_");
-    setup.body_force_ramp = load_steps as f64;
+    setup.params.body_force_ramp = load_steps as f64;
     let y0: Vec<f64> = setup.particles.x.iter().map(|x| x.y).collect();
     let mut sim = Simulation::new(setup).expect("simulation");
     while sim.state.time < load_steps as f64 + 1.0 - 1e-9 {

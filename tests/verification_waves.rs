@@ -10,7 +10,7 @@ use common::material;
 use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::model::{Setup, TimeIntegration};
+use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::petsc::{self, Session};
 use mpm_concrete::shape::ShapeKind;
@@ -57,38 +57,40 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
     .expect("seed");
     let grid = Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(length, h), h, 2).expect("grid");
     let dt = courant * h / c;
-    let setup = Setup {
-        boxes: vec![
-            NodeBox {
-                name: "rollers".into(),
-                min: Vector2::new(-FAR, -FAR),
-                max: Vector2::new(FAR, FAR),
-                motion: [Motion::Free, Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-            NodeBox {
-                name: "piston".into(),
-                min: Vector2::new(-FAR, -FAR),
-                max: Vector2::new(1e-9, FAR),
-                motion: [Motion::Velocity(v0), Motion::Velocity(0.0)],
-                rise_time: 0.0,
-            },
-        ],
-        options_prefix: Some("v3_".into()),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(&format!(
-                "model = \"linear_elastic\"\nbulk_modulus = {K}\nshear_modulus = {G}"
-            ))],
-            kind,
-            TimeIntegration {
-                dt,
-                dt_min: dt,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes: vec![
+                NodeBox {
+                    name: "rollers".into(),
+                    min: Vector2::new(-FAR, -FAR),
+                    max: Vector2::new(FAR, FAR),
+                    motion: [Motion::Free, Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+                NodeBox {
+                    name: "piston".into(),
+                    min: Vector2::new(-FAR, -FAR),
+                    max: Vector2::new(1e-9, FAR),
+                    motion: [Motion::Velocity(v0), Motion::Velocity(0.0)],
+                    rise_time: 0.0,
+                },
+            ],
+            options_prefix: Some("v3_".into()),
+            ..Parameters::new(
+                grid,
+                vec![material(&format!(
+                    "model = \"linear_elastic\"\nbulk_modulus = {K}\nshear_modulus = {G}"
+                ))],
+                kind,
+                TimeIntegration {
+                    dt,
+                    dt_min: dt,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     // Run until the front has crossed three quarters of the strip.
     let steps = (0.75 * length / (c * dt)).round() as usize;
@@ -202,29 +204,31 @@ fn cantilever(
         Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(length, height), h, 2).expect("grid");
     let period = 2.0 * std::f64::consts::PI / w_exact;
     let dt = period / steps_per_period as f64;
-    let setup = Setup {
-        boxes: vec![NodeBox {
-            name: "clamp".into(),
-            min: Vector2::new(-FAR, -FAR),
-            max: Vector2::new(1e-9, FAR),
-            motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
-            rise_time: 0.0,
-        }],
-        options_prefix: Some("v6_".into()),
-        ..Setup::new(
-            grid,
-            particles,
-            vec![material(&format!(
-                "model = \"linear_elastic\"\nyoungs_modulus = {e}\npoisson_ratio = {nu}"
-            ))],
-            kind,
-            TimeIntegration {
-                dt,
-                dt_min: dt,
-                ..TimeIntegration::default()
-            },
-        )
-    };
+    let setup = Setup::of(
+        Parameters {
+            boxes: vec![NodeBox {
+                name: "clamp".into(),
+                min: Vector2::new(-FAR, -FAR),
+                max: Vector2::new(1e-9, FAR),
+                motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
+                rise_time: 0.0,
+            }],
+            options_prefix: Some("v6_".into()),
+            ..Parameters::new(
+                grid,
+                vec![material(&format!(
+                    "model = \"linear_elastic\"\nyoungs_modulus = {e}\npoisson_ratio = {nu}"
+                ))],
+                kind,
+                TimeIntegration {
+                    dt,
+                    dt_min: dt,
+                    ..TimeIntegration::default()
+                },
+            )
+        },
+        particles,
+    );
     let mut sim = Simulation::new(setup).expect("simulation");
     let (mut t_prev, mut u_prev) = (0.0, 0.0);
     let mut crossings = Vec::new();

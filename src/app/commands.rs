@@ -79,7 +79,7 @@ pub fn bench(
 }
 
 /// `study CONFIG`: the configuration for `steps` steps with each option set of the file `sets` (the
-/// default sets when None), results in `output` (default runs/study-<config name>).
+/// default sets when None), results in `output` (default `runs/study-<config name>`).
 pub fn study(
     config: &Path,
     steps: usize,

@@ -1,5 +1,5 @@
 //! `run`: a simulation described by a configuration file, from the checks of its input to the final
-//! table. Everything that can be checked is checked before anything is written ([`prepare`], then the
+//! table. Everything that can be checked is checked before anything is written (`prepare`, then the
 //! first step, which validates the PETSc set-up); then the output directory belongs to the run, which
 //! records every step, writes the point fields and a checkpoint at the output cadence, on Ctrl-C and when a
 //! step fails for good, and keeps run.json up to date.
@@ -278,7 +278,7 @@ fn announce<const D: usize>(
     sim: &Simulation<D>,
     dir: &Path,
 ) {
-    let grid = &sim.model.grid;
+    let grid = &sim.model.params.grid;
     let cells: Vec<String> = grid.cells().iter().map(usize::to_string).collect();
     eprintln!(
         "{}: {} material points, grid {} cells of {} mm{}, {} steps of {:e} s, {} unknowns per node, {}output in {}",

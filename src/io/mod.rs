@@ -325,7 +325,7 @@ impl RunOutput {
             initial_position: initial.particles.x.iter().map(xyz).collect(),
             writes: true,
             dimension: D,
-            ..Self::mirror(dir, title, config_text, model.grid.cell_size())
+            ..Self::mirror(dir, title, config_text, model.params.grid.cell_size())
         })
     }
 

@@ -7,7 +7,7 @@ use nalgebra::Matrix2;
 /// A rigid device in contact with the specimen during one step attempt: its contact nodes and its motion
 /// in the step (translation, and rotation about its pin settled with the active set).
 pub(super) struct Device {
-    /// The rigid body (index into [`Model::rigid`]).
+    /// The rigid body (index into [`Parameters::rigid`](crate::model::Parameters::rigid)).
     pub(super) body: usize,
     /// The contact nodes with their statuses.
     pub(super) contact: DeviceContact,
@@ -312,8 +312,8 @@ impl<const D: usize> Step<'_, D> {
     /// `None` without a pin.
     pub(super) fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
         let model = self.model;
-        let pin = model.rigid[k].contact.as_ref()?.pin?;
-        let acc = self.state.accumulated[model.boxes.len() + k];
+        let pin = model.params.rigid[k].contact.as_ref()?.pin?;
+        let acc = self.state.accumulated[model.params.boxes.len() + k];
         Some(pin + Vector2::new(acc[0], acc[1]))
     }
 
@@ -332,7 +332,7 @@ impl<const D: usize> Step<'_, D> {
     ) -> Result<Vec<Device>, StepError> {
         let mut index = vec![usize::MAX; self.model.field_nodes()];
         let mut devices = Vec::new();
-        for (k, rb) in self.model.rigid.iter().enumerate() {
+        for (k, rb) in self.model.params.rigid.iter().enumerate() {
             let Some(c) = &rb.contact else { continue };
             let pin = self.pin_of(k);
             let dtheta = match pin {
@@ -379,7 +379,7 @@ impl<const D: usize> Step<'_, D> {
         motion: impl Fn(Vector2<f64>) -> Vector2<f64>,
         index: &mut [usize],
     ) -> Vec<ContactNode> {
-        let grid = &self.model.grid;
+        let grid = &self.model.params.grid;
         let (h, nf) = (grid.cell_size(), self.work.dofs.unknowns_per_node());
         let (n, t) = (face.n, face.t);
         let mut nodes = Vec::new();
@@ -462,7 +462,7 @@ impl<const D: usize> Step<'_, D> {
         dt: f64,
         index: &mut [usize],
     ) {
-        let h = self.model.grid.cell_size();
+        let h = self.model.params.grid.cell_size();
         let t = device.tangent();
         let closed = device.closed_status();
         for c in &mut device.nodes {
@@ -512,7 +512,7 @@ impl<const D: usize> Step<'_, D> {
         let mut pairs = self.node_pairs(devices)?;
         let (far_a, near_b) = self.pair_extents(&pairs, all);
         self.work.partners.resize(all, INACTIVE);
-        let h = self.model.grid.cell_size();
+        let h = self.model.params.grid.cell_size();
         let gs = &self.work.grid_state;
         let predicted =
             |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
@@ -537,7 +537,7 @@ impl<const D: usize> Step<'_, D> {
             &self.work.table,
             &self.work.dofs,
         );
-        let (grid, fields, all) = (&model.grid, model.num_fields(), model.field_nodes());
+        let (grid, fields, all) = (&model.params.grid, model.num_fields(), model.field_nodes());
         let nodes = grid.num_nodes();
         let nf = dofs.unknowns_per_node();
         let mut grad_m = vec![SVector::<f64, D>::zeros(); all];

@@ -63,7 +63,7 @@ impl<const D: usize> Step<'_, D> {
             .collect();
         for d in plan.contacts.iter().filter_map(ContactSet::device) {
             let pin = d.pin.unwrap_or_else(Vector2::zeros);
-            let grid_x = |i| xy(&model.grid.node_position(i));
+            let grid_x = |i| xy(&model.params.grid.node_position(i));
             let (f, _) = d.contact.resultant(phys, nf, grid_x, pin);
             let r = &mut reactions[model.rigid_set(d.body)];
             r[0] = f.x;
@@ -87,7 +87,7 @@ impl<const D: usize> Step<'_, D> {
             .iter()
             .map(|d| d.map(|v| v.unwrap_or(0.0)))
             .collect();
-        for (load, nodes) in model.loads.iter().zip(&plan.load_nodes) {
+        for (load, nodes) in model.params.loads.iter().zip(&plan.load_nodes) {
             // A load reports its resultant and the share-weighted mean displacement of its nodes.
             let f = load.force * load.factor(plan.t_new);
             let du: SVector<f64, D> = nodes.iter().map(|&(n, w)| w * du_nodes[n]).sum();
@@ -107,7 +107,7 @@ impl<const D: usize> Step<'_, D> {
     /// same prescribed du).
     fn work(&self, plan: &StepPlan<D>, out: &Outcome<D>) -> f64 {
         let mut work = 0.0;
-        let bf = self.model.body_force * plan.loading.load_factor;
+        let bf = self.model.params.body_force * plan.loading.load_factor;
         for &node in self.work.dofs.active_nodes() {
             let node = node as usize;
             work += self.work.grid_state.mass[node] * bf.dot(&out.du_nodes[node]);
@@ -136,7 +136,7 @@ impl<const D: usize> Step<'_, D> {
             du: &out.du_nodes,
             acceleration: &out.acc_nodes,
             gamma: if newmark.is_some() {
-                model.time.gamma
+                model.params.time.gamma
             } else {
                 0.0
             },
@@ -146,7 +146,7 @@ impl<const D: usize> Step<'_, D> {
         // Eroded points (material `erosion_damage`) move with the grid but keep their deformation
         // gradient, volume and domain: a void does not deform, so it never inverts.
         let frozen: Vec<_> = (0..ps.len())
-            .filter(|&p| model.materials[ps.body[p] as usize].is_eroded(ps.damage[p]))
+            .filter(|&p| model.params.materials[ps.body[p] as usize].is_eroded(ps.damage[p]))
             .map(|p| {
                 (
                     p,
@@ -158,7 +158,7 @@ impl<const D: usize> Step<'_, D> {
                 )
             })
             .collect();
-        let g2p = transfer::grid_to_particles(&self.work.table, &model.grid, &sol, ps);
+        let g2p = transfer::grid_to_particles(&self.work.table, &model.params.grid, &sol, ps);
         agreed(
             session,
             self.state.distributed,
@@ -177,11 +177,14 @@ impl<const D: usize> Step<'_, D> {
             self.state.fem_nodal = Some(self.fem_nodal_state(newmark, &out.acc_nodes));
         }
         let ps = &mut self.state.particles;
-        if model.time.quasi_static {
+        if model.params.time.quasi_static {
             ps.v.iter_mut().for_each(|v| *v = SVector::zeros());
             ps.a.iter_mut().for_each(|a| *a = SVector::zeros());
         }
-        Ok(self.work.assembler.commit(ps, &model.materials, counted))
+        Ok(self
+            .work
+            .assembler
+            .commit(ps, &model.params.materials, counted))
     }
 
     /// The FEM mode's nodal velocity and acceleration after the step (velocities by the trapezoidal rule
@@ -299,6 +302,7 @@ impl<const D: usize> Step<'_, D> {
             wall_total: t0.elapsed().as_secs_f64(),
             new_pattern: plan.new_pattern,
             rotations: model
+                .params
                 .rigid
                 .iter()
                 .enumerate()

@@ -129,7 +129,7 @@ impl<const D: usize> Simulation<D> {
 /// Advances `state` by one step of (at most) `state.dt` on `model`, with the scratch of `workspace`:
 /// halving the step on failure down to `dt_min` (after a failure of the linear solver the fallback solver
 /// is tried first at the same step); a reduced step is doubled again, up to the nominal `dt`, after
-/// [`GROW_AFTER`] steps in a row converged at their first try. The first step of a dynamic run starts with the consistent initial
+/// `GROW_AFTER` steps in a row converged at their first try. The first step of a dynamic run starts with the consistent initial
 /// acceleration unless `initial_acceleration` is [`InitialAcceleration::Zero`] (computed into `state`
 /// before the first attempt). A failed attempt leaves `state` as it was.
 pub fn advance<const D: usize>(
@@ -162,7 +162,7 @@ impl<const D: usize> Step<'_, D> {
     /// [`InitialAcceleration::Zero`].
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
         // Before the first step only: a resumed run continues with its checkpointed accelerations.
-        let time = &self.model.time;
+        let time = &self.model.params.time;
         if self.state.step == 0
             && !time.quasi_static
             && time.initial_acceleration == InitialAcceleration::Consistent
@@ -177,7 +177,7 @@ impl<const D: usize> Step<'_, D> {
         self.work.moved = [0; 2];
         // The main solver first; after a linear-solver failure the fallback solver (if any) at the same
         // dt, then halving.
-        let mut prefix = self.model.options_prefix.clone();
+        let mut prefix = self.model.params.options_prefix.clone();
         loop {
             attempts += 1;
             let attempt = self.try_step(session, dt, prefix.as_deref());
@@ -191,14 +191,14 @@ impl<const D: usize> Step<'_, D> {
                     let st = &mut *self.state;
                     st.calm_steps = if attempts == 1 { st.calm_steps + 1 } else { 0 };
                     st.dt = dt;
-                    if dt < self.model.time.dt && st.calm_steps >= GROW_AFTER {
-                        st.dt = (dt * 2.0).min(self.model.time.dt);
+                    if dt < self.model.params.time.dt && st.calm_steps >= GROW_AFTER {
+                        st.dt = (dt * 2.0).min(self.model.params.time.dt);
                         st.calm_steps = 0;
                     }
                     return Ok(report);
                 }
                 Err(Failure { reason, linear }) => {
-                    if let Some(fb) = &self.model.fallback_prefix
+                    if let Some(fb) = &self.model.params.fallback_prefix
                         && linear
                         && prefix.as_deref() != Some(fb.as_str())
                     {
@@ -211,12 +211,12 @@ impl<const D: usize> Step<'_, D> {
                         continue;
                     }
                     let next = dt / 2.0;
-                    if next < self.model.time.dt_min {
+                    if next < self.model.params.time.dt_min {
                         return Err(StepError::Diverged {
                             step: self.state.step + 1,
                             time: self.state.time,
                             dt,
-                            dt_min: self.model.time.dt_min,
+                            dt_min: self.model.params.time.dt_min,
                             reason,
                         });
                     }
@@ -278,15 +278,15 @@ impl<const D: usize> Step<'_, D> {
         StepInput {
             table,
             particles,
-            materials: &model.materials,
+            materials: &model.params.materials,
             dofs,
             mass: &grid_state.mass,
             velocity: &grid_state.velocity,
             acceleration: &grid_state.acceleration,
             newmark: loading.newmark,
-            body_force: model.body_force * loading.load_factor,
+            body_force: model.params.body_force * loading.load_factor,
             nodal_force: &loading.nodal_force,
-            row_scale: row_scale(&model.materials),
+            row_scale: row_scale(&model.params.materials),
             partners,
         }
     }

@@ -73,13 +73,13 @@ impl<const D: usize> Step<'_, D> {
         })?;
         let contacts = self.contact_sets(session, &g.set_values, dt)?;
         let model = self.model;
-        let newmark = (!model.time.quasi_static).then_some(Newmark {
-            beta: model.time.beta,
-            gamma: model.time.gamma,
+        let newmark = (!model.params.time.quasi_static).then_some(Newmark {
+            beta: model.params.time.beta,
+            gamma: model.params.time.gamma,
             dt,
         });
-        let load_factor = if model.time.quasi_static && model.body_force_ramp > 0.0 {
-            (t_new / model.body_force_ramp).min(1.0)
+        let load_factor = if model.params.time.quasi_static && model.params.body_force_ramp > 0.0 {
+            (t_new / model.params.body_force_ramp).min(1.0)
         } else {
             1.0
         };
@@ -163,7 +163,7 @@ impl<const D: usize> Step<'_, D> {
 
     /// The rigid bodies' entries of the per-set values `set_values` as vectors (free components 0).
     pub(super) fn rigid_values(&self, set_values: &[[Option<f64>; D]]) -> Vec<SVector<f64, D>> {
-        set_values[self.model.boxes.len()..]
+        set_values[self.model.params.boxes.len()..]
             .iter()
             .map(|d| SVector::from_fn(|c, _| d[c].unwrap_or(0.0)))
             .collect()
@@ -192,7 +192,7 @@ impl<const D: usize> Step<'_, D> {
             self.work.system = Some(LinearSystem::new(
                 session,
                 prefix,
-                &self.model.grid,
+                &self.model.params.grid,
                 &self.work.dofs,
                 &self.work.assembler,
                 rows,
@@ -250,7 +250,10 @@ impl<const D: usize> Step<'_, D> {
         let counted = self.own_point_count();
         let shared = self.state.distributed;
         let local = match &model.fem {
-            None => self.work.table.compute(model.shape, &model.grid, ps),
+            None => self
+                .work
+                .table
+                .compute(model.params.shape, &model.params.grid, ps),
             Some(fem) => self.work.table.push_forward(&fem.points, &ps.f),
         }
         .map_err(|e| StepError::from(e.renumbered(&ps.id)))
@@ -263,17 +266,17 @@ impl<const D: usize> Step<'_, D> {
         agreed(session, shared, local)?;
         let fields = model.num_fields();
         if fields > 1 {
-            let (nodes, body) = (model.grid.num_nodes(), &ps.body);
-            self.work
-                .table
-                .offset_fields(nodes, fields, |p| model.fields[body[p] as usize] as usize);
+            let (nodes, body) = (model.params.grid.num_nodes(), &ps.body);
+            self.work.table.offset_fields(nodes, fields, |p| {
+                model.params.fields[body[p] as usize] as usize
+            });
         }
         transfer::particles_to_grid_shared(
             &self.work.table,
             ps,
             counted,
-            &model.grid,
-            model.mass_tolerance,
+            &model.params.grid,
+            model.params.mass_tolerance,
             &mut self.work.grid_state,
             |sums| match shared {
                 true => session.sum(sums).map_err(|e| e.to_string()),
@@ -298,10 +301,11 @@ impl<const D: usize> Step<'_, D> {
     ) -> Vec<[Option<f64>; D]> {
         let model = self.model;
         model
+            .params
             .boxes
             .iter()
             .map(|b| (b.motion, b.rise_time))
-            .chain(model.rigid.iter().map(|r| (r.motion, r.rise_time)))
+            .chain(model.params.rigid.iter().map(|r| (r.motion, r.rise_time)))
             .map(|(motion, rise)| {
                 motion.map(|m| match m {
                     Motion::Free => None,
@@ -318,10 +322,10 @@ impl<const D: usize> Step<'_, D> {
         values: &[[Option<f64>; D]],
     ) -> Result<Vec<Vec<usize>>, StepError> {
         let model = self.model;
-        let grid = &model.grid;
+        let grid = &model.params.grid;
         let nf = self.work.dofs.unknowns_per_node();
         let mut sets: Vec<Vec<usize>> = Vec::new();
-        for (b, du) in model.boxes.iter().zip(values) {
+        for (b, du) in model.params.boxes.iter().zip(values) {
             let mut dofs_of_set = Vec::new();
             // A box holds every body's copy of its nodes.
             for node in 0..model.field_nodes() {
@@ -338,12 +342,13 @@ impl<const D: usize> Step<'_, D> {
             }
             sets.push(dofs_of_set);
         }
-        let nrigid = model.rigid.len();
+        let nrigid = model.params.rigid.len();
         self.work.rigid_tables.resize_with(nrigid, ShapeTable::new);
         for (k, (rb, du)) in model
+            .params
             .rigid
             .iter()
-            .zip(&values[model.boxes.len()..])
+            .zip(&values[model.params.boxes.len()..])
             .enumerate()
         {
             if rb.contact.is_some() {
@@ -356,7 +361,7 @@ impl<const D: usize> Step<'_, D> {
             let rt = match &model.fem {
                 Some(fem) => &fem.rigid[k],
                 None => {
-                    self.work.rigid_tables[k].compute(model.shape, grid, points)?;
+                    self.work.rigid_tables[k].compute(model.params.shape, grid, points)?;
                     &self.work.rigid_tables[k]
                 }
             };
@@ -394,8 +399,8 @@ impl<const D: usize> Step<'_, D> {
     ) -> Result<(Vec<SVector<f64, D>>, LoadNodes), StepError> {
         let model = self.model;
         let mut nodal_force = Vec::new();
-        let mut load_nodes = Vec::with_capacity(model.loads.len());
-        for (load, shares) in model.loads.iter().zip(&self.model.load_shares) {
+        let mut load_nodes = Vec::with_capacity(model.params.loads.len());
+        for (load, shares) in model.params.loads.iter().zip(&self.model.load_shares) {
             let active: Vec<(usize, f64)> = shares
                 .iter()
                 .copied()
@@ -410,7 +415,7 @@ impl<const D: usize> Step<'_, D> {
                 )));
             }
             if nodal_force.is_empty() {
-                nodal_force = vec![SVector::zeros(); model.grid.num_nodes()];
+                nodal_force = vec![SVector::zeros(); model.params.grid.num_nodes()];
             }
             let f = load.force * load.factor(t);
             let active: Vec<(usize, f64)> =

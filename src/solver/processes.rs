@@ -65,8 +65,13 @@ impl<const D: usize> Step<'_, D> {
     pub(super) fn share_points(&mut self, session: &SessionGuard) -> Result<(), StepError> {
         let st = &mut *self.state;
         if self.work.partition.is_none() {
-            let p = Partition::balanced(session, &self.model.grid, &st.particles, !st.distributed)
-                .map_err(StepError::Setup)?;
+            let p = Partition::balanced(
+                session,
+                &self.model.params.grid,
+                &st.particles,
+                !st.distributed,
+            )
+            .map_err(StepError::Setup)?;
             self.work.partition = Some(p);
         }
         let part = self.work.partition.as_ref().expect("set above");

@@ -269,7 +269,7 @@ impl<const D: usize> Step<'_, D> {
                 contacts,
                 &mut solves,
                 (&xs, &phys, nf),
-                &model.grid,
+                &model.params.grid,
                 input.row_scale,
                 step,
             ) {

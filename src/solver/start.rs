@@ -143,7 +143,7 @@ impl<const D: usize> Step<'_, D> {
         for &(k, f) in contact_forces {
             last[model.rigid_set(k)] = std::array::from_fn(|c| f[c]);
         }
-        for (reaction, load) in last[sets.len()..].iter_mut().zip(&model.loads) {
+        for (reaction, load) in last[sets.len()..].iter_mut().zip(&model.params.loads) {
             let f = load.force * load.factor(t);
             *reaction = std::array::from_fn(|c| f[c]);
         }

@@ -11,7 +11,7 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
-use mpm_concrete::model::{Method, Setup, TimeIntegration};
+use mpm_concrete::model::{Method, Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
 use mpm_concrete::shape::ShapeKind;
 use nalgebra::Vector2;
@@ -69,36 +69,38 @@ impl Column {
         let grid = Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(h, self.height), h, 2)
             .expect("grid");
         let far = 1e6;
-        Setup {
-            body_force: Vector2::new(0.0, -self.g),
-            boxes: vec![
-                NodeBox {
-                    name: "side rollers".into(),
-                    min: Vector2::new(-far, -far),
-                    max: Vector2::new(far, far),
-                    motion: [Motion::Velocity(0.0), Motion::Free],
-                    rise_time: 0.0,
-                },
-                NodeBox {
-                    name: "base".into(),
-                    min: Vector2::new(-far, -far),
-                    max: Vector2::new(far, 0.0),
-                    motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
-                    rise_time: 0.0,
-                },
-            ],
-            options_prefix: Some(prefix.into()),
-            method,
-            ..Setup::new(
-                grid,
-                particles,
-                vec![material(&format!(
-                    "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
-                    self.e
-                ))],
-                kind,
-                time,
-            )
-        }
+        Setup::of(
+            Parameters {
+                body_force: Vector2::new(0.0, -self.g),
+                boxes: vec![
+                    NodeBox {
+                        name: "side rollers".into(),
+                        min: Vector2::new(-far, -far),
+                        max: Vector2::new(far, far),
+                        motion: [Motion::Velocity(0.0), Motion::Free],
+                        rise_time: 0.0,
+                    },
+                    NodeBox {
+                        name: "base".into(),
+                        min: Vector2::new(-far, -far),
+                        max: Vector2::new(far, 0.0),
+                        motion: [Motion::Velocity(0.0), Motion::Velocity(0.0)],
+                        rise_time: 0.0,
+                    },
+                ],
+                options_prefix: Some(prefix.into()),
+                method,
+                ..Parameters::new(
+                    grid,
+                    vec![material(&format!(
+                        "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
+                        self.e
+                    ))],
+                    kind,
+                    time,
+                )
+            },
+            particles,
+        )
     }
 }

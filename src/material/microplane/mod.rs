@@ -26,7 +26,7 @@
 //! precomputed `n_I (x) n_I`, see `Microplane::add_elastic_tangent`) and the
 //! loading indicator `chi_I = 1` iff `eta_bar_mic,I > gamma_I^n` and `> gamma_0`;
 //! `dS/d eta_bar = -6 sum_I w_I chi_I d'(gamma_I) (eta_mic,I/eta) s_I`; `A` follows from
-//! [`super::first_piola_from_pk2`], `dP/d eta_bar = F dS/d eta_bar`, `d eta/dF = F d eta/dE`.
+//! `first_piola_from_pk2`, `dP/d eta_bar = F dS/d eta_bar`, `d eta/dF = F d eta/dE`.
 //! At `r_I = sqrt((k1 tr E)^2 + 3/2 k2 E_D . E_D) = 0` the gradient of `eta_mic` is taken as its
 //! one-sided limit (`2 k1 I` if `k1 tr E > 0`, else 0).
 //!
