@@ -165,7 +165,7 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
     let t0 = Instant::now();
     let (mut curve, mut dissipated) = (vec![(0.0, 0.0)], vec![(0.0, 0.0)]);
     let (mut failed_at, mut iterations) = (None, 0);
-    while sim.state.time < case.steps as f64 - 1e-9 {
+    while sim.state.counters.time < case.steps as f64 - 1e-9 {
         match sim.advance(s) {
             Ok(r) => {
                 let dl = r.displacements[0].1[0];

@@ -219,7 +219,7 @@ fn run_case(s: &SessionGuard, h: f64, c: f64, rate: Rate) -> Result<RunResult> {
     };
     let steps = cfg.run.steps;
     let end_time = steps as f64 * cfg.time.dt;
-    while sim.state.time < end_time * (1.0 - 1e-9) {
+    while sim.state.counters.time < end_time * (1.0 - 1e-9) {
         match sim.advance(s) {
             Ok(rep) => {
                 let k = pulled(&rep.reactions).ok_or("no pulled_end reaction")?;

@@ -157,9 +157,9 @@ fn v1(s: &SessionGuard, out: &Path) -> Result<Value> {
             sim.advance(s)?;
             let p = &sim.state.particles;
             let vcm = p.mass.iter().zip(&p.v).map(|(m, v)| m * v.x).sum::<f64>() / mass;
-            max_err =
-                max_err.max((vcm - amplitude * (w1 * sim.state.time).cos()).abs() / amplitude);
-            curve.push((sim.state.time / period, vcm));
+            max_err = max_err
+                .max((vcm - amplitude * (w1 * sim.state.counters.time).cos()).abs() / amplitude);
+            curve.push((sim.state.counters.time / period, vcm));
         }
         println!(
             "V1 {} {cells} cells: max |v_cm error| / amplitude over two periods = {max_err:.4}",
@@ -252,7 +252,7 @@ fn column(
         node_box("base", [-FAR, -FAR], [FAR, 0.0], [Motion::Velocity(0.0); 2]),
     ];
     let mut sim = Simulation::new(st)?;
-    while sim.state.time < load_steps as f64 + 1.0 - 1e-9 {
+    while sim.state.counters.time < load_steps as f64 + 1.0 - 1e-9 {
         sim.advance(s)?;
     }
     let p = &sim.state.particles;
@@ -479,7 +479,7 @@ fn v3(s: &SessionGuard, out: &Path) -> Result<Value> {
         for _ in 0..steps {
             sim.advance(s)?;
         }
-        front = c * sim.state.time;
+        front = c * sim.state.counters.time;
         let p = &sim.state.particles;
         let window: Vec<usize> = (0..p.len())
             .filter(|&q| p.x[q].x > 0.25 * length && p.x[q].x < front - 0.25 * length)
@@ -599,10 +599,11 @@ fn v6(s: &SessionGuard, out: &Path) -> Result<Value> {
                 sim.advance(s)?;
                 let u = sim.state.particles.x[tip].y - y_tip0;
                 if (u_prev > 0.0 && u <= 0.0) || (u_prev < 0.0 && u >= 0.0) {
-                    crossings.push(t_prev + (sim.state.time - t_prev) * u_prev / (u_prev - u));
+                    crossings
+                        .push(t_prev + (sim.state.counters.time - t_prev) * u_prev / (u_prev - u));
                 }
-                curve.push((sim.state.time / period, u));
-                (t_prev, u_prev) = (sim.state.time, u);
+                curve.push((sim.state.counters.time / period, u));
+                (t_prev, u_prev) = (sim.state.counters.time, u);
             }
             let [first, .., last] = crossings[..] else {
                 return Err("fewer than two zero crossings".into());

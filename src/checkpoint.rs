@@ -11,6 +11,7 @@
 //! attribute `crc32`. [`load`] reads and verifies every dataset before it changes anything, so a damaged
 //! file is reported as corrupt and never loaded.
 
+use crate::contact::NodeStatus;
 use crate::io::{OutputError, RunOutput};
 use crate::model::{Counters, Method, Model, State};
 use crate::rundir::RunIdentity;
@@ -129,7 +130,7 @@ fn write<const D: usize>(
         put("fem_nodal_velocity".into(), &flat(v))?;
         put("fem_nodal_acceleration".into(), &flat(a))?;
     }
-    let counters = serde_json::to_value(state.counters())
+    let counters = serde_json::to_value(CounterRecord::of(&state.counters))
         .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))?;
     let text = serde_json::json!({
         "format": FORMAT,
@@ -158,7 +159,7 @@ pub struct Header {
     /// The identity of the run that wrote it.
     pub identity: RunIdentity,
     /// Time, step, time step and accumulated quantities at the checkpoint.
-    pub counters: Counters,
+    pub counters: CounterRecord,
     datasets: Vec<String>,
     records: serde_json::Value,
     points: usize,
@@ -271,8 +272,11 @@ pub fn load<const D: usize>(
             unflat(&take("fem_nodal_acceleration")),
         ));
     }
-    state
-        .set_counters(header.counters.clone())
+    let (nrigid, energy) = (state.rigid.len(), state.counters.initial_energy);
+    state.counters = header
+        .counters
+        .clone()
+        .restore(nrigid, energy)
         .map_err(&unusable)?;
     Ok(header)
 }
@@ -374,4 +378,104 @@ fn check_fits<const D: usize>(
         }
     }
     Ok(())
+}
+
+/// The counters as a checkpoint's header stores them (JSON; one list per constraint set of any length, so
+/// that a header can be read before the dimension of the run is known).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CounterRecord {
+    /// Time reached (s).
+    pub time: f64,
+    /// Steps completed.
+    pub step: usize,
+    /// Time step to try next (s).
+    pub dt: f64,
+    /// Steps in a row that converged at their first try (0 in checkpoints that predate it).
+    #[serde(default)]
+    pub calm_steps: usize,
+    /// Work of reactions and body forces so far (N mm; in 2D per mm thickness).
+    pub external_work: f64,
+    /// Kinetic energy at t = 0 (N mm, in 2D per mm thickness; `None` in checkpoints that predate it,
+    /// which keep the value the configuration gives).
+    #[serde(default)]
+    pub initial_energy: Option<f64>,
+    /// Accumulated prescribed displacement per constraint set, one value per component (mm).
+    pub accumulated: Vec<Vec<f64>>,
+    /// Last reactions per constraint set, one value per component (N; in 2D per mm thickness).
+    pub last_reactions: Vec<Vec<f64>>,
+    /// Rotation of each rigid body about its pin (rad; 0 without a pin).
+    #[serde(default)]
+    pub rotations: Vec<f64>,
+    /// Rotation rate of each rigid body in the last step (rad/s).
+    #[serde(default)]
+    pub rotation_rates: Vec<f64>,
+    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step.
+    #[serde(default)]
+    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
+    /// The closed pairs of contact between bodies at the end of the last step.
+    #[serde(default)]
+    pub closed_pairs: Vec<usize>,
+}
+
+impl CounterRecord {
+    /// The record of a run's counters.
+    pub fn of<const D: usize>(c: &Counters<D>) -> Self {
+        Self {
+            time: c.time,
+            step: c.step,
+            dt: c.dt,
+            calm_steps: c.calm_steps,
+            external_work: c.external_work,
+            initial_energy: Some(c.initial_energy),
+            accumulated: c.accumulated.iter().map(|a| a.to_vec()).collect(),
+            last_reactions: c.last_reactions.iter().map(|f| f.to_vec()).collect(),
+            rotations: c.rotations.clone(),
+            rotation_rates: c.rotation_rates.clone(),
+            contact_statuses: c.contact_statuses.clone(),
+            closed_pairs: c.closed_pairs.clone(),
+        }
+    }
+
+    /// The counters of a run with `nrigid` rigid bodies; `initial_energy` is kept where an older
+    /// checkpoint has none, lists of an older checkpoint without pins or contact are padded to one entry
+    /// per rigid body. An error says which list does not have `D` components per constraint set.
+    fn restore<const D: usize>(
+        self,
+        nrigid: usize,
+        initial_energy: f64,
+    ) -> Result<Counters<D>, String> {
+        let per_set = |name: &str, lists: &[Vec<f64>]| -> Result<Vec<[f64; D]>, String> {
+            lists
+                .iter()
+                .map(|l| {
+                    <[f64; D]>::try_from(l.as_slice()).map_err(|_| {
+                        format!(
+                            "counters.{name}: {} components per constraint set, this run has {D}",
+                            l.len()
+                        )
+                    })
+                })
+                .collect()
+        };
+        let padded = |mut list: Vec<f64>| {
+            list.resize(nrigid, 0.0);
+            list
+        };
+        let mut contact_statuses = self.contact_statuses;
+        contact_statuses.resize(nrigid, Vec::new());
+        Ok(Counters {
+            time: self.time,
+            step: self.step,
+            dt: self.dt,
+            calm_steps: self.calm_steps,
+            external_work: self.external_work,
+            initial_energy: self.initial_energy.unwrap_or(initial_energy),
+            accumulated: per_set("accumulated", &self.accumulated)?,
+            last_reactions: per_set("last_reactions", &self.last_reactions)?,
+            rotations: padded(self.rotations),
+            rotation_rates: padded(self.rotation_rates),
+            contact_statuses,
+            closed_pairs: self.closed_pairs,
+        })
+    }
 }

@@ -306,7 +306,7 @@ impl<const D: usize> Model<D> {
         let mut state = State::new(particles, rigid_points, nsets, params.time.dt);
         if params.time.quasi_static {
             // Without inertia the points' velocities carry no energy (they are zeroed after the first step).
-            state.initial_energy = 0.0;
+            state.counters.initial_energy = 0.0;
         }
         let model = Self {
             params,
@@ -416,6 +416,20 @@ pub struct State<const D: usize = 2> {
     pub particles: Particles<D>,
     /// The points of each rigid body of [`Parameters::rigid`] where the body has moved them.
     pub rigid: Vec<Particles<D>>,
+    /// Time, step, energies and what the constraint sets and devices carry from step to step.
+    pub counters: Counters<D>,
+    /// FEM mode: the nodal velocity and acceleration carried to the next step (None in MPM mode and
+    /// before the first step).
+    pub fem_nodal: Option<NodalState<D>>,
+    /// `particles` holds this process's own points only (MPM on several processes, from the first
+    /// step on; [`crate::partition`]); false: every point. Not checkpointed: a checkpoint holds every
+    /// point, gathered ([`State::with_points`]).
+    pub distributed: bool,
+}
+
+/// The counters of a running simulation besides the points (the header of a checkpoint).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Counters<const D: usize = 2> {
     /// Time reached (s).
     pub time: f64,
     /// Steps completed.
@@ -439,18 +453,11 @@ pub struct State<const D: usize = 2> {
     /// Rotation rate of each rigid body in the last step (rad/s), the first guess of the next step.
     pub rotation_rates: Vec<f64>,
     /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step
-    /// (the first guess of the next step's active set).
+    /// (the first guess of the next step's active set, so that a resumed run takes the same steps).
     pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
     /// The closed pairs of contact between bodies at the end of the last step (the other body's node
     /// copies, sorted): with the predicted overlap, the first guess of the next step's active set.
     pub closed_pairs: Vec<usize>,
-    /// FEM mode: the nodal velocity and acceleration carried to the next step (None in MPM mode and
-    /// before the first step).
-    pub fem_nodal: Option<NodalState<D>>,
-    /// `particles` holds this process's own points only (MPM on several processes, from the first
-    /// step on; [`crate::partition`]); false: every point. Not checkpointed: a checkpoint holds every
-    /// point, gathered ([`State::with_points`]).
-    pub distributed: bool,
 }
 
 impl<const D: usize> State<D> {
@@ -461,9 +468,7 @@ impl<const D: usize> State<D> {
         let initial_energy = (0..particles.len())
             .map(|p| 0.5 * particles.mass[p] * particles.v[p].norm_squared())
             .sum();
-        Self {
-            particles,
-            rigid,
+        let counters = Counters {
             time: 0.0,
             step: 0,
             dt,
@@ -476,6 +481,11 @@ impl<const D: usize> State<D> {
             rotation_rates: vec![0.0; nrigid],
             contact_statuses: vec![Vec::new(); nrigid],
             closed_pairs: Vec::new(),
+        };
+        Self {
+            particles,
+            rigid,
+            counters,
             fem_nodal: None,
             distributed: false,
         }
@@ -486,115 +496,11 @@ impl<const D: usize> State<D> {
         Self {
             particles,
             rigid: self.rigid.clone(),
-            contact_statuses: self.contact_statuses.clone(),
-            closed_pairs: self.closed_pairs.clone(),
+            counters: self.counters.clone(),
             fem_nodal: self.fem_nodal.clone(),
-            accumulated: self.accumulated.clone(),
-            last_reactions: self.last_reactions.clone(),
-            rotations: self.rotations.clone(),
-            rotation_rates: self.rotation_rates.clone(),
             distributed: false,
-            ..*self
         }
     }
-}
-
-impl<const D: usize> State<D> {
-    /// The counters besides the points (the header of a checkpoint).
-    pub fn counters(&self) -> Counters {
-        Counters {
-            time: self.time,
-            step: self.step,
-            dt: self.dt,
-            calm_steps: self.calm_steps,
-            external_work: self.external_work,
-            initial_energy: Some(self.initial_energy),
-            accumulated: self.accumulated.iter().map(|a| a.to_vec()).collect(),
-            last_reactions: self.last_reactions.iter().map(|f| f.to_vec()).collect(),
-            rotations: self.rotations.clone(),
-            rotation_rates: self.rotation_rates.clone(),
-            contact_statuses: self.contact_statuses.clone(),
-            closed_pairs: self.closed_pairs.clone(),
-        }
-    }
-
-    /// Restores the counters of a checkpoint (the points are restored by the caller); lists of an older
-    /// checkpoint without pins or contact are padded to one entry per rigid body. An error says which
-    /// list does not have `D` components per constraint set.
-    pub fn set_counters(&mut self, c: Counters) -> Result<(), String> {
-        let per_set = |name: &str, lists: &[Vec<f64>]| -> Result<Vec<[f64; D]>, String> {
-            lists
-                .iter()
-                .map(|l| {
-                    <[f64; D]>::try_from(l.as_slice()).map_err(|_| {
-                        format!(
-                            "counters.{name}: {} components per constraint set, this run has {D}",
-                            l.len()
-                        )
-                    })
-                })
-                .collect()
-        };
-        let accumulated = per_set("accumulated", &c.accumulated)?;
-        let last_reactions = per_set("last_reactions", &c.last_reactions)?;
-        let nr = self.rigid.len();
-        self.time = c.time;
-        self.step = c.step;
-        self.dt = c.dt;
-        self.calm_steps = c.calm_steps;
-        self.external_work = c.external_work;
-        if let Some(e) = c.initial_energy {
-            self.initial_energy = e;
-        }
-        self.accumulated = accumulated;
-        self.last_reactions = last_reactions;
-        self.rotations = c.rotations;
-        self.rotations.resize(nr, 0.0);
-        self.rotation_rates = c.rotation_rates;
-        self.rotation_rates.resize(nr, 0.0);
-        self.contact_statuses = c.contact_statuses;
-        self.contact_statuses.resize(nr, Vec::new());
-        self.closed_pairs = c.closed_pairs;
-        Ok(())
-    }
-}
-
-/// The counters of a running simulation besides the particles (for checkpoints).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Counters {
-    /// Time reached (s).
-    pub time: f64,
-    /// Steps completed.
-    pub step: usize,
-    /// Time step to try next (s).
-    pub dt: f64,
-    /// Steps in a row that converged at their first try (0 in checkpoints that predate it).
-    #[serde(default)]
-    pub calm_steps: usize,
-    /// Work of reactions and body forces so far (N mm; in 2D per mm thickness).
-    pub external_work: f64,
-    /// Kinetic energy at t = 0 (N mm, in 2D per mm thickness; `None` in checkpoints that predate it,
-    /// which keep the value the configuration gives).
-    #[serde(default)]
-    pub initial_energy: Option<f64>,
-    /// Accumulated prescribed displacement per constraint set, one value per component (mm).
-    pub accumulated: Vec<Vec<f64>>,
-    /// Last reactions per constraint set, one value per component (N; in 2D per mm thickness).
-    pub last_reactions: Vec<Vec<f64>>,
-    /// Rotation of each rigid body about its pin (rad; 0 without a pin).
-    #[serde(default)]
-    pub rotations: Vec<f64>,
-    /// Rotation rate of each rigid body in the last step (rad/s).
-    #[serde(default)]
-    pub rotation_rates: Vec<f64>,
-    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step: the
-    /// first guess of the next step's active set, so that a resumed run takes the same steps.
-    #[serde(default)]
-    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
-    /// The closed pairs of contact between bodies at the end of the last step (see
-    /// [`State::closed_pairs`]).
-    #[serde(default)]
-    pub closed_pairs: Vec<usize>,
 }
 
 /// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.

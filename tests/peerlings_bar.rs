@@ -133,7 +133,7 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
         "c > 0: (u_x, u_y, eta_bar) per node"
     );
     let mut stress = 0.0;
-    while sim.state.time < steps as f64 - 1e-9 {
+    while sim.state.counters.time < steps as f64 - 1e-9 {
         let r = sim.advance(&s).expect("load step converges");
         stress = r.reactions[0].1[0] / h;
     }

@@ -125,7 +125,7 @@ fn axial_bar_with(
         assert!(r.solve.converged());
         let p = &sim.state.particles;
         let vcm = p.mass.iter().zip(&p.v).map(|(m, v)| m * v.x).sum::<f64>() / mass;
-        let exact = amplitude * (w1 * sim.state.time).cos();
+        let exact = amplitude * (w1 * sim.state.counters.time).cos();
         max_err = max_err.max((vcm - exact).abs() / amplitude);
         let total = r.kinetic_energy + r.stored_energy;
         max_drift = max_drift.max((total - e0).abs() / e0);
@@ -236,7 +236,7 @@ fn sudden_gravity_column(method: Method, start: InitialAcceleration, cells: usiz
         assert!(r.solve.converged());
         let p = &sim.state.particles;
         let u = top.iter().map(|&k| p.x[k].y - y0[k]).sum::<f64>() / top.len() as f64;
-        let exact = sudden_gravity_exact(&col, y_top, sim.state.time);
+        let exact = sudden_gravity_exact(&col, y_top, sim.state.counters.time);
         num += (u - exact).powi(2);
         den += exact * exact;
         energy_error =

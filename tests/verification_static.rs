@@ -40,7 +40,7 @@ fn column(
     setup.params.body_force_ramp = load_steps as f64;
     let y0: Vec<f64> = setup.particles.x.iter().map(|x| x.y).collect();
     let mut sim = Simulation::new(setup).expect("simulation");
-    while sim.state.time < load_steps as f64 + 1.0 - 1e-9 {
+    while sim.state.counters.time < load_steps as f64 + 1.0 - 1e-9 {
         let r = sim.advance(&s).expect("step");
         assert!(r.solve.converged());
     }

@@ -98,7 +98,7 @@ fn plane_wave(kind: ShapeKind, cells: usize, courant: f64) -> [f64; 3] {
         let r = sim.advance(&s).expect("step");
         assert!(r.solve.converged());
     }
-    let front = c * sim.state.time;
+    let front = c * sim.state.counters.time;
     let p = &sim.state.particles;
     let window: Vec<usize> = (0..p.len())
         .filter(|&k| p.x[k].x > 0.25 * length && p.x[k].x < front - 0.25 * length)
@@ -238,9 +238,9 @@ fn cantilever(
         let u = sim.state.particles.x[tip].y - y_tip0;
         // Zero crossings of the deflection (it starts at 0 moving up: T/2, T, 3T/2, ...), interpolated.
         if (u_prev > 0.0 && u <= 0.0) || (u_prev < 0.0 && u >= 0.0) {
-            crossings.push(t_prev + (sim.state.time - t_prev) * u_prev / (u_prev - u));
+            crossings.push(t_prev + (sim.state.counters.time - t_prev) * u_prev / (u_prev - u));
         }
-        t_prev = sim.state.time;
+        t_prev = sim.state.counters.time;
         u_prev = u;
     }
     assert!(

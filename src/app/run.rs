@@ -206,7 +206,7 @@ fn simulate<const D: usize>(
         if root {
             eprintln!(
                 "resuming at step {} (t = {:e} s)",
-                sim.state.step, sim.state.time
+                sim.state.counters.step, sim.state.counters.time
             );
         }
     }
@@ -220,7 +220,11 @@ fn simulate<const D: usize>(
     if root {
         announce(session, cfg, &sim, &prepared.dir);
     }
-    let bar = progress_bar(invocation.quiet || !root, cfg.run.steps, sim.state.step);
+    let bar = progress_bar(
+        invocation.quiet || !root,
+        cfg.run.steps,
+        sim.state.counters.step,
+    );
     let started = std::time::Instant::now();
     // A PETSc logging stage for the time loop, so -log_view separates it from the set-up.
     let _stage = session.push_stage(session.register_stage("MPM time steps")?)?;
@@ -435,9 +439,9 @@ fn new_record<const D: usize>(
             .map_or(0, |d| d.as_secs()),
         resumed_from_step: prepared.resume_from.as_ref().map(|h| h.counters.step),
         status: "running".into(),
-        steps_done: sim.state.step,
+        steps_done: sim.state.counters.step,
         steps_requested: cfg.run.steps,
-        time_reached: sim.state.time,
+        time_reached: sim.state.counters.time,
         time_requested: cfg.run.steps as f64 * cfg.time.dt,
         reduced_steps: 0,
         note: None,
@@ -474,8 +478,8 @@ impl Records<'_> {
 
     /// run.json follows the checkpoint, so a run killed outright shows how far it got.
     fn follow<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<()> {
-        self.record.steps_done = sim.state.step;
-        self.record.time_reached = sim.state.time;
+        self.record.steps_done = sim.state.counters.step;
+        self.record.time_reached = sim.state.counters.time;
         if self.root {
             self.record.write(self.dir)?;
         }
@@ -492,11 +496,11 @@ impl Records<'_> {
     ) -> Result<Option<String>> {
         let cfg = self.cfg;
         let taken: Vec<f64> = self.out.rows().iter().map(|r| r.dt).collect();
-        let note = time_note(&taken, sim.state.time, cfg.run.steps, cfg.time.dt);
+        let note = time_note(&taken, sim.state.counters.time, cfg.run.steps, cfg.time.dt);
         let record = &mut self.record;
         record.status = status.into();
-        record.steps_done = sim.state.step;
-        record.time_reached = sim.state.time;
+        record.steps_done = sim.state.counters.step;
+        record.time_reached = sim.state.counters.time;
         record.reduced_steps = reduced_steps(&taken, cfg.time.dt);
         record.note = match (&why, &note) {
             (Some(w), Some(n)) => Some(format!("{w}; {n}")),
@@ -542,22 +546,25 @@ impl Steps<'_> {
             let every = records.cfg.run.output_every;
             // Every process stops after the same step (a signal may reach them at different steps).
             let stop = self.session.any(self.interrupted.load(Ordering::SeqCst));
-            if (every > 0 && sim.state.step % every == 0) || sim.state.step == steps || stop {
+            if (every > 0 && sim.state.counters.step % every == 0)
+                || sim.state.counters.step == steps
+                || stop
+            {
                 records.save(self.session, sim)?;
                 records.follow(sim)?;
             }
-            if stop && sim.state.step < steps {
+            if stop && sim.state.counters.step < steps {
                 self.bar.abandon();
-                let why = format!("interrupted after step {}", sim.state.step);
+                let why = format!("interrupted after step {}", sim.state.counters.step);
                 records.finish(sim, "interrupted", Some(why))?;
                 anyhow::bail!(
                     "interrupted after step {}; the state is saved in {}: continue with {}",
-                    sim.state.step,
+                    sim.state.counters.step,
                     records.dir.display(),
                     self.hint
                 );
             }
-            if sim.state.step >= steps {
+            if sim.state.counters.step >= steps {
                 return Ok(());
             }
             step = sim.advance(self.session);
@@ -594,7 +601,7 @@ impl Steps<'_> {
         }
         let why = format!(
             "step {} failed: {}",
-            sim.state.step + 1,
+            sim.state.counters.step + 1,
             e.to_string().trim()
         );
         if let Err(closing) = records.finish(sim, "failed", Some(why)) {
@@ -604,8 +611,8 @@ impl Steps<'_> {
             "{}; the last converged state (step {}, t = {:e} s) is saved in {} with a checkpoint; \
              to continue (e.g. with other solver options): {}",
             e.to_string().trim(),
-            sim.state.step,
-            sim.state.time,
+            sim.state.counters.step,
+            sim.state.counters.time,
             records.dir.display(),
             self.hint
         )

@@ -503,7 +503,7 @@ impl RunOutput {
                 self.cell_size,
                 p.point_spacing(),
                 criteria,
-                state.time,
+                state.counters.time,
             );
             measured.dissipated = p
                 .dissipated
@@ -524,7 +524,9 @@ impl RunOutput {
             state,
             &section,
             layer,
-            &self.dir.join(file::numbered(file::DAMAGE_MAP, state.step)),
+            &self
+                .dir
+                .join(file::numbered(file::DAMAGE_MAP, state.counters.step)),
         )
     }
 
@@ -535,7 +537,7 @@ impl RunOutput {
         if !self.writes {
             return Ok(());
         }
-        let file = file::numbered(file::FIELDS, state.step);
+        let file = file::numbered(file::FIELDS, state.counters.step);
         let path = self.dir.join(&file);
         let tmp = tmp_name(&path);
         self.write_h5(&tmp, state).map_err(|e| OutputError::Hdf5 {
@@ -543,10 +545,10 @@ impl RunOutput {
             message: e.to_string(),
         })?;
         std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
-        self.snapshots.retain(|s| s.step != state.step);
+        self.snapshots.retain(|s| s.step != state.counters.step);
         self.snapshots.push(Snapshot {
-            step: state.step,
-            time: state.time,
+            step: state.counters.step,
+            time: state.counters.time,
             file,
         });
         self.write_xdmf(state.particles.len())
@@ -576,10 +578,10 @@ impl RunOutput {
         put_text(&f, "config", &self.config_text)?;
         f.new_attr::<f64>()
             .create("time_s")?
-            .write_scalar(&state.time)?;
+            .write_scalar(&state.counters.time)?;
         f.new_attr::<u64>()
             .create("step")?
-            .write_scalar(&(state.step as u64))?;
+            .write_scalar(&(state.counters.step as u64))?;
         let connectivity: Vec<i64> = (0..n as i64).collect();
         let ds = f
             .new_dataset_builder()
@@ -666,7 +668,7 @@ impl RunOutput {
             title: format!(
                 "{}: damage at t = {:.1} us{plane}",
                 self.title,
-                state.time * 1e6
+                state.counters.time * 1e6
             ),
             x: section.iter().map(|&k| p.x[k][0]).collect(),
             y: section.iter().map(|&k| p.x[k][1]).collect(),
@@ -812,8 +814,8 @@ material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio =
             *v = Vector2::new(1.0e3, i as f64);
         }
         p.damage[1] = 0.75;
-        sim.state.step = 7;
-        sim.state.time = 7.0e-6;
+        sim.state.counters.step = 7;
+        sim.state.counters.time = 7.0e-6;
         out.snapshot(&sim.state).expect("snapshot 7");
 
         let xdmf = std::fs::read_to_string(dir.join("fields.xdmf")).expect("xdmf");

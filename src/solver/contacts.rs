@@ -257,17 +257,17 @@ impl<const D: usize> ContactSet<D> {
     pub(super) fn commit(&self, state: &mut State<D>) {
         match self {
             Self::Device(d) => {
-                state.contact_statuses[d.body] =
+                state.counters.contact_statuses[d.body] =
                     d.contact.nodes.iter().map(|c| (c.node, c.status)).collect();
             }
             Self::Bodies(b) => {
-                state.closed_pairs = b
+                state.counters.closed_pairs = b
                     .pairs
                     .iter()
                     .filter(|c| c.closed)
                     .map(|c| c.node_b)
                     .collect();
-                state.closed_pairs.sort_unstable();
+                state.counters.closed_pairs.sort_unstable();
             }
         }
     }
@@ -313,7 +313,7 @@ impl<const D: usize> Step<'_, D> {
     pub(super) fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
         let model = self.model;
         let pin = model.params.rigid[k].contact.as_ref()?.pin?;
-        let acc = self.state.accumulated[model.params.boxes.len() + k];
+        let acc = self.state.counters.accumulated[model.params.boxes.len() + k];
         Some(pin + Vector2::new(acc[0], acc[1]))
     }
 
@@ -336,11 +336,11 @@ impl<const D: usize> Step<'_, D> {
             let Some(c) = &rb.contact else { continue };
             let pin = self.pin_of(k);
             let dtheta = match pin {
-                Some(_) if rotate => self.state.rotation_rates[k] * dt,
+                Some(_) if rotate => self.state.counters.rotation_rates[k] * dt,
                 _ => 0.0,
             };
             let face = Face::of(
-                contact::rotation(self.state.rotations[k]) * c.normal,
+                contact::rotation(self.state.counters.rotations[k]) * c.normal,
                 &self.state.rigid[k],
             );
             let translation = xy(&translations[k]);
@@ -356,7 +356,12 @@ impl<const D: usize> Step<'_, D> {
                 friction: c.friction,
                 nodes,
             };
-            self.first_statuses(&mut device, &self.state.contact_statuses[k], dt, &mut index);
+            self.first_statuses(
+                &mut device,
+                &self.state.counters.contact_statuses[k],
+                dt,
+                &mut index,
+            );
             devices.push(Device {
                 body: k,
                 contact: device,
@@ -519,7 +524,12 @@ impl<const D: usize> Step<'_, D> {
         for (k, c) in pairs.iter_mut().enumerate() {
             c.gap = (near_b[k] - far_a[k]).max(0.0);
             let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
-            let was_closed = self.state.closed_pairs.binary_search(&c.node_b).is_ok();
+            let was_closed = self
+                .state
+                .counters
+                .closed_pairs
+                .binary_search(&c.node_b)
+                .is_ok();
             c.closed = overlap < -1e-9 * h || (c.gap <= 1e-9 * h && was_closed);
             self.work.partners[c.node_a] = c.node_b as u32;
             self.work.partners[c.node_b] = c.node_a as u32;

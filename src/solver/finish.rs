@@ -29,15 +29,15 @@ impl<const D: usize> Step<'_, D> {
         let stored = self.move_points(session, &plan, &out, counted)?;
         self.move_rigid_bodies(&plan, &out);
         let st = &mut *self.state;
-        for (acc, du) in st.accumulated.iter_mut().zip(&out.displacements) {
+        for (acc, du) in st.counters.accumulated.iter_mut().zip(&out.displacements) {
             for c in 0..D {
                 acc[c] += du[c];
             }
         }
-        st.last_reactions = out.reactions.clone();
-        st.external_work += work;
-        st.time = plan.t_new;
-        st.step += 1;
+        st.counters.last_reactions = out.reactions.clone();
+        st.counters.external_work += work;
+        st.counters.time = plan.t_new;
+        st.counters.step += 1;
         let mut energies = [self.kinetic_energy(counted), stored];
         if self.state.distributed {
             session.sum(&mut energies)?;
@@ -114,7 +114,7 @@ impl<const D: usize> Step<'_, D> {
         }
         for (k, (r, du)) in out.reactions.iter().zip(&out.displacements).enumerate() {
             for c in 0..D {
-                work += 0.5 * (r[c] + self.state.last_reactions[k][c]) * du[c];
+                work += 0.5 * (r[c] + self.state.counters.last_reactions[k][c]) * du[c];
             }
         }
         work
@@ -228,10 +228,10 @@ impl<const D: usize> Step<'_, D> {
             let moved = |x: &mut SVector<f64, D>| *x += dx + r * (*x - pin);
             rb.x.iter_mut().for_each(moved);
             rb.corners.iter_mut().for_each(moved);
-            st.rotations[k] += dtheta;
-            st.rotation_rates[k] = dtheta / dt;
+            st.counters.rotations[k] += dtheta;
+            st.counters.rotation_rates[k] = dtheta / dt;
         }
-        st.closed_pairs.clear();
+        st.counters.closed_pairs.clear();
         for c in &plan.contacts {
             c.commit(st);
         }
@@ -271,8 +271,8 @@ impl<const D: usize> Step<'_, D> {
         let (model, st) = (self.model, &*self.state);
         let names = model.set_names();
         StepReport {
-            step: st.step,
-            time: st.time,
+            step: st.counters.step,
+            time: st.counters.time,
             dt: plan.dt,
             attempts: 1,
             solve: solved.info,
@@ -289,12 +289,12 @@ impl<const D: usize> Step<'_, D> {
                 .collect(),
             displacements: names
                 .into_iter()
-                .zip(st.accumulated.iter().map(|d| d.to_vec()))
+                .zip(st.counters.accumulated.iter().map(|d| d.to_vec()))
                 .collect(),
             kinetic_energy: kinetic,
             stored_energy: stored,
-            external_work: st.external_work,
-            initial_energy: st.initial_energy,
+            external_work: st.counters.external_work,
+            initial_energy: st.counters.initial_energy,
             wall_setup: plan.setup_time,
             wall_solve: solved.solve_time,
             wall_assembly: solved.assembly_time,
@@ -307,7 +307,7 @@ impl<const D: usize> Step<'_, D> {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| r.contact.as_ref().is_some_and(|c| c.pin.is_some()))
-                .map(|(k, r)| (r.name.clone(), st.rotations[k]))
+                .map(|(k, r)| (r.name.clone(), st.counters.rotations[k]))
                 .collect(),
             contact_solves: solved.contact_solves,
             migrated: self.work.moved[0],

@@ -163,7 +163,7 @@ impl<const D: usize> Step<'_, D> {
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
         // Before the first step only: a resumed run continues with its checkpointed accelerations.
         let time = &self.model.params.time;
-        if self.state.step == 0
+        if self.state.counters.step == 0
             && !time.quasi_static
             && time.initial_acceleration == InitialAcceleration::Consistent
         {
@@ -172,7 +172,7 @@ impl<const D: usize> Step<'_, D> {
             r?;
         }
         let started = Instant::now();
-        let mut dt = self.state.dt;
+        let mut dt = self.state.counters.dt;
         let mut attempts = 0;
         self.work.moved = [0; 2];
         // The main solver first; after a linear-solver failure the fallback solver (if any) at the same
@@ -189,11 +189,15 @@ impl<const D: usize> Step<'_, D> {
                     // A reduced step is kept until GROW_AFTER steps in a row converged at the first try,
                     // then doubled (up to the nominal dt).
                     let st = &mut *self.state;
-                    st.calm_steps = if attempts == 1 { st.calm_steps + 1 } else { 0 };
-                    st.dt = dt;
-                    if dt < self.model.params.time.dt && st.calm_steps >= GROW_AFTER {
-                        st.dt = (dt * 2.0).min(self.model.params.time.dt);
-                        st.calm_steps = 0;
+                    st.counters.calm_steps = if attempts == 1 {
+                        st.counters.calm_steps + 1
+                    } else {
+                        0
+                    };
+                    st.counters.dt = dt;
+                    if dt < self.model.params.time.dt && st.counters.calm_steps >= GROW_AFTER {
+                        st.counters.dt = (dt * 2.0).min(self.model.params.time.dt);
+                        st.counters.calm_steps = 0;
                     }
                     return Ok(report);
                 }
@@ -204,8 +208,8 @@ impl<const D: usize> Step<'_, D> {
                     {
                         tracing::warn!(
                             "step {} at t = {:.6e} s: {reason}; retrying with the fallback solver (-{fb}*)",
-                            self.state.step + 1,
-                            self.state.time
+                            self.state.counters.step + 1,
+                            self.state.counters.time
                         );
                         prefix = Some(fb.clone());
                         continue;
@@ -213,8 +217,8 @@ impl<const D: usize> Step<'_, D> {
                     let next = dt / 2.0;
                     if next < self.model.params.time.dt_min {
                         return Err(StepError::Diverged {
-                            step: self.state.step + 1,
-                            time: self.state.time,
+                            step: self.state.counters.step + 1,
+                            time: self.state.counters.time,
                             dt,
                             dt_min: self.model.params.time.dt_min,
                             reason,
@@ -222,8 +226,8 @@ impl<const D: usize> Step<'_, D> {
                     }
                     tracing::warn!(
                         "step {} at t = {:.6e} s: {reason}; retrying with dt = {next:.3e} s",
-                        self.state.step + 1,
-                        self.state.time
+                        self.state.counters.step + 1,
+                        self.state.counters.time
                     );
                     dt = next;
                 }

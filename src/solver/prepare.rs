@@ -67,7 +67,7 @@ impl<const D: usize> Step<'_, D> {
                     .into(),
             ));
         }
-        let (t, t_new) = (self.state.time, self.state.time + dt);
+        let (t, t_new) = (self.state.counters.time, self.state.counters.time + dt);
         let g = self.grid_phase(session, t_new, |v, rise| {
             prescribed_increment(v, rise, t, dt)
         })?;

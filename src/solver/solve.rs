@@ -190,7 +190,7 @@ impl<const D: usize> Step<'_, D> {
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, Failure>, StepError> {
         let t1 = Instant::now();
-        let (step, model, shared) = (self.state.step, self.model, self.state.distributed);
+        let (step, model, shared) = (self.state.counters.step, self.model, self.state.distributed);
         let Workspace {
             table,
             dofs,

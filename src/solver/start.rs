@@ -14,7 +14,7 @@ impl<const D: usize> Step<'_, D> {
         &mut self,
         session: &SessionGuard,
     ) -> Result<(), StepError> {
-        let t = self.state.time;
+        let t = self.state.counters.time;
         let g = self.grid_phase(session, t, |v, rise| prescribed_acceleration(v, rise, t))?;
         let r = self.unbalanced_force(session, g.nodal_force, &g.eta_bar)?;
         let nf = self.work.dofs.unknowns_per_node();
@@ -130,9 +130,9 @@ impl<const D: usize> Step<'_, D> {
         let (model, nf, t) = (
             self.model,
             self.work.dofs.unknowns_per_node(),
-            self.state.time,
+            self.state.counters.time,
         );
-        let last = &mut self.state.last_reactions;
+        let last = &mut self.state.counters.last_reactions;
         for (reaction, dofs) in last.iter_mut().zip(sets) {
             *reaction = [0.0; D];
             for &d in dofs {
