@@ -8,6 +8,9 @@
 //! step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes"); process 0
 //! gathers the points and alone writes.
 
+mod resume;
+mod summary;
+
 use super::{bad, processes_per_node, share_cores};
 use crate::checkpoint;
 use crate::config::{self, RunConfig};
@@ -21,9 +24,11 @@ use crate::solver::{Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
+use resume::{check_resume, command_line, refusal, resume_command};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use summary::summary;
 
 /// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
 /// range, unsupported, incompatible, unknown type).
@@ -628,126 +633,6 @@ fn report_unused_fallback(session: &SessionGuard, defaults: &[String]) -> Result
     Ok(())
 }
 
-/// Quotes `word` for a POSIX shell when it needs it.
-fn shell_quote(word: &str) -> String {
-    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./=:,+@%".contains(c);
-    if !word.is_empty() && word.chars().all(plain) {
-        word.to_owned()
-    } else {
-        format!("'{}'", word.replace('\'', "'\\''"))
-    }
-}
-
-/// The command line as given, quoted for a shell.
-fn command_line(own: &[String], petsc: &[String]) -> String {
-    own.iter()
-        .chain(&petsc[1..])
-        .map(|w| shell_quote(w))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-/// The command that resumes a run started with `own` + `petsc`: the same arguments with `--resume`
-/// instead of `--overwrite` and with the output directory spelled out.
-fn resume_command(own: &[String], petsc: &[String], dir: &Path) -> String {
-    let mut words: Vec<String> = own
-        .iter()
-        .filter(|a| *a != "--overwrite")
-        .cloned()
-        .collect();
-    if !own
-        .iter()
-        .any(|a| a == "--output" || a.starts_with("--output="))
-    {
-        words.push("--output".into());
-        words.push(dir.display().to_string());
-    }
-    if !own.iter().any(|a| a == "--resume") {
-        words.push("--resume".into());
-    }
-    let mut all = vec![words.remove(0)];
-    all.extend(words);
-    command_line(&all, petsc)
-}
-
-/// Why a new run may not write into `dir`.
-fn refusal(dir: &Path, contents: &rundir::Contents, identity: &RunIdentity) -> String {
-    let what = match &contents.record {
-        Some(r) => format!(
-            "the results of {} (config {}, {} at step {} of {})",
-            if r.identity.physics == identity.physics {
-                "an earlier run of the same model"
-            } else {
-                "another run"
-            },
-            r.config_file,
-            r.status,
-            r.steps_done,
-            r.steps_requested
-        ),
-        None => {
-            let n = contents.results.len();
-            format!(
-                "the results of another run ({}{})",
-                contents.results[..n.min(3)].join(", "),
-                if n > 3 {
-                    format!(" and {} more files", n - 3)
-                } else {
-                    String::new()
-                }
-            )
-        }
-    };
-    format!(
-        "{} holds {what}: use --overwrite to replace them, --resume to continue that run, or another --output",
-        dir.display()
-    )
-}
-
-/// Checks that the checkpoint in `dir` can be resumed by a run of `identity` with `steps` steps.
-fn check_resume(dir: &Path, identity: &RunIdentity, steps: usize) -> Result<checkpoint::Header> {
-    let header = checkpoint::read_header(dir).map_err(bad)?;
-    let file = dir.join(checkpoint::FILE);
-    let changes = header.identity.physics_changes(identity);
-    if !changes.is_empty() {
-        return Err(bad(format!(
-            "{}: the checkpoint was written with other physics ({}); --resume may change only the [run] \
-             section (steps, output_every, output_dir, name, petsc_options): start a new run instead",
-            file.display(),
-            changes.join("; ")
-        )));
-    }
-    let done = header.counters.step;
-    if steps <= done {
-        return Err(bad(format!(
-            "{}: the checkpoint is at step {done} and the run asks for {steps} steps, so there is nothing to \
-             do: give --steps N with N > {done} to continue",
-            file.display()
-        )));
-    }
-    if header.identity.version != identity.version {
-        eprintln!(
-            "note: the checkpoint was written by version {}, this is {}",
-            header.identity.version, identity.version
-        );
-    }
-    if header.identity.petsc_options != identity.petsc_options {
-        let shown = |o: &str| {
-            if o.is_empty() {
-                "none".to_owned()
-            } else {
-                format!("`{o}`")
-            }
-        };
-        eprintln!(
-            "note: PETSc options {} at the checkpoint, {} now",
-            shown(&header.identity.petsc_options),
-            shown(&identity.petsc_options)
-        );
-    }
-    Ok(header)
-}
-
 /// Steps (their time steps `taken`) that took less than the nominal time step `dt`.
 fn reduced_steps(taken: &[f64], dt: f64) -> usize {
     taken.iter().filter(|&&t| t < dt * (1.0 - 1e-9)).count()
@@ -793,154 +678,9 @@ fn append_history_note(dir: &Path, note: &str) -> Result<()> {
     writeln!(f, "# {note}").with_context(|| format!("{}: appending a note", path.display()))
 }
 
-/// Final table: steps, time reached, iterations, times, memory, reactions; `note` says that the run ended
-/// before its requested end time.
-fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
-    let rows = out.rows();
-    println!("\n| quantity | value |\n|---|---|");
-    summary_steps(rows, note);
-    summary_costs(rows, wall);
-    summary_results(out);
-}
-
-/// The summary's rows on the steps: how many, the time reached, the iterations, contact solves and points
-/// between processes.
-fn summary_steps(rows: &[StepReport], note: Option<&str>) {
-    let newton: usize = rows.iter().map(|r| r.solve.iterations).sum();
-    let linear: usize = rows.iter().map(|r| r.solve.linear_iterations).sum();
-    let retries: usize = rows.iter().map(|r| r.attempts - 1).sum();
-    let per_step = |n: usize| n as f64 / rows.len().max(1) as f64;
-    println!(
-        "| steps | {} ({} retried with the fallback solver or a smaller dt) |",
-        rows.len(),
-        retries
-    );
-    let time = rows.last().map_or(0.0, |r| r.time);
-    match note {
-        Some(n) => println!("| time reached | **{:.4} us**: {n} |", time * 1e6),
-        None => println!(
-            "| time reached | {:.4} us, the requested end time |",
-            time * 1e6
-        ),
-    }
-    println!(
-        "| Newton iterations | {newton} ({:.2} per step) |",
-        per_step(newton)
-    );
-    println!("| linear iterations | {linear} |");
-    let contact: usize = rows.iter().map(|r| r.contact_solves).sum();
-    if contact > rows.len() {
-        println!(
-            "| contact solves | {contact} ({:.2} per step: SNES solves while the contact active sets and \
-             pin rotations settled) |",
-            per_step(contact)
-        );
-    }
-    let ghosts: usize = rows.iter().map(|r| r.ghosts).sum();
-    if ghosts > 0 {
-        let migrated: usize = rows.iter().map(|r| r.migrated).sum();
-        println!(
-            "| points between processes | {migrated} moved to another process; {:.0} ghost copies per step |",
-            per_step(ghosts)
-        );
-    }
-}
-
-/// The summary's rows on the costs: wall times (`wall` this process's) and peak memory.
-fn summary_costs(rows: &[StepReport], wall: f64) {
-    let assembly: f64 = rows.iter().map(|r| r.wall_assembly).sum();
-    let solve: f64 = rows.iter().map(|r| r.wall_solve - r.wall_assembly).sum();
-    let setup: f64 = rows.iter().map(|r| r.wall_setup).sum();
-    // The steps' times cover the whole run, also the part before a resume; `wall` is this process's.
-    let steps_wall: f64 = rows.iter().map(|r| r.wall_total).sum();
-    println!(
-        "| wall time | {steps_wall:.1} s in the steps (set-up {setup:.1} s, assembly {assembly:.1} s, PETSc solve \
-         {solve:.1} s); {wall:.1} s in this process |"
-    );
-    println!("| peak memory | {:.0} MB |", peak_rss_mb());
-}
-
-/// The summary's rows on the results: final reactions, the crack, the output directory.
-fn summary_results(out: &RunOutput) {
-    if let Some(last) = out.rows().last() {
-        for (name, f) in &last.reactions {
-            let components: Vec<String> = f.iter().map(|v| format!("{v:.4e}")).collect();
-            // A 3D run's reactions are of the whole plate, a 2D run's per mm of thickness.
-            let units = if f.len() == 3 { "N" } else { "N/mm" };
-            println!(
-                "| final reaction `{name}` | ({}) {units} |",
-                components.join(", ")
-            );
-        }
-    }
-    if let Some(c) = out.cracks().last() {
-        let angles: Vec<String> = c
-            .bands
-            .iter()
-            .map(|b| format!("{:.0} deg", b.angle_degrees))
-            .collect();
-        println!(
-            "| crack | {} (length {:.1} mm, bands at {}; criteria in crack.json) |",
-            c.classification,
-            c.length,
-            if angles.is_empty() {
-                "-".to_owned()
-            } else {
-                angles.join(", ")
-            }
-        );
-    }
-    println!("| output | {} |", out.dir().display());
-}
-
-/// Peak resident set size of this process (MB), from /proc.
-fn peak_rss_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
-                l.split_whitespace()
-                    .nth(1)
-                    .and_then(|v| v.parse::<f64>().ok())
-            })
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn words(s: &[&str]) -> Vec<String> {
-        s.iter().map(|w| w.to_string()).collect()
-    }
-
-    #[test]
-    fn the_resume_command_repeats_the_invocation_with_resume_and_the_output() {
-        let own = words(&[
-            "target/release/mpm-concrete",
-            "run",
-            "configs/ct-demo.toml",
-            "--steps",
-            "20",
-            "--overwrite",
-            "--set",
-            "ct.material={ model = \"microplane\", preset = \"paper\" }",
-        ]);
-        let petsc = words(&["prog", "-ksp_type", "gmres"]);
-        assert_eq!(
-            resume_command(&own, &petsc, Path::new("runs/ct demo")),
-            "target/release/mpm-concrete run configs/ct-demo.toml --steps 20 --set \
-             'ct.material={ model = \"microplane\", preset = \"paper\" }' --output 'runs/ct demo' --resume \
-             -ksp_type gmres"
-        );
-        let own = words(&["mpm-concrete", "run", "c.toml", "--output", "d", "--resume"]);
-        assert_eq!(
-            resume_command(&own, &words(&["p"]), Path::new("d")),
-            "mpm-concrete run c.toml --output d --resume"
-        );
-        assert_eq!(shell_quote("it's"), "'it'\\''s'");
-    }
 
     #[test]
     fn the_time_note_tells_an_early_end_and_reduced_steps() {
