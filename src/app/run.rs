@@ -11,6 +11,7 @@
 mod resume;
 mod summary;
 
+use super::args::launcher_rank;
 use super::{bad, processes_per_node, share_cores};
 use crate::checkpoint;
 use crate::config::{self, RunConfig};
@@ -18,7 +19,7 @@ use crate::io::RunOutput;
 use crate::model::{Setup, State};
 use crate::petsc::{self, Session, SessionGuard};
 use crate::preflight;
-use crate::rundir::{self, RunIdentity, RunRecord};
+use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
 use crate::scenario::{self, RunSetup};
 use crate::solver::{Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
@@ -93,6 +94,9 @@ struct Prepared {
     dir: PathBuf,
     /// The checkpoint a `--resume` continues from.
     resume_from: Option<checkpoint::Header>,
+    /// The lock of the output directory, if it existed (process 0; a new directory is locked when it is
+    /// created).
+    lock: Option<DirLock>,
 }
 
 /// `run CONFIG`: checks the input (`own_args` the program's arguments, `petsc_args` PETSc's, starting with
@@ -144,6 +148,12 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         .to_owned();
     let identity = RunIdentity::new(&effective, &petsc_options);
     let contents = rundir::inspect(&dir).map_err(bad)?;
+    // Another run writing into the directory comes first: neither --overwrite nor --resume may touch it.
+    let lock = if launcher_rank() == 0 && dir.is_dir() {
+        Some(rundir::lock(&dir).map_err(bad)?)
+    } else {
+        None
+    };
     let resume_from = if flags.resume {
         Some(check_resume(&dir, &identity, cfg.run.steps)?)
     } else {
@@ -164,6 +174,7 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         identity,
         dir,
         resume_from,
+        lock,
     })
 }
 
@@ -197,9 +208,10 @@ fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
 fn simulate<const D: usize>(
     session: &SessionGuard,
     invocation: &Invocation,
-    prepared: Prepared,
+    mut prepared: Prepared,
     setup: Setup<D>,
 ) -> Result<()> {
+    let lock = prepared.lock.take();
     let (cfg, file) = (&prepared.cfg, &invocation.file);
     let root = session.rank() == 0;
     let (mut sim, defaults) = build(session, setup, file)?;
@@ -236,7 +248,7 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
-    let mut records = open_output(invocation, &prepared, &sim, root, initial)?;
+    let mut records = open_output(invocation, &prepared, &sim, (root, lock), initial)?;
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
     let steps = Steps {
         session,
@@ -363,17 +375,28 @@ fn check_first_step(
     Ok(())
 }
 
-/// The output: the directory now belongs to this run. Removes an earlier run's files (--overwrite),
-/// writes the effective configuration, the reference state `initial` (the state at step 0, on process 0;
-/// a resumed run restores its records instead) and run.json.
+/// The output: the directory now belongs to this run (on process 0, `root`, it holds `lock` of the
+/// directory, taken here if the directory is new). Removes an earlier run's files (--overwrite) and the
+/// temporaries of an interrupted write, writes the effective configuration, the reference state `initial`
+/// (the state at step 0, on process 0; a resumed run restores its records instead) and run.json.
 fn open_output<'a, const D: usize>(
     invocation: &Invocation,
     prepared: &'a Prepared,
     sim: &Simulation<D>,
-    root: bool,
+    (root, lock): (bool, Option<DirLock>),
     initial: Option<State<D>>,
 ) -> Result<Records<'a>> {
     let Prepared { cfg, dir, .. } = prepared;
+    let lock = match lock {
+        None if root => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            Some(rundir::lock(dir).map_err(bad)?)
+        }
+        lock => lock,
+    };
+    if root {
+        rundir::remove_temporaries(dir).map_err(anyhow::Error::msg)?;
+    }
     if invocation.overwrite && root {
         let removed = rundir::remove_program_files(dir).map_err(anyhow::Error::msg)?;
         if removed > 0 {
@@ -402,7 +425,7 @@ fn open_output<'a, const D: usize>(
             crate::crack::CrackCriteria::for_notch(ct.notch_width, cfg.grid.cell_size),
         );
     }
-    let record = new_record(invocation, prepared, sim);
+    let record = new_record(invocation, prepared);
     if root {
         record.write(dir)?;
     }
@@ -414,6 +437,7 @@ fn open_output<'a, const D: usize>(
         (None, None) => {}
     }
     Ok(Records {
+        _lock: lock,
         cfg,
         dir,
         identity: &prepared.identity,
@@ -423,13 +447,11 @@ fn open_output<'a, const D: usize>(
     })
 }
 
-/// The run.json of a run starting (or resuming) at the state of `sim`.
-fn new_record<const D: usize>(
-    invocation: &Invocation,
-    prepared: &Prepared,
-    sim: &Simulation<D>,
-) -> RunRecord {
+/// The run.json of a run starting at step 0 or resuming at its checkpoint (its steps done are those of the
+/// checkpoint it has, while running).
+fn new_record(invocation: &Invocation, prepared: &Prepared) -> RunRecord {
     let cfg = &prepared.cfg;
+    let start = prepared.resume_from.as_ref().map(|h| &h.counters);
     RunRecord {
         identity: prepared.identity.clone(),
         command: command_line(invocation.own, invocation.petsc),
@@ -440,17 +462,20 @@ fn new_record<const D: usize>(
             .map_or(0, |d| d.as_secs()),
         resumed_from_step: prepared.resume_from.as_ref().map(|h| h.counters.step),
         status: "running".into(),
-        steps_done: sim.state.step,
+        steps_done: start.map_or(0, |c| c.step),
         steps_requested: cfg.run.steps,
-        time_reached: sim.state.time,
+        time_reached: start.map_or(0.0, |c| c.time),
         time_requested: cfg.run.steps as f64 * cfg.time.dt,
         reduced_steps: 0,
         note: None,
+        holder: Some(Holder::this_process()),
     }
 }
 
 /// The records of a run in progress: its output and its run.json, and where they go.
 struct Records<'a> {
+    /// The lock of the output directory, held until the run ends (process 0).
+    _lock: Option<DirLock>,
     cfg: &'a RunConfig,
     dir: &'a Path,
     identity: &'a RunIdentity,
@@ -500,6 +525,7 @@ impl Records<'_> {
         let note = time_note(&taken, sim.state.time, cfg.run.steps, cfg.time.dt);
         let record = &mut self.record;
         record.status = status.into();
+        record.holder = None;
         record.steps_done = sim.state.step;
         record.time_reached = sim.state.time;
         record.reduced_steps = reduced_steps(&taken, cfg.time.dt);

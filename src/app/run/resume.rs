@@ -49,20 +49,25 @@ pub(super) fn resume_command(own: &[String], petsc: &[String], dir: &Path) -> St
     command_line(&all, petsc)
 }
 
-/// Why a new run may not write into `dir`.
+/// Why a new run may not write into `dir` (which no other run holds: a run whose record still says
+/// `running` ended without closing it, killed or crashed).
 pub(super) fn refusal(dir: &Path, contents: &rundir::Contents, identity: &RunIdentity) -> String {
     let what = match &contents.record {
         Some(r) => format!(
-            "the results of {} (config {}, {} at step {} of {})",
+            "the results of {} (config {}, {})",
             if r.identity.physics == identity.physics {
                 "an earlier run of the same model"
             } else {
                 "another run"
             },
             r.config_file,
-            r.status,
-            r.steps_done,
-            r.steps_requested
+            match r.status.as_str() {
+                "running" => format!(
+                    "ended without closing its record (killed?) after step {} of {}",
+                    r.steps_done, r.steps_requested
+                ),
+                status => format!("{status} at step {} of {}", r.steps_done, r.steps_requested),
+            }
         ),
         None => {
             let n = contents.results.len();
@@ -77,8 +82,13 @@ pub(super) fn refusal(dir: &Path, contents: &rundir::Contents, identity: &RunIde
             )
         }
     };
+    let resume = if contents.results.iter().any(|f| f == checkpoint::FILE) {
+        ", --resume to continue that run"
+    } else {
+        " (it left no checkpoint to resume)"
+    };
     format!(
-        "{} holds {what}: use --overwrite to replace them, --resume to continue that run, or another --output",
+        "{} holds {what}: use --overwrite to replace them{resume}, or another --output",
         dir.display()
     )
 }
