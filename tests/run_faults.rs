@@ -4,8 +4,7 @@
 //! * a second run into a directory that a run is writing is refused, also with --overwrite or --resume;
 //! * Ctrl-C on several processes stops them all at the same step with a complete checkpoint of it;
 //! * a write that fails (a file-size limit standing in for a full disk) leaves a resumable state and a
-//!   run.json that says "failed";
-//! * `crack` refuses corrupt snapshots.
+//!   run.json that says "failed".
 //!
 //! Every child process runs under `timeout`, so a hang fails the test instead of blocking it.
 
@@ -190,5 +189,214 @@ fn of_two_runs_started_together_into_one_directory_one_runs() {
     refused(lost, &["d"]);
     assert_eq!(record(&dir.join("d")).status, "finished");
     assert!(checkpoint::read_header(&dir.join("d")).is_ok());
+    std::fs::remove_dir_all(&dir).ok();
+}
+/// The files of `dir` whose names end in `.tmp` or hold `.tmp-` (the temporaries of unfinished writes).
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .expect("dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp") || n.contains(".tmp-"))
+        .collect()
+}
+
+/// The parent process id and the process group of process `pid` (from /proc).
+fn parent_and_group(pid: u32) -> (u32, u32) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("/proc/PID/stat");
+    // After the command's name in parentheses: state, ppid, pgrp.
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .expect("stat")
+        .1
+        .split_whitespace()
+        .collect();
+    (fields[1].parse().unwrap(), fields[2].parse().unwrap())
+}
+
+/// Runs the resume command `hint` (printed for `--steps 2000`) for two more steps than `done`, in `dir`;
+/// checks that it continued from step `done`.
+fn resume_two_more(dir: &Path, hint: &str, done: usize) {
+    let hint = hint.replace("--steps 2000", &format!("--steps {}", done + 2));
+    let o = Command::new("timeout")
+        .current_dir(dir)
+        .args(["120", "sh", "-c", &hint])
+        .output()
+        .expect("sh");
+    succeeds(&o);
+    assert!(
+        stderr(&o).contains(&format!("resuming at step {done} ")),
+        "{}",
+        stderr(&o)
+    );
+    let r = record(&dir.join("d"));
+    assert_eq!(
+        (r.status.as_str(), r.steps_done, r.resumed_from_step),
+        ("finished", done + 2, Some(done))
+    );
+    let history = std::fs::read_to_string(dir.join("d/history.csv")).expect("history");
+    let steps: Vec<usize> = history
+        .lines()
+        .filter_map(|l| l.split(',').next()?.parse().ok())
+        .collect();
+    assert_eq!(
+        steps,
+        (1..=done + 2).collect::<Vec<_>>(),
+        "one row per step"
+    );
+    assert!(temporaries(&dir.join("d")).is_empty());
+}
+
+/// Ctrl-C on `mpirun -n 2` (SIGINT to its process group as a terminal sends it, or to mpirun alone; Open
+/// MPI forwards it to the processes as SIGTERM): both processes stop after the same step, the checkpoint
+/// of that step is complete, run.json says so, process 0 alone prints the resume command, which works.
+#[test]
+fn ctrl_c_on_several_processes_stops_them_at_one_saved_step() {
+    for target in ["group", "launcher"] {
+        let dir = scratch(&format!("mpi-int-{target}"));
+        let mut child = Command::new("timeout")
+            .current_dir(&dir)
+            .args(["120", "setsid", "mpirun", "--oversubscribe", "-n", "2", EXE])
+            .args([
+                "run",
+                "tiny.toml",
+                "--quiet",
+                "--output",
+                "d",
+                "--steps",
+                "2000",
+            ])
+            .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+            .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start timeout/setsid/mpirun (is Open MPI installed?)");
+        let (mut err, rest) = wait_for_line(&mut child, "step 3:");
+        // run.json names process 0; its parent is mpirun, the leader of its own process group.
+        let rank0 = record(&dir.join("d")).holder.expect("holder").pid;
+        let (mpirun, group) = parent_and_group(rank0);
+        let whom = match target {
+            "group" => format!("-{group}"),
+            _ => mpirun.to_string(),
+        };
+        let kill = Command::new("kill")
+            .args(["-INT", "--", &whom])
+            .status()
+            .expect("kill");
+        assert!(kill.success());
+        for line in rest.map_while(Result::ok) {
+            err += &line;
+            err.push('\n');
+        }
+        let code = child.wait().expect("wait").code();
+        assert!(
+            code != Some(0) && code != Some(124),
+            "{target}: {code:?}\n{err}"
+        );
+        let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+        assert_eq!(errors.len(), 1, "{target}: process 0 alone reports:\n{err}");
+        let (_, hint) = errors[0]
+            .split_once(": continue with ")
+            .unwrap_or_else(|| panic!("{target}: no resume command in:\n{err}"));
+        let d = dir.join("d");
+        let done = checkpoint::read_header(&d)
+            .expect("checkpoint")
+            .counters
+            .step;
+        let r = record(&d);
+        assert_eq!(
+            (r.status.as_str(), r.steps_done),
+            ("interrupted", done),
+            "{err}"
+        );
+        assert!(
+            errors[0].contains(&format!("interrupted after step {done};")),
+            "{err}"
+        );
+        assert!(d.join(format!("fields_{done:06}.h5")).is_file());
+        assert!(temporaries(&d).is_empty(), "{:?}", temporaries(&d));
+        resume_two_more(&dir, hint, done);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+/// `mpm-concrete ARGS` in `dir` under `timeout`, with writes limited to files of `kib` KiB (SIGXFSZ
+/// ignored, so a write beyond it fails with EFBIG, as on a full disk). Open MPI's start-up keeps its
+/// shared memory in files, which the limit would stop: `PMIX_MCA_gds=hash` keeps it in memory.
+fn run_limited(dir: &Path, kib: usize, args: &str) -> Output {
+    let script = format!("trap '' XFSZ; ulimit -f {kib}; exec {EXE} {args}");
+    Command::new("timeout")
+        .current_dir(dir)
+        .args(["120", "bash", "-c", &script])
+        .env("PMIX_MCA_gds", "hash")
+        .output()
+        .expect("timeout/bash")
+}
+
+/// A write that fails after the checkpoint of its step (here the index of the point fields grows beyond the
+/// limit) leaves that checkpoint, run.json says `failed` at the real step, the message names the file
+/// and the cause once, and the printed command resumes (writing the step's fields again if they are
+/// missing); a failure before any checkpoint says so, and the refusal of a new run does not offer
+/// --resume.
+#[test]
+fn a_failed_write_leaves_a_resumable_state_and_a_failed_record() {
+    let dir = scratch("full");
+    // The checkpoint grows by about 1.4 kB per step, the fields' index by 3.3 kB per snapshot: with one
+    // snapshot per step the index passes 400 KiB first, near step 120.
+    let o = run_limited(
+        &dir,
+        400,
+        "run tiny.toml --quiet --output d --steps 2000 --set run.output_every=1",
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .expect("error line");
+    assert_eq!(line.matches("File too large").count(), 1, "{line}");
+    assert!(line.contains("d/fields.xdmf"), "{line}");
+    let d = dir.join("d");
+    let done = checkpoint::read_header(&d)
+        .expect("checkpoint")
+        .counters
+        .step;
+    assert!(done > 10, "{done}");
+    let r = record(&d);
+    assert_eq!((r.status.as_str(), r.steps_done), ("failed", done), "{err}");
+    assert!(r.note.unwrap_or_default().contains("fields.xdmf"));
+    assert!(temporaries(&d).is_empty(), "{:?}", temporaries(&d));
+    refused(
+        &run(&dir, &["run", "tiny.toml", "--quiet", "--output", "d"]),
+        &[
+            &format!("failed at step {done} of 2000"),
+            "--resume to continue",
+        ],
+    );
+    // As if the fields file of that step had failed: the resumed run writes it again.
+    let fields = d.join(format!("fields_{done:06}.h5"));
+    std::fs::remove_file(&fields).expect("fields of the last step");
+    let (_, hint) = line
+        .split_once("(e.g. space freed): ")
+        .expect("resume command");
+    resume_two_more(&dir, hint, done);
+    assert!(fields.is_file());
+
+    // Before the first checkpoint: nothing to resume, and no offer to.
+    let o = run_limited(&dir, 100, "run tiny.toml --quiet --output e --steps 10");
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(
+            "checkpoint.h5: HDF5: writing failed: File too large; no checkpoint was written"
+        ),
+        "{err}"
+    );
+    let e = dir.join("e");
+    assert!(!e.join("checkpoint.h5").exists() && temporaries(&e).is_empty());
+    assert_eq!(record(&e).status, "failed");
+    refused(
+        &run(&dir, &["run", "tiny.toml", "--quiet", "--output", "e"]),
+        &["failed at step 1 of 10", "it left no checkpoint to resume"],
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -9,6 +9,7 @@
 //! gathers the points and alone writes.
 
 mod resume;
+mod steps;
 mod summary;
 
 use super::args::launcher_rank;
@@ -21,6 +22,7 @@ use crate::petsc::{self, Session, SessionGuard};
 use crate::preflight;
 use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
 use crate::scenario::{self, RunSetup};
+use crate::schema::file;
 use crate::solver::{Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
 use anyhow::{Context, Result};
@@ -29,6 +31,7 @@ use resume::{check_resume, command_line, refusal, resume_command};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use steps::{Records, Steps, agreed};
 use summary::summary;
 
 /// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
@@ -218,22 +221,8 @@ fn simulate<const D: usize>(
     // The output's reference state (initial positions, the step-0 fields) is the state at step 0 as
     // built, also for a resumed run, on the process that writes (the others keep the records only).
     let initial = root.then(|| sim.state.clone());
-    if prepared.resume_from.is_some() {
-        checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
-        if root {
-            eprintln!(
-                "resuming at step {} (t = {:e} s)",
-                sim.state.step, sim.state.time
-            );
-        }
-    }
-    // Ctrl-C: finish the current step, write a checkpoint and the outputs, and stop.
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-            .context("installing the Ctrl-C handler")?;
-    }
+    let resumed = resume(&prepared, &mut sim, root)?;
+    let interrupted = on_signal(root)?;
     if root {
         announce(session, cfg, &sim, &prepared.dir);
     }
@@ -248,8 +237,20 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
-    let mut records = open_output(invocation, &prepared, &sim, (root, lock), initial)?;
+    let opened = open_output(invocation, &prepared, &sim, (root, lock), initial.as_ref());
+    let mut records = agreed(session, opened)?;
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
+    // The starting state: a fresh run's step 0 (its checkpoint, then its fields), or a resumed run's
+    // checkpoint state if the fields of that step are missing.
+    let start = if prepared.resume_from.is_some() {
+        resumed.as_ref()
+    } else {
+        initial.as_ref()
+    };
+    if let Err(e) = records.keep(session, start) {
+        bar.abandon();
+        return Err(records.abandon(session, &sim, e, &hint));
+    }
     let steps = Steps {
         session,
         bar: &bar,
@@ -259,7 +260,7 @@ fn simulate<const D: usize>(
     };
     steps.run(&mut records, &mut sim, step)?;
     bar.finish();
-    let note = records.finish(&sim, "finished", None)?;
+    let note = records.finish(session, &sim, "finished", None)?;
     if !root {
         return Ok(());
     }
@@ -272,6 +273,45 @@ fn simulate<const D: usize>(
         eprintln!("warning: {n}");
     }
     report_unused_fallback(session, &defaults)
+}
+
+/// Loads the checkpoint of a resumed run into `sim`; on process 0 (`root`) returns a copy of the loaded
+/// state if the fields of its step are missing (a write failed after the checkpoint), to be written again.
+fn resume<const D: usize>(
+    prepared: &Prepared,
+    sim: &mut Simulation<D>,
+    root: bool,
+) -> Result<Option<State<D>>> {
+    if prepared.resume_from.is_none() {
+        return Ok(None);
+    }
+    checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
+    if !root {
+        return Ok(None);
+    }
+    eprintln!(
+        "resuming at step {} (t = {:e} s)",
+        sim.state.step, sim.state.time
+    );
+    let fields = file::numbered(file::FIELDS, sim.state.step);
+    Ok((!prepared.dir.join(fields).is_file()).then(|| sim.state.clone()))
+}
+
+/// Notes SIGINT (Ctrl-C), SIGTERM (what an MPI launcher sends the processes on Ctrl-C) and SIGHUP: the
+/// run finishes the current step, which every process agrees on before the next, saves it and stops. The
+/// first signal is acknowledged on process 0 (`root`).
+fn on_signal(root: bool) -> Result<Arc<AtomicBool>> {
+    let interrupted = Arc::new(AtomicBool::new(false));
+    let flag = interrupted.clone();
+    ctrlc::set_handler(move || {
+        if !flag.swap(true, Ordering::SeqCst) && root {
+            eprintln!(
+                "signal received: stopping after this step, which is saved with a checkpoint"
+            );
+        }
+    })
+    .context("installing the signal handler")?;
+    Ok(interrupted)
 }
 
 /// The simulation of `setup` (of the file `file`) with its solver defaults applied, and the defaults'
@@ -377,14 +417,15 @@ fn check_first_step(
 
 /// The output: the directory now belongs to this run (on process 0, `root`, it holds `lock` of the
 /// directory, taken here if the directory is new). Removes an earlier run's files (--overwrite) and the
-/// temporaries of an interrupted write, writes the effective configuration, the reference state `initial`
-/// (the state at step 0, on process 0; a resumed run restores its records instead) and run.json.
+/// temporaries of an interrupted write, writes the effective configuration and run.json, and sets up the
+/// output on the reference state `initial` (the state at step 0, on process 0; a resumed run restores
+/// its records).
 fn open_output<'a, const D: usize>(
     invocation: &Invocation,
     prepared: &'a Prepared,
     sim: &Simulation<D>,
     (root, lock): (bool, Option<DirLock>),
-    initial: Option<State<D>>,
+    initial: Option<&State<D>>,
 ) -> Result<Records<'a>> {
     let Prepared { cfg, dir, .. } = prepared;
     let lock = match lock {
@@ -412,7 +453,7 @@ fn open_output<'a, const D: usize>(
         config::source_label(&invocation.file, &prepared.overrides),
         prepared.effective
     );
-    let mut out = match &initial {
+    let mut out = match initial {
         Some(initial) => RunOutput::create(dir, &cfg.run.name, &config_copy, &sim.model, initial)?,
         None => RunOutput::mirror(dir, &cfg.run.name, &config_copy, cfg.grid.cell_size),
     };
@@ -429,12 +470,10 @@ fn open_output<'a, const D: usize>(
     if root {
         record.write(dir)?;
     }
-    match (&prepared.resume_from, &initial) {
-        (Some(header), _) => header
+    if let Some(header) = &prepared.resume_from {
+        header
             .restore_records(&mut out)
-            .context("restoring the output's records from the checkpoint")?,
-        (None, Some(initial)) => out.snapshot(initial)?,
-        (None, None) => {}
+            .context("restoring the output's records from the checkpoint")?;
     }
     Ok(Records {
         _lock: lock,
@@ -444,6 +483,7 @@ fn open_output<'a, const D: usize>(
         root,
         out,
         record,
+        checkpoint: prepared.resume_from.as_ref().map(|h| h.counters.step),
     })
 }
 
@@ -472,177 +512,6 @@ fn new_record(invocation: &Invocation, prepared: &Prepared) -> RunRecord {
     }
 }
 
-/// The records of a run in progress: its output and its run.json, and where they go.
-struct Records<'a> {
-    /// The lock of the output directory, held until the run ends (process 0).
-    _lock: Option<DirLock>,
-    cfg: &'a RunConfig,
-    dir: &'a Path,
-    identity: &'a RunIdentity,
-    /// This process writes (process 0).
-    root: bool,
-    out: RunOutput,
-    record: RunRecord,
-}
-
-impl Records<'_> {
-    /// Writes the point fields, the force plots and the checkpoint of the current state (with the points
-    /// shared out over processes, process 0 gathers them first). Collective.
-    fn save<const D: usize>(&mut self, session: &SessionGuard, sim: &Simulation<D>) -> Result<()> {
-        let Some(state) = crate::partition::whole_state(session, &sim.state)
-            .context("gathering the points on process 0")?
-        else {
-            return Ok(());
-        };
-        self.out.snapshot(&state)?;
-        self.out.force_plots()?;
-        if self.out.writes() {
-            checkpoint::save(self.dir, &state, &self.out, self.identity)?;
-        }
-        Ok(())
-    }
-
-    /// run.json follows the checkpoint, so a run killed outright shows how far it got.
-    fn follow<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<()> {
-        self.record.steps_done = sim.state.step;
-        self.record.time_reached = sim.state.time;
-        if self.root {
-            self.record.write(self.dir)?;
-        }
-        Ok(())
-    }
-
-    /// Closes run.json with `status` and the note `why` (and a note on an early end or reduced steps,
-    /// which also goes into history.csv); returns the latter note.
-    fn finish<const D: usize>(
-        &mut self,
-        sim: &Simulation<D>,
-        status: &str,
-        why: Option<String>,
-    ) -> Result<Option<String>> {
-        let cfg = self.cfg;
-        let taken: Vec<f64> = self.out.rows().iter().map(|r| r.dt).collect();
-        let note = time_note(&taken, sim.state.time, cfg.run.steps, cfg.time.dt);
-        let record = &mut self.record;
-        record.status = status.into();
-        record.holder = None;
-        record.steps_done = sim.state.step;
-        record.time_reached = sim.state.time;
-        record.reduced_steps = reduced_steps(&taken, cfg.time.dt);
-        record.note = match (&why, &note) {
-            (Some(w), Some(n)) => Some(format!("{w}; {n}")),
-            (w, n) => w.clone().or(n.clone()),
-        };
-        if self.root {
-            if let Some(n) = &record.note {
-                append_history_note(self.dir, n)?;
-            }
-            record.write(self.dir)?;
-        }
-        Ok(note)
-    }
-}
-
-/// The time loop's surroundings: the session, the progress display, the Ctrl-C flag and the command
-/// that resumes the run.
-struct Steps<'a> {
-    session: &'a SessionGuard,
-    bar: &'a ProgressBar,
-    interrupted: &'a AtomicBool,
-    hint: &'a str,
-    quiet: bool,
-}
-
-impl Steps<'_> {
-    /// Records the first step's result `step` and advances until the requested step, a step that fails
-    /// for good or an interruption (both an error, after the state is saved).
-    fn run<const D: usize>(
-        &self,
-        records: &mut Records,
-        sim: &mut Simulation<D>,
-        mut step: Result<StepReport, StepError>,
-    ) -> Result<()> {
-        let steps = records.cfg.run.steps;
-        loop {
-            let report = match step {
-                Ok(r) => r,
-                Err(e) => return Err(self.failed(records, sim, &e)),
-            };
-            self.show(&report, records.root);
-            records.out.record(report)?;
-            let every = records.cfg.run.output_every;
-            // Every process stops after the same step (a signal may reach them at different steps).
-            let stop = self.session.any(self.interrupted.load(Ordering::SeqCst));
-            if (every > 0 && sim.state.step % every == 0) || sim.state.step == steps || stop {
-                records.save(self.session, sim)?;
-                records.follow(sim)?;
-            }
-            if stop && sim.state.step < steps {
-                self.bar.abandon();
-                let why = format!("interrupted after step {}", sim.state.step);
-                records.finish(sim, "interrupted", Some(why))?;
-                anyhow::bail!(
-                    "interrupted after step {}; the state is saved in {}: continue with {}",
-                    sim.state.step,
-                    records.dir.display(),
-                    self.hint
-                );
-            }
-            if sim.state.step >= steps {
-                return Ok(());
-            }
-            step = sim.advance(self.session);
-        }
-    }
-
-    /// A step's line: on the progress bar, and with `--quiet` on standard error (process 0).
-    fn show(&self, report: &StepReport, root: bool) {
-        let msg = format!(
-            "t = {:.2} us, Newton {}, KSP {}, {}",
-            report.time * 1e6,
-            report.solve.iterations,
-            report.solve.linear_iterations,
-            report.solve.reason_name
-        );
-        if self.quiet && root {
-            eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
-        }
-        self.bar.set_message(msg);
-        self.bar.inc(1);
-    }
-
-    /// A step that failed for good: saves the last converged state and closes the records; the error
-    /// says how to continue.
-    fn failed<const D: usize>(
-        &self,
-        records: &mut Records,
-        sim: &Simulation<D>,
-        e: &StepError,
-    ) -> anyhow::Error {
-        self.bar.abandon();
-        if let Err(saving) = records.save(self.session, sim) {
-            return saving;
-        }
-        let why = format!(
-            "step {} failed: {}",
-            sim.state.step + 1,
-            e.to_string().trim()
-        );
-        if let Err(closing) = records.finish(sim, "failed", Some(why)) {
-            return closing;
-        }
-        anyhow::anyhow!(
-            "{}; the last converged state (step {}, t = {:e} s) is saved in {} with a checkpoint; \
-             to continue (e.g. with other solver options): {}",
-            e.to_string().trim(),
-            sim.state.step,
-            sim.state.time,
-            records.dir.display(),
-            self.hint
-        )
-    }
-}
-
 /// A note on the fallback solver's options that were never used (the fallback did not run, or the option
 /// is misspelled), other than its defaults `defaults`.
 fn report_unused_fallback(session: &SessionGuard, defaults: &[String]) -> Result<()> {
@@ -657,68 +526,4 @@ fn report_unused_fallback(session: &SessionGuard, defaults: &[String]) -> Result
         );
     }
     Ok(())
-}
-
-/// Steps (their time steps `taken`) that took less than the nominal time step `dt`.
-fn reduced_steps(taken: &[f64], dt: f64) -> usize {
-    taken.iter().filter(|&&t| t < dt * (1.0 - 1e-9)).count()
-}
-
-/// A sentence when a run whose steps took `taken` reached less than its requested end time (steps x dt)
-/// or took reduced steps.
-fn time_note(taken: &[f64], time: f64, steps: usize, dt: f64) -> Option<String> {
-    let end = steps as f64 * dt;
-    let reduced = reduced_steps(taken, dt);
-    if time >= end * (1.0 - 1e-9) && reduced == 0 {
-        return None;
-    }
-    let smallest = taken.iter().copied().fold(f64::INFINITY, f64::min);
-    let mut note = format!(
-        "the run ended at t = {:.4} us, before its requested end time {:.4} us ({steps} steps of {:.4} us)",
-        time * 1e6,
-        end * 1e6,
-        dt * 1e6
-    );
-    if reduced > 0 {
-        note += &format!(
-            "; {reduced} of {} steps took a reduced time step (down to {:.4} us)",
-            taken.len(),
-            smallest * 1e6
-        );
-    }
-    Some(note)
-}
-
-/// Appends `# note` to the run's history.csv, if it has one (the next rewrite of the history, by a resumed
-/// run, drops it).
-fn append_history_note(dir: &Path, note: &str) -> Result<()> {
-    use std::io::Write as _;
-    let path = dir.join(crate::schema::file::HISTORY);
-    if !path.exists() {
-        return Ok(());
-    }
-    let mut f = std::fs::OpenOptions::new()
-        .append(true)
-        .open(&path)
-        .with_context(|| format!("{}: appending a note", path.display()))?;
-    writeln!(f, "# {note}").with_context(|| format!("{}: appending a note", path.display()))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_time_note_tells_an_early_end_and_reduced_steps() {
-        let full = [1e-6; 4];
-        assert_eq!(time_note(&full, 4e-6, 4, 1e-6), None);
-        let halved = [1e-6, 0.5e-6, 0.25e-6, 0.5e-6];
-        let note = time_note(&halved, 2.25e-6, 4, 1e-6).expect("note");
-        assert!(
-            note.contains("t = 2.2500 us, before its requested end time 4.0000 us")
-                && note.contains("3 of 4 steps took a reduced time step (down to 0.2500 us)"),
-            "{note}"
-        );
-        assert!(time_note(&full[..2], 2e-6, 4, 1e-6).is_some());
-    }
 }

@@ -159,10 +159,7 @@ struct Measure {
 /// The crack state of the snapshot `path` (its time, damage and positions; for a plate on the section
 /// layer), measured as `how` says.
 fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
-    let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
+    let h5 = |e: hdf5_metno::Error| OutputError::hdf5(path, &e);
     let file = hdf5_metno::File::open(path).map_err(h5)?;
     let time: f64 = file
         .attr("time_s")
