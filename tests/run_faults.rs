@@ -4,7 +4,8 @@
 //! * a second run into a directory that a run is writing is refused, also with --overwrite or --resume;
 //! * Ctrl-C on several processes stops them all at the same step with a complete checkpoint of it;
 //! * a write that fails (a file-size limit standing in for a full disk) leaves a resumable state and a
-//!   run.json that says "failed".
+//!   run.json that says "failed";
+//! * `crack` refuses corrupt snapshots.
 //!
 //! Every child process runs under `timeout`, so a hang fails the test instead of blocking it.
 
@@ -398,5 +399,59 @@ fn a_failed_write_leaves_a_resumable_state_and_a_failed_record() {
         &run(&dir, &["run", "tiny.toml", "--quiet", "--output", "e"]),
         &["failed at step 1 of 10", "it left no checkpoint to resume"],
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Sets point 0 of the dataset `name` of the snapshot `file` to `value`.
+fn corrupt_point(file: &Path, name: &str, value: f64) {
+    let f = hdf5_metno::File::open_rw(file).expect("open the snapshot");
+    let ds = f.dataset(name).expect("dataset");
+    let mut values: Vec<f64> = ds.read_raw().expect("read");
+    values[0] = value;
+    ds.write_raw(&values).expect("write");
+}
+
+/// `crack RUN` verifies the snapshots it reads as a checkpoint is verified: a non-finite value or a damage
+/// outside [0, 1] is refused, naming the file and the dataset, and crack.json is not rewritten.
+#[test]
+fn crack_refuses_corrupt_snapshots_and_keeps_crack_json() {
+    let dir = scratch("crack-corrupt");
+    succeeds(&run(
+        &dir,
+        &["run", "tiny.toml", "--quiet", "--output", "d"],
+    ));
+    let d = dir.join("d");
+    let snapshot = d.join("fields_000002.h5");
+    let good = std::fs::read(&snapshot).expect("snapshot");
+    let crack_json = std::fs::read(d.join("crack.json")).expect("crack.json");
+    for (name, value, shown) in [
+        ("damage", f64::NAN, "holds NaN at point 0"),
+        ("damage", 1.0 + 1e-9, "(allowed: values in [0, 1])"),
+        ("damage", -0.5, "holds -0.5 at point 0"),
+        (
+            "position",
+            f64::INFINITY,
+            "holds inf at point 0 (allowed: finite values)",
+        ),
+        ("nonlocal_damage", f64::NAN, "`nonlocal_damage` holds NaN"),
+    ] {
+        std::fs::write(&snapshot, &good).expect("restore");
+        corrupt_point(&snapshot, name, value);
+        refused(
+            &run(&dir, &["crack", "d"]),
+            &[
+                "d/fields_000002.h5",
+                &format!("dataset `{name}`"),
+                shown,
+                "corrupt",
+            ],
+        );
+        assert_eq!(
+            std::fs::read(d.join("crack.json")).expect("crack.json"),
+            crack_json
+        );
+    }
+    std::fs::write(&snapshot, &good).expect("restore");
+    succeeds(&run(&dir, &["crack", "d"]));
     std::fs::remove_dir_all(&dir).ok();
 }
