@@ -31,7 +31,7 @@ pub struct BodySection {
 
 /// Motion of one component: "free", "fixed" or `{ velocity = v }` (mm/s).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(untagged)]
+#[serde(try_from = "toml::Value")]
 pub enum MotionSpec {
     /// "free" or "fixed".
     Keyword(Keyword),
@@ -50,6 +50,29 @@ pub enum Keyword {
     Free,
     /// Zero velocity.
     Fixed,
+}
+
+impl TryFrom<toml::Value> for MotionSpec {
+    type Error = String;
+
+    /// The forms of a component's motion; anything else is refused with the allowed forms listed.
+    fn try_from(v: toml::Value) -> Result<Self, String> {
+        let velocity = match &v {
+            toml::Value::String(s) if s == "free" => return Ok(Keyword::Free.into()),
+            toml::Value::String(s) if s == "fixed" => return Ok(Keyword::Fixed.into()),
+            toml::Value::Table(t) if t.len() == 1 => t.get("velocity"),
+            _ => None,
+        };
+        match velocity {
+            Some(toml::Value::Float(f)) => Ok(MotionSpec::Velocity { velocity: *f }),
+            Some(toml::Value::Integer(i)) => Ok(MotionSpec::Velocity {
+                velocity: *i as f64,
+            }),
+            _ => Err(format!(
+                "{v}: a component's motion is \"free\", \"fixed\" or {{ velocity = v }} (mm/s)"
+            )),
+        }
+    }
 }
 
 impl From<Keyword> for MotionSpec {
