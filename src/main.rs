@@ -97,7 +97,8 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    // Under mpirun every process takes the same decisions: process 0 logs them, the others only warn.
+    // Under mpirun every process takes the same decisions and meets the same warnings: process 0 logs and
+    // warns, the others report only errors.
     let rank = launcher_rank();
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
@@ -106,7 +107,7 @@ fn main() -> std::process::ExitCode {
         .with_max_level(if rank == 0 {
             tracing::Level::INFO
         } else {
-            tracing::Level::WARN
+            tracing::Level::ERROR
         })
         .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
@@ -150,7 +151,13 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
         Command::Crack { run_dir } => commands::crack(&run_dir, petsc_args),
         Command::MaterialDriver(args) => {
             no_petsc_options("material-driver", "", petsc_args)?;
-            let summary = material_driver::run_driver(&args)?;
+            let summary = material_driver::run_driver(&args).map_err(|e| {
+                if e.is_bad_input() {
+                    mpm_concrete::app::bad(e)
+                } else {
+                    e.into()
+                }
+            })?;
             println!("{summary}");
             Ok(())
         }

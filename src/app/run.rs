@@ -188,6 +188,16 @@ fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
     // gathers all points for the output: each process on this node may peak near a serial run's memory
     // (paper-size CT: 731 MB per process on 2 against 649 MB on one).
     let mut need = preflight::memory_need(cfg);
+    // Points are numbered with 32 bits: more cannot be seeded, however much memory there is.
+    if need.points > u32::MAX as f64 {
+        return Err(bad(format!(
+            "{label}: the run would have about {:.3e} material points, more than the {:.3e} the program \
+             can number (also with --allow-large): use a larger grid.cell_size or fewer \
+             shape.points_per_cell",
+            need.points,
+            u32::MAX as f64
+        )));
+    }
     need.bytes *= processes_per_node().unwrap_or(1) as f64;
     if let Some(limit) = preflight::memory_limit()
         && need.bytes > limit.bytes
@@ -430,7 +440,13 @@ fn open_output<'a, const D: usize>(
     let Prepared { cfg, dir, .. } = prepared;
     let lock = match lock {
         None if root => {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(|e| {
+                bad(format!(
+                    "{}: cannot create the output directory: {e} (give another --output); nothing \
+                     was written",
+                    dir.display()
+                ))
+            })?;
             Some(rundir::lock(dir).map_err(bad)?)
         }
         lock => lock,
