@@ -155,6 +155,17 @@ fn bad_input_is_refused_before_anything_is_written() {
         "",
     );
     block("bad-kind.toml", "y = \"fixed\"", "y = \"fixd\"");
+    let second = BLOCK[BLOCK.find("[[body]]").unwrap()..BLOCK.find("[[constraint]]").unwrap()]
+        .replace("name = \"b\"", "name = \"c\"")
+        .replace(
+            "min = [0.0, 0.0], max = [10.0, 10.0]",
+            "min = [5.0, 5.0], max = [15.0, 15.0]",
+        );
+    block(
+        "overlap.toml",
+        "[[constraint]]",
+        &format!("{second}[[constraint]]"),
+    );
     block(
         "rigid-no-geometry.toml",
         "[[constraint]]",
@@ -341,6 +352,13 @@ fn bad_input_is_refused_before_anything_is_written() {
                 "\"fixd\"",
                 "\"free\", \"fixed\" or { velocity = v } (mm/s)",
                 "[[constraint]] 0 (name = \"base\")",
+            ],
+        ),
+        (
+            vec!["run", "overlap.toml", "--output", "out"],
+            vec![
+                "body[1].geometry",
+                "overlaps body[0] `b` at (5.500, 5.500) mm",
             ],
         ),
         (

@@ -361,6 +361,7 @@ impl RunConfig {
             ));
         }
         let bodies = bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
+        bodies::check_overlaps(&self.body, self.grid.cell_size, c)?;
         for (i, s) in self.constraint.iter().enumerate() {
             s.validate(c, i)?;
         }
