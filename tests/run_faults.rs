@@ -455,3 +455,48 @@ fn crack_refuses_corrupt_snapshots_and_keeps_crack_json() {
     succeeds(&run(&dir, &["crack", "d"]));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A block and a rigid body 500 mm away: the grid grows from 11 x 11 to 258 x 258 cells.
+const FAR: &str = r#"
+[run]
+name = "far"
+steps = 1
+
+[grid]
+cell_size = 2.0
+
+[[body]]
+name = "b"
+density = 2.4e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
+material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
+
+[[rigid_body]]
+name = "far"
+geometry = { include = [{ type = "rect", min = [500.0, 500.0], max = [504.0, 504.0] }] }
+y = "fixed"
+"#;
+
+/// A rigid body far from the bodies that grows the grid is warned about, with the grid's size with and
+/// without it, and under mpirun once (by process 0).
+#[test]
+fn a_far_rigid_body_is_warned_about_once() {
+    let dir = scratch("far");
+    std::fs::write(dir.join("far.toml"), FAR).expect("config");
+    let warning =
+        "the grid is 258x258 cells, the bodies alone need 11x11: a [[rigid_body]] lies far";
+    let o = run(&dir, &["run", "far.toml", "--quiet", "--output", "d"]);
+    succeeds(&o);
+    assert_eq!(stderr(&o).matches(warning).count(), 1, "{}", stderr(&o));
+    let o = Command::new("timeout")
+        .current_dir(&dir)
+        .args(["120", "mpirun", "--oversubscribe", "-n", "2", EXE])
+        .args(["run", "far.toml", "--quiet", "--output", "e"])
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .output()
+        .expect("start timeout/mpirun (is Open MPI installed?)");
+    succeeds(&o);
+    assert_eq!(stderr(&o).matches(warning).count(), 1, "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).ok();
+}
