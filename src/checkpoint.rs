@@ -85,10 +85,11 @@ pub fn save<const D: usize>(
 ) -> Result<(), OutputError> {
     let path = dir.join(FILE);
     let tmp = dir.join(format!("{FILE}.tmp"));
-    write(&tmp, state, out, identity).map_err(|e| OutputError::Hdf5 {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    })?;
+    if let Err(e) = write(&tmp, state, out, identity) {
+        // A full disk leaves no half-written temporary behind (the previous checkpoint stays).
+        let _ = std::fs::remove_file(&tmp);
+        return Err(OutputError::hdf5(&path, &e));
+    }
     std::fs::rename(&tmp, &path).map_err(|source| OutputError::Io {
         path: path.display().to_string(),
         source,
@@ -149,7 +150,9 @@ fn write<const D: usize>(
     meta.new_attr::<u32>()
         .create("crc32")?
         .write_scalar(&crc32fast::hash(text.as_bytes()))?;
-    Ok(())
+    // A write that fails on the way to the disk (full, or above the file-size limit) is reported here:
+    // dropping the file would close it silently, truncated, and it would be renamed into place.
+    f.flush()
 }
 
 /// What a checkpoint says about itself: the identity of the run that wrote it, its counters and the

@@ -11,7 +11,10 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use mpm_concrete::app::args::{launcher_rank, misplaced_program_option, split_args};
 use mpm_concrete::app::run::{self, RunFlags};
-use mpm_concrete::app::{BadInput, commands, compare, material_driver, no_petsc_options, smoke};
+use mpm_concrete::app::{
+    BadInput, FailedElsewhere, commands, compare, error_line, material_driver, no_petsc_options,
+    smoke,
+};
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -94,7 +97,8 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    // Under mpirun every process takes the same decisions: process 0 logs them, the others only warn.
+    // Under mpirun every process takes the same decisions and meets the same warnings: process 0 logs and
+    // warns, the others report only errors.
     let rank = launcher_rank();
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
@@ -103,7 +107,7 @@ fn main() -> std::process::ExitCode {
         .with_max_level(if rank == 0 {
             tracing::Level::INFO
         } else {
-            tracing::Level::WARN
+            tracing::Level::ERROR
         })
         .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
@@ -116,21 +120,23 @@ fn main() -> std::process::ExitCode {
         return std::process::ExitCode::from(compare::run_cli(args, &petsc_args[1..]));
     }
     // Under mpirun every process meets the same bad input and the same failed step: process 0 reports
-    // them; the others report only what process 0 may not have met (errors other than bad input),
-    // naming themselves.
+    // them; the others report only what process 0 may not have met (errors other than bad input and
+    // the failures process 0 reports, such as its failed writes or an interruption), naming themselves.
     match run(cli, &own, &petsc_args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => match e.chain().find_map(|c| c.downcast_ref::<BadInput>()) {
             Some(b) => {
                 if !b.0.is_empty() && rank == 0 {
-                    eprintln!("error: {e:#}");
+                    eprintln!("error: {}", error_line(&e));
                 }
                 std::process::ExitCode::from(2)
             }
             None => {
+                let elsewhere = e.chain().any(|c| c.is::<FailedElsewhere>());
                 match rank {
-                    0 => eprintln!("error: {e:#}"),
-                    r => eprintln!("error (process {r}): {e:#}"),
+                    0 => eprintln!("error: {}", error_line(&e)),
+                    _ if elsewhere => {}
+                    r => eprintln!("error (process {r}): {}", error_line(&e)),
                 }
                 std::process::ExitCode::FAILURE
             }
@@ -145,7 +151,13 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
         Command::Crack { run_dir } => commands::crack(&run_dir, petsc_args),
         Command::MaterialDriver(args) => {
             no_petsc_options("material-driver", "", petsc_args)?;
-            let summary = material_driver::run_driver(&args)?;
+            let summary = material_driver::run_driver(&args).map_err(|e| {
+                if e.is_bad_input() {
+                    mpm_concrete::app::bad(e)
+                } else {
+                    e.into()
+                }
+            })?;
             println!("{summary}");
             Ok(())
         }

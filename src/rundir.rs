@@ -1,7 +1,9 @@
 //! A run's output directory belongs to one run. The run's identity (a fingerprint of its effective
 //! configuration, the program version and the PETSc options) is written to `run.json` when the run starts
 //! and into every checkpoint; a new run refuses a directory that holds another run's results unless told
-//! to overwrite them (which removes only the files the program writes) or to resume.
+//! to overwrite them (which removes only the files the program writes) or to resume. A run holds an
+//! advisory lock ([`lock`], `flock` on the directory) for its life, so a second run into the same
+//! directory is refused while the first is running, also with `--overwrite` or `--resume`.
 
 use crate::io::{OutputError, write_atomic};
 use crate::schema::file;
@@ -14,9 +16,13 @@ pub const RUN_FILE: &str = file::RUN;
 /// Whether `name` is a file the program writes into a run directory: `run.json`, `config.toml`,
 /// `history.csv`, `fields.xdmf`, `fields_NNNNNN.h5`, `damage_NNNNNN.png`, `force_time.png`,
 /// `force_displacement.png`, `crack.json`, `checkpoint.h5` (see [`crate::io`] and [`crate::checkpoint`]),
-/// or the temporary `*.tmp` copy of one of them that an interrupted write leaves behind.
+/// or the temporary copy of one of them that an interrupted write leaves behind ([`is_temporary`]).
 pub fn is_program_file(name: &str) -> bool {
-    let name = name.strip_suffix(".tmp").unwrap_or(name);
+    is_result_file(name) || is_temporary(name)
+}
+
+/// Whether `name` is one of the files of [`is_program_file`] other than a temporary.
+fn is_result_file(name: &str) -> bool {
     let numbered = |prefix: &str, suffix: &str| {
         name.strip_prefix(prefix)
             .and_then(|r| r.strip_suffix(suffix))
@@ -37,6 +43,98 @@ pub fn is_program_file(name: &str) -> bool {
     .contains(&name)
         || numbered(file::FIELDS.0, file::FIELDS.1)
         || numbered(file::DAMAGE_MAP.0, file::DAMAGE_MAP.1)
+}
+
+/// Whether `name` is the temporary copy of a program file that a write in progress (or one interrupted by
+/// a kill or a full disk) leaves: `NAME.tmp` (files written through [`write_atomic`]) or
+/// `.STEM.tmp-PID.png` (the plots, [`crate::plot`]).
+pub fn is_temporary(name: &str) -> bool {
+    if let Some(base) = name.strip_suffix(".tmp") {
+        return is_result_file(base);
+    }
+    let plot = name
+        .strip_prefix('.')
+        .and_then(|n| n.strip_suffix(".png"))
+        .and_then(|n| n.rsplit_once(".tmp-"));
+    plot.is_some_and(|(stem, pid)| {
+        !pid.is_empty()
+            && pid.bytes().all(|b| b.is_ascii_digit())
+            && is_result_file(&format!("{stem}.png"))
+    })
+}
+
+/// Removes the temporaries ([`is_temporary`]) from `dir`, which this process holds the lock of (so no
+/// other run is writing them); returns how many.
+pub fn remove_temporaries(dir: &Path) -> Result<usize, String> {
+    remove_matching(dir, is_temporary)
+}
+
+/// The process that holds a run directory ([`lock`]), as run.json names it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Holder {
+    /// Process id (of process 0 under an MPI launcher).
+    pub pid: u32,
+    /// Host name.
+    pub host: String,
+}
+
+impl Holder {
+    /// This process.
+    pub fn this_process() -> Self {
+        let host = nix::unistd::gethostname()
+            .ok()
+            .map(|h| h.to_string_lossy().into_owned())
+            .filter(|h| !h.is_empty())
+            .unwrap_or_else(|| "an unknown host".into());
+        Self {
+            pid: std::process::id(),
+            host,
+        }
+    }
+}
+
+/// The advisory lock of a run directory, held until dropped; the system releases it when the process
+/// ends in any way (also by kill -9), so a lock is never stale.
+#[derive(Debug)]
+pub struct DirLock {
+    _lock: nix::fcntl::Flock<std::fs::File>,
+}
+
+/// Takes the lock of the existing directory `dir` without waiting (`flock` on the directory itself, so
+/// that a refused run writes nothing); the error names the run that holds it.
+pub fn lock(dir: &Path) -> Result<DirLock, String> {
+    let file = std::fs::File::open(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    match nix::fcntl::Flock::lock(file, nix::fcntl::FlockArg::LockExclusiveNonblock) {
+        Ok(lock) => Ok(DirLock { _lock: lock }),
+        Err((_, nix::errno::Errno::EWOULDBLOCK)) => Err(format!(
+            "{}: another run is writing into this directory ({}): wait until it has ended, or give \
+             another --output",
+            dir.display(),
+            holder_of(dir)
+        )),
+        Err((_, e)) => Err(format!("{}: cannot lock the directory: {e}", dir.display())),
+    }
+}
+
+/// The run that holds `dir`, as its run.json says.
+fn holder_of(dir: &Path) -> String {
+    let record: Option<RunRecord> = std::fs::read_to_string(dir.join(RUN_FILE))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    match record {
+        Some(RunRecord {
+            holder: Some(h),
+            status,
+            config_file,
+            steps_done,
+            steps_requested,
+            ..
+        }) if status == "running" => format!(
+            "process {} on {}, config {config_file}, at step {steps_done} of {steps_requested}",
+            h.pid, h.host
+        ),
+        _ => "a run that is starting and has not written its run.json yet".into(),
+    }
 }
 
 /// What a directory holds of a run.
@@ -76,6 +174,11 @@ pub fn inspect(dir: &Path) -> Result<Contents, String> {
 
 /// Removes the program's files from `dir` (nothing else); returns how many.
 pub fn remove_program_files(dir: &Path) -> Result<usize, String> {
+    remove_matching(dir, is_program_file)
+}
+
+/// Removes the files of `dir` whose names `remove` accepts; returns how many.
+fn remove_matching(dir: &Path, remove: fn(&str) -> bool) -> Result<usize, String> {
     if !dir.is_dir() {
         return Ok(0);
     }
@@ -83,7 +186,7 @@ pub fn remove_program_files(dir: &Path) -> Result<usize, String> {
     for entry in std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))? {
         let path = entry.map_err(|e| format!("{}: {e}", dir.display()))?.path();
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        if name.is_some_and(|n| is_program_file(&n)) && path.is_file() {
+        if name.is_some_and(|n| remove(&n)) && path.is_file() {
             std::fs::remove_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
             removed += 1;
         }
@@ -245,6 +348,9 @@ pub struct RunRecord {
     pub reduced_steps: usize,
     /// What happened, in a sentence (why a run stopped; that it ended before its end time).
     pub note: Option<String>,
+    /// The process that holds the directory while the run is running ([`lock`]).
+    #[serde(default)]
+    pub holder: Option<Holder>,
 }
 
 impl RunRecord {
@@ -277,6 +383,8 @@ mod tests {
             "crack.json",
             "checkpoint.h5",
             "checkpoint.h5.tmp",
+            ".crack_length.tmp-4711.png",
+            ".damage_000002.tmp-12.png",
         ] {
             assert!(is_program_file(name), "{name}");
         }
@@ -288,6 +396,9 @@ mod tests {
             "my_config.toml",
             "log_view.txt",
             "history.csv.bak",
+            ".notes.tmp-12.png",
+            "notes.tmp",
+            ".crack_length.tmp-.png",
         ] {
             assert!(!is_program_file(name), "{name}");
         }

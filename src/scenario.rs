@@ -467,18 +467,36 @@ fn covering_grid(
     particles: &Particles,
     rigid_points: &[Particles],
 ) -> Result<Grid, ScenarioError> {
-    let mut lo = Vector2::repeat(f64::INFINITY);
-    let mut hi = Vector2::repeat(f64::NEG_INFINITY);
-    for x in particles
-        .x
-        .iter()
-        .chain(rigid_points.iter().flat_map(|r| r.x.iter()))
-    {
-        lo = lo.inf(x);
-        hi = hi.sup(x);
+    let bounds = |points: &mut dyn Iterator<Item = &Vector2<f64>>| {
+        points.fold(
+            (
+                Vector2::repeat(f64::INFINITY),
+                Vector2::repeat(f64::NEG_INFINITY),
+            ),
+            |(lo, hi), x| (lo.inf(x), hi.sup(x)),
+        )
+    };
+    let (blo, bhi) = bounds(&mut particles.x.iter());
+    let (rlo, rhi) = bounds(&mut rigid_points.iter().flat_map(|r| r.x.iter()));
+    let (lo, hi) = (blo.inf(&rlo), bhi.sup(&rhi));
+    let (h, margin) = (cfg.grid.cell_size, cfg.grid.margin_cells.max(1));
+    // A rigid body far from the bodies makes the grid cover the space between: say so when it grows the
+    // grid more than 16-fold (the unknowns and the memory grow with it).
+    let cells = |lo: Vector2<f64>, hi: Vector2<f64>| {
+        ((hi - lo) / h).map(|e| e.ceil().max(1.0) as usize + 2 * margin)
+    };
+    let (all, own) = (cells(lo, hi), cells(blo, bhi));
+    if blo.x.is_finite() && rlo.x.is_finite() && all.product() > 16 * own.product() {
+        tracing::warn!(
+            "the grid is {}x{} cells, the bodies alone need {}x{}: a [[rigid_body]] lies far from them \
+             (the grid covers every rigid body's points; place it nearer the bodies)",
+            all.x,
+            all.y,
+            own.x,
+            own.y
+        );
     }
-    let h = cfg.grid.cell_size;
-    Ok(Grid::covering(lo, hi, h, cfg.grid.margin_cells.max(1))?)
+    Ok(Grid::covering(lo, hi, h, margin)?)
 }
 
 /// The node boxes of the `[[constraint]]` sections; each must hold a node of `grid` (cell size `h`, mm).

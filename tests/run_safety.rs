@@ -150,6 +150,28 @@ fn bad_input_is_refused_before_anything_is_written() {
         "min = [-1.0, -60.0]\nmax = [11.0, -50.0]",
     );
     block(
+        "no-material.toml",
+        "material = { model = \"linear_elastic\", youngs_modulus = 30000.0, poisson_ratio = 0.2 }\n",
+        "",
+    );
+    block("bad-kind.toml", "y = \"fixed\"", "y = \"fixd\"");
+    let second = BLOCK[BLOCK.find("[[body]]").unwrap()..BLOCK.find("[[constraint]]").unwrap()]
+        .replace("name = \"b\"", "name = \"c\"")
+        .replace(
+            "min = [0.0, 0.0], max = [10.0, 10.0]",
+            "min = [5.0, 5.0], max = [15.0, 15.0]",
+        );
+    block(
+        "overlap.toml",
+        "[[constraint]]",
+        &format!("{second}[[constraint]]"),
+    );
+    block(
+        "rigid-no-geometry.toml",
+        "[[constraint]]",
+        "[[rigid_body]]\nname = \"r\"\ny = \"fixed\"\n\n[[constraint]]",
+    );
+    block(
         "nan-velocity.toml",
         "initial_velocity = [0.0, 0.0]",
         "initial_velocity = [nan, 0.0]",
@@ -236,7 +258,7 @@ fn bad_input_is_refused_before_anything_is_written() {
             vec!["`--steps` comes after the PETSc option `-snes_monitor`"],
         ),
         (
-            vec!["--set", "grid.cell_size=0.001"],
+            vec!["--set", "grid.cell_size=0.01"],
             vec![],
             vec!["tiny.toml", "needs about", "available", "--allow-large"],
         ),
@@ -244,6 +266,15 @@ fn bad_input_is_refused_before_anything_is_written() {
             vec!["--resume"],
             vec![],
             vec!["checkpoint.h5", "no checkpoint"],
+        ),
+        (
+            vec!["--allow-large", "--set", "extrusion.thickness=1e8"],
+            vec![],
+            vec![
+                "material points",
+                "more than the 4.295e9",
+                "also with --allow-large",
+            ],
         ),
         (
             vec![],
@@ -272,6 +303,81 @@ fn bad_input_is_refused_before_anything_is_written() {
         (
             vec!["run", "nan-velocity.toml", "--output", "out"],
             vec!["body[0].initial_velocity", "finite"],
+        ),
+        (
+            vec![
+                "run",
+                "block.toml",
+                "--output",
+                "out",
+                "--set",
+                "body[0].density=-1",
+            ],
+            vec!["body[0].density", "= -1", "a density > 0"],
+        ),
+        (
+            vec![
+                "run",
+                "block.toml",
+                "--output",
+                "out",
+                "--set",
+                "body[2].density=1",
+            ],
+            vec![
+                "--set body[2].density=1",
+                "the file has 1 [[body]] (indices 0 to 0)",
+            ],
+        ),
+        (
+            vec![
+                "run",
+                "block.toml",
+                "--output",
+                "out",
+                "--set",
+                "shape.kind=\"bspline2\"",
+                "--set",
+                "grid.margin_cells=1",
+            ],
+            vec!["grid.margin_cells", "= 1", "at least 2", "bspline2"],
+        ),
+        (
+            vec!["run", "no-material.toml", "--output", "out"],
+            vec!["missing field `material`", "(in [[body]] 0 (name = \"b\"))"],
+        ),
+        (
+            vec!["run", "bad-kind.toml", "--output", "out"],
+            vec![
+                "\"fixd\"",
+                "\"free\", \"fixed\" or { velocity = v } (mm/s)",
+                "[[constraint]] 0 (name = \"base\")",
+            ],
+        ),
+        (
+            vec!["run", "overlap.toml", "--output", "out"],
+            vec![
+                "body[1].geometry",
+                "overlaps body[0] `b` at (5.500, 5.500) mm",
+            ],
+        ),
+        (
+            vec!["run", "rigid-no-geometry.toml", "--output", "out"],
+            vec![
+                "missing field `geometry`",
+                "[[rigid_body]] 0 (name = \"r\")",
+            ],
+        ),
+        (
+            vec!["run", "tiny.toml", "--quiet", "--output", "/proc/mpmc/out"],
+            vec![
+                "/proc/mpmc/out: cannot create the output directory: No such file or directory (os \
+                 error 2) (give another --output)",
+            ],
+        ),
+        (
+            vec!["material-driver", "--max-strain", "-0.01", "--out", "out"],
+            vec!["max strain -0.01 must lie in (0, 1)"],
         ),
         (
             vec!["run", "tiny.toml", "--output", "a_file"],

@@ -140,13 +140,13 @@ pub struct DriverArgs {
     pub path: PathKind,
     /// Magnitude of the control strain at the end of the path (default: 10 gamma_0, 40 gamma_0 in
     /// compression; 0.01 for elastic materials).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub max_strain: Option<f64>,
     /// Number of load steps.
     #[arg(long, default_value_t = 400)]
     pub steps: usize,
     /// Prescribe `eta_bar = eta_bar_max |eps|/max_strain` instead of the local `eta_bar = eta`.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub eta_bar_max: Option<f64>,
     /// Output directory for `<name>.csv` and `<name>.png`.
     #[arg(long, default_value = "out/material-driver")]
@@ -176,6 +176,18 @@ pub struct DriverSummary {
     pub final_damage: f64,
     /// Implied uniaxial strengths (microplane only).
     pub strengths: Option<Strengths>,
+}
+
+impl DriverError {
+    /// The driver's input was bad (its arguments, the material configuration), not the work.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            DriverError::Argument(_)
+                | DriverError::Config { .. }
+                | DriverError::Material(MaterialError::DriverArgument(_))
+        )
+    }
 }
 
 impl fmt::Display for DriverSummary {
@@ -231,7 +243,9 @@ pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, DriverError> {
         Some(p) => read_material_config(p)?,
         None => MaterialConfig::Microplane(MicroplaneConfig::preset(args.preset)),
     };
-    let material = config.build()?;
+    let material = config
+        .build()
+        .map_err(|e| DriverError::Argument(format!("the material: {e}")))?;
     let max_strain = match (args.max_strain, &material) {
         (Some(m), _) => m,
         (None, Material::Microplane(m)) => {

@@ -21,6 +21,27 @@ use crate::petsc::SessionGuard;
 #[error("{0}")]
 pub struct BadInput(pub String);
 
+/// A failure of another process, which reports it (e.g. process 0's failed write, or the interruption
+/// that process 0 reports): the other processes end with exit code 1 without repeating it.
+#[derive(Debug, thiserror::Error)]
+#[error("another process failed (it reports why)")]
+pub struct FailedElsewhere;
+
+/// The one line that reports `e`: its message and its causes, each cause left out whose text the line
+/// already holds (many errors name their cause in their own message, e.g. `f: File too large`).
+pub fn error_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.is_empty() {
+            line = text;
+        } else if !line.contains(&text) {
+            line = format!("{line}: {text}");
+        }
+    }
+    line
+}
+
 /// A [`BadInput`] error.
 pub fn bad(message: impl std::fmt::Display) -> anyhow::Error {
     BadInput(message.to_string()).into()
@@ -85,4 +106,23 @@ pub fn share_cores(session: &SessionGuard) {
     let _ = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build_global();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_error_line_names_each_cause_once() {
+        let io = std::io::Error::from_raw_os_error(27);
+        let output = crate::io::OutputError::Io {
+            path: "d/fields.xdmf".into(),
+            source: io,
+        };
+        let e = anyhow::Error::from(output).context("writing the output");
+        assert_eq!(
+            error_line(&e),
+            "writing the output: d/fields.xdmf: File too large (os error 27)"
+        );
+    }
 }

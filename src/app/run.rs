@@ -8,6 +8,11 @@
 //! step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes"); process 0
 //! gathers the points and alone writes.
 
+mod resume;
+mod steps;
+mod summary;
+
+use super::args::launcher_rank;
 use super::{bad, processes_per_node, share_cores};
 use crate::checkpoint;
 use crate::config::{self, RunConfig};
@@ -15,15 +20,19 @@ use crate::io::RunOutput;
 use crate::model::{Setup, State};
 use crate::petsc::{self, Session, SessionGuard};
 use crate::preflight;
-use crate::rundir::{self, RunIdentity, RunRecord};
+use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
 use crate::scenario::{self, RunSetup};
+use crate::schema::file;
 use crate::solver::{Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
+use resume::{check_resume, command_line, refusal, resume_command};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use steps::{Records, Steps, agreed};
+use summary::summary;
 
 /// PETSc error codes that mean the options asked for something impossible (wrong argument, out of
 /// range, unsupported, incompatible, unknown type).
@@ -88,6 +97,9 @@ struct Prepared {
     dir: PathBuf,
     /// The checkpoint a `--resume` continues from.
     resume_from: Option<checkpoint::Header>,
+    /// The lock of the output directory, if it existed (process 0; a new directory is locked when it is
+    /// created).
+    lock: Option<DirLock>,
 }
 
 /// `run CONFIG`: checks the input (`own_args` the program's arguments, `petsc_args` PETSc's, starting with
@@ -139,6 +151,12 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         .to_owned();
     let identity = RunIdentity::new(&effective, &petsc_options);
     let contents = rundir::inspect(&dir).map_err(bad)?;
+    // Another run writing into the directory comes first: neither --overwrite nor --resume may touch it.
+    let lock = if launcher_rank() == 0 && dir.is_dir() {
+        Some(rundir::lock(&dir).map_err(bad)?)
+    } else {
+        None
+    };
     let resume_from = if flags.resume {
         Some(check_resume(&dir, &identity, cfg.run.steps)?)
     } else {
@@ -159,6 +177,7 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         identity,
         dir,
         resume_from,
+        lock,
     })
 }
 
@@ -169,6 +188,16 @@ fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
     // gathers all points for the output: each process on this node may peak near a serial run's memory
     // (paper-size CT: 731 MB per process on 2 against 649 MB on one).
     let mut need = preflight::memory_need(cfg);
+    // Points are numbered with 32 bits: more cannot be seeded, however much memory there is.
+    if need.points > u32::MAX as f64 {
+        return Err(bad(format!(
+            "{label}: the run would have about {:.3e} material points, more than the {:.3e} the program \
+             can number (also with --allow-large): use a larger grid.cell_size or fewer \
+             shape.points_per_cell",
+            need.points,
+            u32::MAX as f64
+        )));
+    }
     need.bytes *= processes_per_node().unwrap_or(1) as f64;
     if let Some(limit) = preflight::memory_limit()
         && need.bytes > limit.bytes
@@ -192,31 +221,18 @@ fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
 fn simulate<const D: usize>(
     session: &SessionGuard,
     invocation: &Invocation,
-    prepared: Prepared,
+    mut prepared: Prepared,
     setup: Setup<D>,
 ) -> Result<()> {
+    let lock = prepared.lock.take();
     let (cfg, file) = (&prepared.cfg, &invocation.file);
     let root = session.rank() == 0;
     let (mut sim, defaults) = build(session, setup, file)?;
     // The output's reference state (initial positions, the step-0 fields) is the state at step 0 as
     // built, also for a resumed run, on the process that writes (the others keep the records only).
     let initial = root.then(|| sim.state.clone());
-    if prepared.resume_from.is_some() {
-        checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
-        if root {
-            eprintln!(
-                "resuming at step {} (t = {:e} s)",
-                sim.state.counters.step, sim.state.counters.time
-            );
-        }
-    }
-    // Ctrl-C: finish the current step, write a checkpoint and the outputs, and stop.
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-            .context("installing the Ctrl-C handler")?;
-    }
+    let resumed = resume(&prepared, &mut sim, root)?;
+    let interrupted = on_signal(root)?;
     if root {
         announce(session, cfg, &sim, &prepared.dir);
     }
@@ -235,8 +251,20 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
-    let mut records = open_output(invocation, &prepared, &sim, root, initial)?;
+    let opened = open_output(invocation, &prepared, &sim, (root, lock), initial.as_ref());
+    let mut records = agreed(session, opened)?;
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
+    // The starting state: a fresh run's step 0 (its checkpoint, then its fields), or a resumed run's
+    // checkpoint state if the fields of that step are missing.
+    let start = if prepared.resume_from.is_some() {
+        resumed.as_ref()
+    } else {
+        initial.as_ref()
+    };
+    if let Err(e) = records.keep(session, start) {
+        bar.abandon();
+        return Err(records.abandon(session, &sim, e, &hint));
+    }
     let steps = Steps {
         session,
         bar: &bar,
@@ -246,7 +274,7 @@ fn simulate<const D: usize>(
     };
     steps.run(&mut records, &mut sim, step)?;
     bar.finish();
-    let note = records.finish(&sim, "finished", None)?;
+    let note = records.finish(session, &sim, "finished", None)?;
     if !root {
         return Ok(());
     }
@@ -259,6 +287,45 @@ fn simulate<const D: usize>(
         eprintln!("warning: {n}");
     }
     report_unused_fallback(session, &defaults)
+}
+
+/// Loads the checkpoint of a resumed run into `sim`; on process 0 (`root`) returns a copy of the loaded
+/// state if the fields of its step are missing (a write failed after the checkpoint), to be written again.
+fn resume<const D: usize>(
+    prepared: &Prepared,
+    sim: &mut Simulation<D>,
+    root: bool,
+) -> Result<Option<State<D>>> {
+    if prepared.resume_from.is_none() {
+        return Ok(None);
+    }
+    checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
+    if !root {
+        return Ok(None);
+    }
+    eprintln!(
+        "resuming at step {} (t = {:e} s)",
+        sim.state.counters.step, sim.state.counters.time
+    );
+    let fields = file::numbered(file::FIELDS, sim.state.counters.step);
+    Ok((!prepared.dir.join(fields).is_file()).then(|| sim.state.clone()))
+}
+
+/// Notes SIGINT (Ctrl-C), SIGTERM (what an MPI launcher sends the processes on Ctrl-C) and SIGHUP: the
+/// run finishes the current step, which every process agrees on before the next, saves it and stops. The
+/// first signal is acknowledged on process 0 (`root`).
+fn on_signal(root: bool) -> Result<Arc<AtomicBool>> {
+    let interrupted = Arc::new(AtomicBool::new(false));
+    let flag = interrupted.clone();
+    ctrlc::set_handler(move || {
+        if !flag.swap(true, Ordering::SeqCst) && root {
+            eprintln!(
+                "signal received: stopping after this step, which is saved with a checkpoint"
+            );
+        }
+    })
+    .context("installing the signal handler")?;
+    Ok(interrupted)
 }
 
 /// The simulation of `setup` (of the file `file`) with its solver defaults applied, and the defaults'
@@ -362,17 +429,35 @@ fn check_first_step(
     Ok(())
 }
 
-/// The output: the directory now belongs to this run. Removes an earlier run's files (--overwrite),
-/// writes the effective configuration, the reference state `initial` (the state at step 0, on process 0;
-/// a resumed run restores its records instead) and run.json.
+/// The output: the directory now belongs to this run (on process 0, `root`, it holds `lock` of the
+/// directory, taken here if the directory is new). Removes an earlier run's files (--overwrite) and the
+/// temporaries of an interrupted write, writes the effective configuration and run.json, and sets up the
+/// output on the reference state `initial` (the state at step 0, on process 0; a resumed run restores
+/// its records).
 fn open_output<'a, const D: usize>(
     invocation: &Invocation,
     prepared: &'a Prepared,
     sim: &Simulation<D>,
-    root: bool,
-    initial: Option<State<D>>,
+    (root, lock): (bool, Option<DirLock>),
+    initial: Option<&State<D>>,
 ) -> Result<Records<'a>> {
     let Prepared { cfg, dir, .. } = prepared;
+    let lock = match lock {
+        None if root => {
+            std::fs::create_dir_all(dir).map_err(|e| {
+                bad(format!(
+                    "{}: cannot create the output directory: {e} (give another --output); nothing \
+                     was written",
+                    dir.display()
+                ))
+            })?;
+            Some(rundir::lock(dir).map_err(bad)?)
+        }
+        lock => lock,
+    };
+    if root {
+        rundir::remove_temporaries(dir).map_err(anyhow::Error::msg)?;
+    }
     if invocation.overwrite && root {
         let removed = rundir::remove_program_files(dir).map_err(anyhow::Error::msg)?;
         if removed > 0 {
@@ -388,7 +473,7 @@ fn open_output<'a, const D: usize>(
         config::source_label(&invocation.file, &prepared.overrides),
         prepared.effective
     );
-    let mut out = match &initial {
+    let mut out = match initial {
         Some(initial) => RunOutput::create(dir, &cfg.run.name, &config_copy, &sim.model, initial)?,
         None => RunOutput::mirror(dir, &cfg.run.name, &config_copy, cfg.grid.cell_size),
     };
@@ -401,34 +486,32 @@ fn open_output<'a, const D: usize>(
             crate::crack::CrackCriteria::for_notch(ct.notch_width, cfg.grid.cell_size),
         );
     }
-    let record = new_record(invocation, prepared, sim);
+    let record = new_record(invocation, prepared);
     if root {
         record.write(dir)?;
     }
-    match (&prepared.resume_from, &initial) {
-        (Some(header), _) => header
+    if let Some(header) = &prepared.resume_from {
+        header
             .restore_records(&mut out)
-            .context("restoring the output's records from the checkpoint")?,
-        (None, Some(initial)) => out.snapshot(initial)?,
-        (None, None) => {}
+            .context("restoring the output's records from the checkpoint")?;
     }
     Ok(Records {
+        _lock: lock,
         cfg,
         dir,
         identity: &prepared.identity,
         root,
         out,
         record,
+        checkpoint: prepared.resume_from.as_ref().map(|h| h.counters.step),
     })
 }
 
-/// The run.json of a run starting (or resuming) at the state of `sim`.
-fn new_record<const D: usize>(
-    invocation: &Invocation,
-    prepared: &Prepared,
-    sim: &Simulation<D>,
-) -> RunRecord {
+/// The run.json of a run starting at step 0 or resuming at its checkpoint (its steps done are those of the
+/// checkpoint it has, while running).
+fn new_record(invocation: &Invocation, prepared: &Prepared) -> RunRecord {
     let cfg = &prepared.cfg;
+    let start = prepared.resume_from.as_ref().map(|h| &h.counters);
     RunRecord {
         identity: prepared.identity.clone(),
         command: command_line(invocation.own, invocation.petsc),
@@ -439,183 +522,13 @@ fn new_record<const D: usize>(
             .map_or(0, |d| d.as_secs()),
         resumed_from_step: prepared.resume_from.as_ref().map(|h| h.counters.step),
         status: "running".into(),
-        steps_done: sim.state.counters.step,
+        steps_done: start.map_or(0, |c| c.step),
         steps_requested: cfg.run.steps,
-        time_reached: sim.state.counters.time,
+        time_reached: start.map_or(0.0, |c| c.time),
         time_requested: cfg.run.steps as f64 * cfg.time.dt,
         reduced_steps: 0,
         note: None,
-    }
-}
-
-/// The records of a run in progress: its output and its run.json, and where they go.
-struct Records<'a> {
-    cfg: &'a RunConfig,
-    dir: &'a Path,
-    identity: &'a RunIdentity,
-    /// This process writes (process 0).
-    root: bool,
-    out: RunOutput,
-    record: RunRecord,
-}
-
-impl Records<'_> {
-    /// Writes the point fields, the force plots and the checkpoint of the current state (with the points
-    /// shared out over processes, process 0 gathers them first). Collective.
-    fn save<const D: usize>(&mut self, session: &SessionGuard, sim: &Simulation<D>) -> Result<()> {
-        let Some(state) = crate::partition::whole_state(session, &sim.state)
-            .context("gathering the points on process 0")?
-        else {
-            return Ok(());
-        };
-        self.out.snapshot(&state)?;
-        self.out.force_plots()?;
-        if self.out.writes() {
-            checkpoint::save(self.dir, &state, &self.out, self.identity)?;
-        }
-        Ok(())
-    }
-
-    /// run.json follows the checkpoint, so a run killed outright shows how far it got.
-    fn follow<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<()> {
-        self.record.steps_done = sim.state.counters.step;
-        self.record.time_reached = sim.state.counters.time;
-        if self.root {
-            self.record.write(self.dir)?;
-        }
-        Ok(())
-    }
-
-    /// Closes run.json with `status` and the note `why` (and a note on an early end or reduced steps,
-    /// which also goes into history.csv); returns the latter note.
-    fn finish<const D: usize>(
-        &mut self,
-        sim: &Simulation<D>,
-        status: &str,
-        why: Option<String>,
-    ) -> Result<Option<String>> {
-        let cfg = self.cfg;
-        let taken: Vec<f64> = self.out.rows().iter().map(|r| r.dt).collect();
-        let note = time_note(&taken, sim.state.counters.time, cfg.run.steps, cfg.time.dt);
-        let record = &mut self.record;
-        record.status = status.into();
-        record.steps_done = sim.state.counters.step;
-        record.time_reached = sim.state.counters.time;
-        record.reduced_steps = reduced_steps(&taken, cfg.time.dt);
-        record.note = match (&why, &note) {
-            (Some(w), Some(n)) => Some(format!("{w}; {n}")),
-            (w, n) => w.clone().or(n.clone()),
-        };
-        if self.root {
-            if let Some(n) = &record.note {
-                append_history_note(self.dir, n)?;
-            }
-            record.write(self.dir)?;
-        }
-        Ok(note)
-    }
-}
-
-/// The time loop's surroundings: the session, the progress display, the Ctrl-C flag and the command
-/// that resumes the run.
-struct Steps<'a> {
-    session: &'a SessionGuard,
-    bar: &'a ProgressBar,
-    interrupted: &'a AtomicBool,
-    hint: &'a str,
-    quiet: bool,
-}
-
-impl Steps<'_> {
-    /// Records the first step's result `step` and advances until the requested step, a step that fails
-    /// for good or an interruption (both an error, after the state is saved).
-    fn run<const D: usize>(
-        &self,
-        records: &mut Records,
-        sim: &mut Simulation<D>,
-        mut step: Result<StepReport, StepError>,
-    ) -> Result<()> {
-        let steps = records.cfg.run.steps;
-        loop {
-            let report = match step {
-                Ok(r) => r,
-                Err(e) => return Err(self.failed(records, sim, &e)),
-            };
-            self.show(&report, records.root);
-            records.out.record(report)?;
-            let every = records.cfg.run.output_every;
-            // Every process stops after the same step (a signal may reach them at different steps).
-            let stop = self.session.any(self.interrupted.load(Ordering::SeqCst));
-            if (every > 0 && sim.state.counters.step % every == 0)
-                || sim.state.counters.step == steps
-                || stop
-            {
-                records.save(self.session, sim)?;
-                records.follow(sim)?;
-            }
-            if stop && sim.state.counters.step < steps {
-                self.bar.abandon();
-                let why = format!("interrupted after step {}", sim.state.counters.step);
-                records.finish(sim, "interrupted", Some(why))?;
-                anyhow::bail!(
-                    "interrupted after step {}; the state is saved in {}: continue with {}",
-                    sim.state.counters.step,
-                    records.dir.display(),
-                    self.hint
-                );
-            }
-            if sim.state.counters.step >= steps {
-                return Ok(());
-            }
-            step = sim.advance(self.session);
-        }
-    }
-
-    /// A step's line: on the progress bar, and with `--quiet` on standard error (process 0).
-    fn show(&self, report: &StepReport, root: bool) {
-        let msg = format!(
-            "t = {:.2} us, Newton {}, KSP {}, {}",
-            report.time * 1e6,
-            report.solve.iterations,
-            report.solve.linear_iterations,
-            report.solve.reason_name
-        );
-        if self.quiet && root {
-            eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
-        }
-        self.bar.set_message(msg);
-        self.bar.inc(1);
-    }
-
-    /// A step that failed for good: saves the last converged state and closes the records; the error
-    /// says how to continue.
-    fn failed<const D: usize>(
-        &self,
-        records: &mut Records,
-        sim: &Simulation<D>,
-        e: &StepError,
-    ) -> anyhow::Error {
-        self.bar.abandon();
-        if let Err(saving) = records.save(self.session, sim) {
-            return saving;
-        }
-        let why = format!(
-            "step {} failed: {}",
-            sim.state.counters.step + 1,
-            e.to_string().trim()
-        );
-        if let Err(closing) = records.finish(sim, "failed", Some(why)) {
-            return closing;
-        }
-        anyhow::anyhow!(
-            "{}; the last converged state (step {}, t = {:e} s) is saved in {} with a checkpoint; \
-             to continue (e.g. with other solver options): {}",
-            e.to_string().trim(),
-            sim.state.counters.step,
-            sim.state.counters.time,
-            records.dir.display(),
-            self.hint
-        )
+        holder: Some(Holder::this_process()),
     }
 }
 
@@ -633,333 +546,4 @@ fn report_unused_fallback(session: &SessionGuard, defaults: &[String]) -> Result
         );
     }
     Ok(())
-}
-
-/// Quotes `word` for a POSIX shell when it needs it.
-fn shell_quote(word: &str) -> String {
-    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./=:,+@%".contains(c);
-    if !word.is_empty() && word.chars().all(plain) {
-        word.to_owned()
-    } else {
-        format!("'{}'", word.replace('\'', "'\\''"))
-    }
-}
-
-/// The command line as given, quoted for a shell.
-fn command_line(own: &[String], petsc: &[String]) -> String {
-    own.iter()
-        .chain(&petsc[1..])
-        .map(|w| shell_quote(w))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-/// The command that resumes a run started with `own` + `petsc`: the same arguments with `--resume`
-/// instead of `--overwrite` and with the output directory spelled out.
-fn resume_command(own: &[String], petsc: &[String], dir: &Path) -> String {
-    let mut words: Vec<String> = own
-        .iter()
-        .filter(|a| *a != "--overwrite")
-        .cloned()
-        .collect();
-    if !own
-        .iter()
-        .any(|a| a == "--output" || a.starts_with("--output="))
-    {
-        words.push("--output".into());
-        words.push(dir.display().to_string());
-    }
-    if !own.iter().any(|a| a == "--resume") {
-        words.push("--resume".into());
-    }
-    let mut all = vec![words.remove(0)];
-    all.extend(words);
-    command_line(&all, petsc)
-}
-
-/// Why a new run may not write into `dir`.
-fn refusal(dir: &Path, contents: &rundir::Contents, identity: &RunIdentity) -> String {
-    let what = match &contents.record {
-        Some(r) => format!(
-            "the results of {} (config {}, {} at step {} of {})",
-            if r.identity.physics == identity.physics {
-                "an earlier run of the same model"
-            } else {
-                "another run"
-            },
-            r.config_file,
-            r.status,
-            r.steps_done,
-            r.steps_requested
-        ),
-        None => {
-            let n = contents.results.len();
-            format!(
-                "the results of another run ({}{})",
-                contents.results[..n.min(3)].join(", "),
-                if n > 3 {
-                    format!(" and {} more files", n - 3)
-                } else {
-                    String::new()
-                }
-            )
-        }
-    };
-    format!(
-        "{} holds {what}: use --overwrite to replace them, --resume to continue that run, or another --output",
-        dir.display()
-    )
-}
-
-/// Checks that the checkpoint in `dir` can be resumed by a run of `identity` with `steps` steps.
-fn check_resume(dir: &Path, identity: &RunIdentity, steps: usize) -> Result<checkpoint::Header> {
-    let header = checkpoint::read_header(dir).map_err(bad)?;
-    let file = dir.join(checkpoint::FILE);
-    let changes = header.identity.physics_changes(identity);
-    if !changes.is_empty() {
-        return Err(bad(format!(
-            "{}: the checkpoint was written with other physics ({}); --resume may change only the [run] \
-             section (steps, output_every, output_dir, name, petsc_options): start a new run instead",
-            file.display(),
-            changes.join("; ")
-        )));
-    }
-    let done = header.counters.step;
-    if steps <= done {
-        return Err(bad(format!(
-            "{}: the checkpoint is at step {done} and the run asks for {steps} steps, so there is nothing to \
-             do: give --steps N with N > {done} to continue",
-            file.display()
-        )));
-    }
-    if header.identity.version != identity.version {
-        eprintln!(
-            "note: the checkpoint was written by version {}, this is {}",
-            header.identity.version, identity.version
-        );
-    }
-    if header.identity.petsc_options != identity.petsc_options {
-        let shown = |o: &str| {
-            if o.is_empty() {
-                "none".to_owned()
-            } else {
-                format!("`{o}`")
-            }
-        };
-        eprintln!(
-            "note: PETSc options {} at the checkpoint, {} now",
-            shown(&header.identity.petsc_options),
-            shown(&identity.petsc_options)
-        );
-    }
-    Ok(header)
-}
-
-/// Steps (their time steps `taken`) that took less than the nominal time step `dt`.
-fn reduced_steps(taken: &[f64], dt: f64) -> usize {
-    taken.iter().filter(|&&t| t < dt * (1.0 - 1e-9)).count()
-}
-
-/// A sentence when a run whose steps took `taken` reached less than its requested end time (steps x dt)
-/// or took reduced steps.
-fn time_note(taken: &[f64], time: f64, steps: usize, dt: f64) -> Option<String> {
-    let end = steps as f64 * dt;
-    let reduced = reduced_steps(taken, dt);
-    if time >= end * (1.0 - 1e-9) && reduced == 0 {
-        return None;
-    }
-    let smallest = taken.iter().copied().fold(f64::INFINITY, f64::min);
-    let mut note = format!(
-        "the run ended at t = {:.4} us, before its requested end time {:.4} us ({steps} steps of {:.4} us)",
-        time * 1e6,
-        end * 1e6,
-        dt * 1e6
-    );
-    if reduced > 0 {
-        note += &format!(
-            "; {reduced} of {} steps took a reduced time step (down to {:.4} us)",
-            taken.len(),
-            smallest * 1e6
-        );
-    }
-    Some(note)
-}
-
-/// Appends `# note` to the run's history.csv, if it has one (the next rewrite of the history, by a resumed
-/// run, drops it).
-fn append_history_note(dir: &Path, note: &str) -> Result<()> {
-    use std::io::Write as _;
-    let path = dir.join(crate::schema::file::HISTORY);
-    if !path.exists() {
-        return Ok(());
-    }
-    let mut f = std::fs::OpenOptions::new()
-        .append(true)
-        .open(&path)
-        .with_context(|| format!("{}: appending a note", path.display()))?;
-    writeln!(f, "# {note}").with_context(|| format!("{}: appending a note", path.display()))
-}
-
-/// Final table: steps, time reached, iterations, times, memory, reactions; `note` says that the run ended
-/// before its requested end time.
-fn summary(out: &RunOutput, wall: f64, note: Option<&str>) {
-    let rows = out.rows();
-    println!("\n| quantity | value |\n|---|---|");
-    summary_steps(rows, note);
-    summary_costs(rows, wall);
-    summary_results(out);
-}
-
-/// The summary's rows on the steps: how many, the time reached, the iterations, contact solves and points
-/// between processes.
-fn summary_steps(rows: &[StepReport], note: Option<&str>) {
-    let newton: usize = rows.iter().map(|r| r.solve.iterations).sum();
-    let linear: usize = rows.iter().map(|r| r.solve.linear_iterations).sum();
-    let retries: usize = rows.iter().map(|r| r.attempts - 1).sum();
-    let per_step = |n: usize| n as f64 / rows.len().max(1) as f64;
-    println!(
-        "| steps | {} ({} retried with the fallback solver or a smaller dt) |",
-        rows.len(),
-        retries
-    );
-    let time = rows.last().map_or(0.0, |r| r.time);
-    match note {
-        Some(n) => println!("| time reached | **{:.4} us**: {n} |", time * 1e6),
-        None => println!(
-            "| time reached | {:.4} us, the requested end time |",
-            time * 1e6
-        ),
-    }
-    println!(
-        "| Newton iterations | {newton} ({:.2} per step) |",
-        per_step(newton)
-    );
-    println!("| linear iterations | {linear} |");
-    let contact: usize = rows.iter().map(|r| r.contact_solves).sum();
-    if contact > rows.len() {
-        println!(
-            "| contact solves | {contact} ({:.2} per step: SNES solves while the contact active sets and \
-             pin rotations settled) |",
-            per_step(contact)
-        );
-    }
-    let ghosts: usize = rows.iter().map(|r| r.ghosts).sum();
-    if ghosts > 0 {
-        let migrated: usize = rows.iter().map(|r| r.migrated).sum();
-        println!(
-            "| points between processes | {migrated} moved to another process; {:.0} ghost copies per step |",
-            per_step(ghosts)
-        );
-    }
-}
-
-/// The summary's rows on the costs: wall times (`wall` this process's) and peak memory.
-fn summary_costs(rows: &[StepReport], wall: f64) {
-    let assembly: f64 = rows.iter().map(|r| r.wall_assembly).sum();
-    let solve: f64 = rows.iter().map(|r| r.wall_solve - r.wall_assembly).sum();
-    let setup: f64 = rows.iter().map(|r| r.wall_setup).sum();
-    // The steps' times cover the whole run, also the part before a resume; `wall` is this process's.
-    let steps_wall: f64 = rows.iter().map(|r| r.wall_total).sum();
-    println!(
-        "| wall time | {steps_wall:.1} s in the steps (set-up {setup:.1} s, assembly {assembly:.1} s, PETSc solve \
-         {solve:.1} s); {wall:.1} s in this process |"
-    );
-    println!("| peak memory | {:.0} MB |", peak_rss_mb());
-}
-
-/// The summary's rows on the results: final reactions, the crack, the output directory.
-fn summary_results(out: &RunOutput) {
-    if let Some(last) = out.rows().last() {
-        for (name, f) in &last.reactions {
-            let components: Vec<String> = f.iter().map(|v| format!("{v:.4e}")).collect();
-            // A 3D run's reactions are of the whole plate, a 2D run's per mm of thickness.
-            let units = if f.len() == 3 { "N" } else { "N/mm" };
-            println!(
-                "| final reaction `{name}` | ({}) {units} |",
-                components.join(", ")
-            );
-        }
-    }
-    if let Some(c) = out.cracks().last() {
-        let angles: Vec<String> = c
-            .bands
-            .iter()
-            .map(|b| format!("{:.0} deg", b.angle_degrees))
-            .collect();
-        println!(
-            "| crack | {} (length {:.1} mm, bands at {}; criteria in crack.json) |",
-            c.classification,
-            c.length,
-            if angles.is_empty() {
-                "-".to_owned()
-            } else {
-                angles.join(", ")
-            }
-        );
-    }
-    println!("| output | {} |", out.dir().display());
-}
-
-/// Peak resident set size of this process (MB), from /proc.
-fn peak_rss_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
-                l.split_whitespace()
-                    .nth(1)
-                    .and_then(|v| v.parse::<f64>().ok())
-            })
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn words(s: &[&str]) -> Vec<String> {
-        s.iter().map(|w| w.to_string()).collect()
-    }
-
-    #[test]
-    fn the_resume_command_repeats_the_invocation_with_resume_and_the_output() {
-        let own = words(&[
-            "target/release/mpm-concrete",
-            "run",
-            "configs/ct-demo.toml",
-            "--steps",
-            "20",
-            "--overwrite",
-            "--set",
-            "ct.material={ model = \"microplane\", preset = \"paper\" }",
-        ]);
-        let petsc = words(&["prog", "-ksp_type", "gmres"]);
-        assert_eq!(
-            resume_command(&own, &petsc, Path::new("runs/ct demo")),
-            "target/release/mpm-concrete run configs/ct-demo.toml --steps 20 --set \
-             'ct.material={ model = \"microplane\", preset = \"paper\" }' --output 'runs/ct demo' --resume \
-             -ksp_type gmres"
-        );
-        let own = words(&["mpm-concrete", "run", "c.toml", "--output", "d", "--resume"]);
-        assert_eq!(
-            resume_command(&own, &words(&["p"]), Path::new("d")),
-            "mpm-concrete run c.toml --output d --resume"
-        );
-        assert_eq!(shell_quote("it's"), "'it'\\''s'");
-    }
-
-    #[test]
-    fn the_time_note_tells_an_early_end_and_reduced_steps() {
-        let full = [1e-6; 4];
-        assert_eq!(time_note(&full, 4e-6, 4, 1e-6), None);
-        let halved = [1e-6, 0.5e-6, 0.25e-6, 0.5e-6];
-        let note = time_note(&halved, 2.25e-6, 4, 1e-6).expect("note");
-        assert!(
-            note.contains("t = 2.2500 us, before its requested end time 4.0000 us")
-                && note.contains("3 of 4 steps took a reduced time step (down to 0.2500 us)"),
-            "{note}"
-        );
-        assert!(time_note(&full[..2], 2e-6, 4, 1e-6).is_some());
-    }
 }

@@ -31,7 +31,7 @@ pub struct BodySection {
 
 /// Motion of one component: "free", "fixed" or `{ velocity = v }` (mm/s).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(untagged)]
+#[serde(try_from = "toml::Value")]
 pub enum MotionSpec {
     /// "free" or "fixed".
     Keyword(Keyword),
@@ -50,6 +50,29 @@ pub enum Keyword {
     Free,
     /// Zero velocity.
     Fixed,
+}
+
+impl TryFrom<toml::Value> for MotionSpec {
+    type Error = String;
+
+    /// The forms of a component's motion; anything else is refused with the allowed forms listed.
+    fn try_from(v: toml::Value) -> Result<Self, String> {
+        let velocity = match &v {
+            toml::Value::String(s) if s == "free" => return Ok(Keyword::Free.into()),
+            toml::Value::String(s) if s == "fixed" => return Ok(Keyword::Fixed.into()),
+            toml::Value::Table(t) if t.len() == 1 => t.get("velocity"),
+            _ => None,
+        };
+        match velocity {
+            Some(toml::Value::Float(f)) => Ok(MotionSpec::Velocity { velocity: *f }),
+            Some(toml::Value::Integer(i)) => Ok(MotionSpec::Velocity {
+                velocity: *i as f64,
+            }),
+            _ => Err(format!(
+                "{v}: a component's motion is \"free\", \"fixed\" or {{ velocity = v }} (mm/s)"
+            )),
+        }
+    }
 }
 
 impl From<Keyword> for MotionSpec {
@@ -155,6 +178,48 @@ pub struct ContactSection {
     /// Pin position at t = 0 (mm); none: the device only translates.
     #[serde(default)]
     pub pin: Option<[f64; 2]>,
+}
+
+/// Refuses two `[[body]]` regions that overlap (their points would be seeded twice there): a test on a
+/// lattice of points at most half a cell `h` (mm) apart over the intersection of each pair's bounding
+/// boxes (at most 200 per direction), off the boxes' edges so that bodies that only touch pass.
+pub(super) fn check_overlaps(bodies: &[BodySection], h: f64, c: Check) -> Result<(), ConfigError> {
+    for (j, b) in bodies.iter().enumerate() {
+        for (i, a) in bodies[..j].iter().enumerate() {
+            let (Some((alo, ahi)), Some((blo, bhi))) =
+                (a.geometry.bounding_box(), b.geometry.bounding_box())
+            else {
+                continue;
+            };
+            let (lo, hi) = (alo.sup(&blo), ahi.inf(&bhi));
+            let extent = hi - lo;
+            if extent.x <= 0.0 || extent.y <= 0.0 {
+                continue;
+            }
+            let n = extent.map(|e| (2.0 * e / h).ceil().clamp(1.0, 200.0) as usize);
+            let step = extent.component_div(&n.map(|k| k as f64));
+            let inside = (0..n.x)
+                .flat_map(|u| (0..n.y).map(move |v| (u, v)))
+                .find_map(|(u, v)| {
+                    let x = lo
+                        + step
+                            .component_mul(&nalgebra::Vector2::new(u as f64 + 0.5, v as f64 + 0.5));
+                    (a.geometry.contains(x) && b.geometry.contains(x)).then_some(x)
+                });
+            if let Some(x) = inside {
+                return Err(c.bad(
+                    &format!("body[{j}].geometry"),
+                    format!(
+                        "(overlaps body[{i}] `{}` at ({:.3}, {:.3}) mm)",
+                        a.name, x.x, x.y
+                    ),
+                    "a region no other [[body]] covers: the points of both would be seeded there \
+                     (give one an exclude region)",
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks the `[[body]]` sections and returns their materials; `ct`: the run has a `[ct]` section (whose

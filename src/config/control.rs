@@ -28,7 +28,9 @@ pub struct RunSection {
     pub steps: usize,
     /// Output directory (relative to the working directory); default `runs/<name>`.
     pub output_dir: Option<PathBuf>,
-    /// Write point fields (HDF5) and damage maps (PNG) every this many steps (0: only at the end).
+    /// Write point fields (HDF5), damage maps (PNG) and the checkpoint every this many steps; 0: only at
+    /// the end of the run (and when it is interrupted or a step fails), so a run killed outright cannot
+    /// be resumed.
     #[serde(default = "default_output_every")]
     pub output_every: usize,
     /// PETSc options applied as defaults; options given on the command line win.

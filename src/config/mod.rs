@@ -89,6 +89,43 @@ impl Check<'_> {
     }
 }
 
+/// The table under the key `k` of `t` for a `--set` override: `name` (created if absent) or `name[i]`,
+/// entry `i` of an array of tables such as `[[body]]`.
+fn descend<'t>(t: &'t mut toml::Table, k: &str) -> Result<&'t mut toml::Table, String> {
+    let indexed = k
+        .strip_suffix(']')
+        .and_then(|r| r.split_once('['))
+        .map(|(name, i)| (name, i.parse::<usize>()));
+    match indexed {
+        None => t
+            .entry(k.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut()
+            .ok_or_else(|| format!("`{k}` is not a table")),
+        Some((name, Err(_))) => Err(format!(
+            "`{k}`: an index is a number, e.g. {name}[0] for the first [[{name}]]"
+        )),
+        Some((name, Ok(i))) => {
+            let entries = t
+                .get_mut(name)
+                .and_then(toml::Value::as_array_mut)
+                .ok_or_else(|| {
+                    format!("`{name}` is no array of tables ([[{name}]]) in the file")
+                })?;
+            let n = entries.len();
+            entries
+                .get_mut(i)
+                .and_then(toml::Value::as_table_mut)
+                .ok_or_else(|| {
+                    format!(
+                        "`{k}`: the file has {n} [[{name}]] (indices 0 to {})",
+                        n.max(1) - 1
+                    )
+                })
+        }
+    }
+}
+
 /// All components finite.
 fn finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
@@ -169,22 +206,44 @@ pub fn source_label(file: &str, overrides: &[String]) -> String {
 /// column in `text`.
 fn toml_message(e: &toml::de::Error, text: &str, position: bool) -> String {
     let mut message = e.message().trim().replace('\n', " ");
-    if let Some(before) = e.span().and_then(|span| text.get(..span.start)) {
-        if let Some(table) = before
-            .lines()
-            .rev()
-            .map(str::trim)
-            .find(|l| l.starts_with('['))
-        {
+    if let Some(start) = e.span().map(|span| span.start) {
+        // The table is the last header up to the end of the error's line (a missing field's span is the
+        // header of the table that misses it).
+        let line_end = text[start.min(text.len())..]
+            .find('\n')
+            .map_or(text.len(), |i| start + i);
+        if let Some(table) = table_named(text, line_end) {
             message += &format!(" (in {table})");
         }
-        if position {
+        if position && let Some(before) = text.get(..start) {
             let line = before.matches('\n').count() + 1;
             let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
             message = format!("line {line}, column {column}: {message}");
         }
     }
     message
+}
+
+/// The last table header of `text` before the byte `upto` (the end of an error's line), an array's entry
+/// with its index and its name if it has one: `[grid]`, `[[body]] 0`, `[[rigid_body]] 1 (name = "pin")`.
+fn table_named(text: &str, upto: usize) -> Option<String> {
+    let before = text.get(..upto)?.lines().count();
+    let lines: Vec<&str> = text.lines().map(str::trim).collect();
+    let at = lines[..before.min(lines.len())]
+        .iter()
+        .rposition(|l| l.starts_with('['))?;
+    let header = lines[at];
+    if !header.starts_with("[[") {
+        return Some(header.to_owned());
+    }
+    let index = lines[..at].iter().filter(|l| **l == header).count();
+    let name = lines[at + 1..]
+        .iter()
+        .take_while(|l| !l.starts_with('['))
+        .find_map(|l| l.strip_prefix("name").map(str::trim_start))
+        .and_then(|r| r.strip_prefix('='))
+        .map(|v| format!(" (name = {})", v.trim()));
+    Some(format!("{header} {index}{}", name.unwrap_or_default()))
 }
 
 impl RunConfig {
@@ -237,11 +296,7 @@ impl RunConfig {
             let keys: Vec<&str> = key.trim().split('.').collect();
             let mut t = &mut table;
             for k in &keys[..keys.len() - 1] {
-                t = t
-                    .entry(k.to_string())
-                    .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-                    .as_table_mut()
-                    .ok_or_else(|| parse_err(&file, format!("--set {o}: `{k}` is not a table")))?;
+                t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {o}: {e}")))?;
             }
             t.insert(keys[keys.len() - 1].to_string(), value);
         }
@@ -280,6 +335,14 @@ impl RunConfig {
         self.time.validate(c)?;
         self.grid.validate(c)?;
         self.shape.validate(c)?;
+        if self.shape.kind == crate::shape::ShapeKind::Bspline2 && self.grid.margin_cells < 2 {
+            return Err(c.bad(
+                "grid.margin_cells",
+                self.grid.margin_cells.to_string(),
+                "at least 2 with shape.kind = \"bspline2\" (the quadratic B-spline of a point reaches \
+                 1.5 cells beyond its cell)",
+            ));
+        }
         if let Some(e) = &self.extrusion {
             e.validate(c, self.grid.cell_size, self.shape.method)?;
         }
@@ -298,6 +361,7 @@ impl RunConfig {
             ));
         }
         let bodies = bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
+        bodies::check_overlaps(&self.body, self.grid.cell_size, c)?;
         for (i, s) in self.constraint.iter().enumerate() {
             s.validate(c, i)?;
         }

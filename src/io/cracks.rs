@@ -156,34 +156,73 @@ struct Measure {
     section_z: Option<Option<f64>>,
 }
 
-/// The crack state of the snapshot `path` (its time, damage and positions; for a plate on the section
-/// layer), measured as `how` says.
-fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
-    let h5 = |e: hdf5_metno::Error| OutputError::Hdf5 {
+/// The values of the dataset `name` of the snapshot `file` (at `path`), verified as a checkpoint's are:
+/// finite, within `range` if given, and `per_point` values for each of `points` points (if given).
+fn verified(
+    file: &hdf5_metno::File,
+    path: &Path,
+    name: &str,
+    range: Option<(f64, f64)>,
+    shape: (usize, Option<usize>),
+) -> Result<Vec<f64>, OutputError> {
+    let values: Vec<f64> = file
+        .dataset(name)
+        .and_then(|d| d.read_raw())
+        .map_err(|e| OutputError::hdf5(path, &e))?;
+    let corrupt = |what: String| OutputError::Run {
         path: path.display().to_string(),
-        message: e.to_string(),
+        message: format!(
+            "dataset `{name}` {what}: the snapshot is corrupt, nothing was re-measured and crack.json \
+             is unchanged"
+        ),
     };
+    let (per_point, points) = shape;
+    if points.is_some_and(|n| values.len() != per_point * n) || values.len() % per_point != 0 {
+        return Err(corrupt(format!(
+            "has {} values, not {per_point} per point",
+            values.len()
+        )));
+    }
+    let outside = |v: f64| !v.is_finite() || range.is_some_and(|(lo, hi)| v < lo || v > hi);
+    if let Some(k) = values.iter().position(|&v| outside(v)) {
+        let allowed = match range {
+            Some((lo, hi)) => format!("values in [{lo}, {hi}]"),
+            None => "finite values".into(),
+        };
+        return Err(corrupt(format!(
+            "holds {} at point {} (allowed: {allowed})",
+            values[k],
+            k / per_point
+        )));
+    }
+    Ok(values)
+}
+
+/// The crack state of the snapshot `path` (its time, damage and positions; for a plate on the section
+/// layer), measured as `how` says; the values it reads are verified first ([`verified`]).
+fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
+    let h5 = |e: hdf5_metno::Error| OutputError::hdf5(path, &e);
     let file = hdf5_metno::File::open(path).map_err(h5)?;
     let time: f64 = file
         .attr("time_s")
         .and_then(|a| a.read_scalar())
         .map_err(h5)?;
-    let position: Vec<f64> = file
-        .dataset("position")
-        .and_then(|d| d.read_raw())
-        .map_err(h5)?;
-    let damage: Vec<f64> = file
-        .dataset("damage")
-        .and_then(|d| d.read_raw())
-        .map_err(h5)?;
-    let width = (position.len() / damage.len().max(1)).max(1);
+    if !time.is_finite() || time < 0.0 {
+        return Err(OutputError::Run {
+            path: path.display().to_string(),
+            message: format!(
+                "attribute `time_s` = {time}: the snapshot is corrupt (a time >= 0 s)"
+            ),
+        });
+    }
+    let damage = verified(&file, path, "damage", Some((0.0, 1.0)), (1, None))?;
+    let points = Some(damage.len());
+    let position = verified(&file, path, "position", None, (3, points))?;
+    let width = 3;
     // A plate (3D run): the layer of the section, found by the points' initial z.
     let section: Vec<usize> = match how.section_z {
         Some(section_z) => {
-            let displacement: Vec<f64> = file
-                .dataset("displacement")
-                .and_then(|d| d.read_raw())
-                .map_err(h5)?;
+            let displacement = verified(&file, path, "displacement", None, (3, points))?;
             let z0: Vec<f64> = position
                 .chunks_exact(width)
                 .zip(displacement.chunks_exact(width))
@@ -207,10 +246,8 @@ fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputErro
         &how.criteria,
         time,
     );
-    if let Ok(nonlocal) = file
-        .dataset("nonlocal_damage")
-        .and_then(|d| d.read_raw::<f64>())
-    {
+    if file.dataset("nonlocal_damage").is_ok() {
+        let nonlocal = verified(&file, path, "nonlocal_damage", None, (1, points))?;
         state.nonlocal_points = section
             .iter()
             .filter(|&&k| {

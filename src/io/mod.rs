@@ -62,6 +62,23 @@ pub enum OutputError {
     },
 }
 
+impl OutputError {
+    /// An HDF5 error `e` on the file `path`, in one line: a failed write by the system's message (HDF5's
+    /// own spans several lines with buffer addresses), other errors with their whitespace collapsed.
+    pub fn hdf5(path: &Path, e: &hdf5_metno::Error) -> Self {
+        let text = e.to_string();
+        let system = text
+            .split_once("error message = '")
+            .and_then(|(_, rest)| rest.split_once('\''))
+            .map(|(m, _)| format!("writing failed: {m}"));
+        OutputError::Hdf5 {
+            path: path.display().to_string(),
+            message: system
+                .unwrap_or_else(|| text.split_whitespace().collect::<Vec<_>>().join(" ")),
+        }
+    }
+}
+
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
     move |source| OutputError::Io {
         path: path.display().to_string(),
@@ -70,9 +87,13 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
 }
 
 /// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
+/// A failed write removes its temporary (a full disk leaves nothing half-written behind).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     let tmp = tmp_name(path);
-    std::fs::write(&tmp, bytes).map_err(io_err(&tmp))?;
+    if let Err(e) = std::fs::write(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io_err(path)(e));
+    }
     std::fs::rename(&tmp, path).map_err(io_err(path))
 }
 
@@ -485,41 +506,76 @@ impl RunOutput {
     }
 
     /// Writes the point fields of the current state (HDF5 + XDMF index), measures the crack (if tracked) and
-    /// draws a damage map (PNG); in 3D both of the section layer ([`RunOutput::set_section`]).
+    /// draws a damage map (PNG); in 3D both of the section layer ([`RunOutput::set_section`]): records
+    /// the snapshot ([`RunOutput::note_snapshot`]), then writes it ([`RunOutput::write_snapshot`]).
     pub fn snapshot<const D: usize>(&mut self, state: &State<D>) -> Result<(), OutputError> {
+        self.note_snapshot(state);
+        self.write_snapshot(state)
+    }
+
+    /// Records the snapshot of `state` (its fields file, the crack measured on it) without writing it, so
+    /// that a checkpoint of the same step, written before the snapshot's files, lists it.
+    pub fn note_snapshot<const D: usize>(&mut self, state: &State<D>) {
+        if !self.writes {
+            return;
+        }
+        self.snapshots.retain(|s| s.step != state.counters.step);
+        self.snapshots.push(Snapshot {
+            step: state.counters.step,
+            time: state.counters.time,
+            file: file::numbered(file::FIELDS, state.counters.step),
+        });
+        let Some((tip, criteria)) = &self.crack else {
+            return;
+        };
+        let (section, _) = self.section(state);
+        let p = &state.particles;
+        let x: Vec<Vector2<f64>> = section.iter().map(|&k| xy(&p.x[k])).collect();
+        let damage: Vec<f64> = section.iter().map(|&k| p.damage[k]).collect();
+        let mut measured = crack::measure(
+            &x,
+            &damage,
+            *tip,
+            self.cell_size,
+            p.point_spacing(),
+            criteria,
+            state.counters.time,
+        );
+        measured.dissipated = p
+            .dissipated
+            .iter()
+            .fold([0.0; 2], |a, d| [a[0] + d[0], a[1] + d[1]]);
+        measured.nonlocal_points = section
+            .iter()
+            .filter(|&&i| {
+                p.damage[i] >= criteria.damage_threshold
+                    && p.nonlocal_damage[i] >= 0.5 * p.damage[i]
+            })
+            .count();
+        self.cracks.retain(|c| c.time != measured.time);
+        self.cracks.push(measured);
+    }
+
+    /// Writes the snapshot of `state` that [`RunOutput::note_snapshot`] recorded: `fields_<step>.h5`
+    /// (written, then renamed), `fields.xdmf` for ParaView, `crack.json` (if the crack is tracked) and the
+    /// damage map.
+    pub fn write_snapshot<const D: usize>(&self, state: &State<D>) -> Result<(), OutputError> {
         if !self.writes {
             return Ok(());
         }
-        self.write_fields(state)?;
-        let (section, layer) = self.section(state);
-        if let Some((tip, criteria)) = &self.crack {
-            let p = &state.particles;
-            let x: Vec<Vector2<f64>> = section.iter().map(|&k| xy(&p.x[k])).collect();
-            let damage: Vec<f64> = section.iter().map(|&k| p.damage[k]).collect();
-            let mut measured = crack::measure(
-                &x,
-                &damage,
-                *tip,
-                self.cell_size,
-                p.point_spacing(),
-                criteria,
-                state.counters.time,
-            );
-            measured.dissipated = p
-                .dissipated
-                .iter()
-                .fold([0.0; 2], |a, d| [a[0] + d[0], a[1] + d[1]]);
-            measured.nonlocal_points = section
-                .iter()
-                .filter(|&&i| {
-                    p.damage[i] >= criteria.damage_threshold
-                        && p.nonlocal_damage[i] >= 0.5 * p.damage[i]
-                })
-                .count();
-            self.cracks.retain(|c| c.time != measured.time);
-            self.cracks.push(measured);
-            self.write_cracks()?;
+        let path = self
+            .dir
+            .join(file::numbered(file::FIELDS, state.counters.step));
+        let tmp = tmp_name(&path);
+        if let Err(e) = self.write_h5(&tmp, state) {
+            // A full disk leaves no half-written temporary behind.
+            let _ = std::fs::remove_file(&tmp);
+            return Err(OutputError::hdf5(&path, &e));
         }
+        std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
+        self.write_xdmf(state.particles.len())?;
+        self.write_cracks()?;
+        let (section, layer) = self.section(state);
         self.damage_map(
             state,
             &section,
@@ -528,30 +584,6 @@ impl RunOutput {
                 .dir
                 .join(file::numbered(file::DAMAGE_MAP, state.counters.step)),
         )
-    }
-
-    /// The point fields of `state` (2D or 3D) as `fields_<step>.h5` (written, then renamed), indexed in
-    /// `fields.xdmf` for ParaView: the part of [`RunOutput::snapshot`] that does not depend on the
-    /// dimension (a 3D run's snapshot; crack metrics and damage maps are plane).
-    pub fn write_fields<const D: usize>(&mut self, state: &State<D>) -> Result<(), OutputError> {
-        if !self.writes {
-            return Ok(());
-        }
-        let file = file::numbered(file::FIELDS, state.counters.step);
-        let path = self.dir.join(&file);
-        let tmp = tmp_name(&path);
-        self.write_h5(&tmp, state).map_err(|e| OutputError::Hdf5 {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
-        std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
-        self.snapshots.retain(|s| s.step != state.counters.step);
-        self.snapshots.push(Snapshot {
-            step: state.counters.step,
-            time: state.counters.time,
-            file,
-        });
-        self.write_xdmf(state.particles.len())
     }
 
     fn write_h5<const D: usize>(&self, path: &Path, state: &State<D>) -> hdf5_metno::Result<()> {
@@ -603,7 +635,9 @@ impl RunOutput {
             put_text(&ds, "units", field.units)?;
             put_text(&ds, "description", field.description)?;
         }
-        Ok(())
+        // A write that fails on the way to the disk (full, or above the file-size limit) is reported here:
+        // dropping the file would close it silently, truncated.
+        f.flush()
     }
 
     /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0

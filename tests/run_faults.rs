@@ -1,0 +1,502 @@
+//! Runs survive what happens to real runs: the real binary on a tiny CT specimen (360 points) under the
+//! faults of docs/bad-input.md, "While running":
+//!
+//! * a second run into a directory that a run is writing is refused, also with --overwrite or --resume;
+//! * Ctrl-C on several processes stops them all at the same step with a complete checkpoint of it;
+//! * a write that fails (a file-size limit standing in for a full disk) leaves a resumable state and a
+//!   run.json that says "failed";
+//! * `crack` refuses corrupt snapshots.
+//!
+//! Every child process runs under `timeout`, so a hang fails the test instead of blocking it.
+
+use mpm_concrete::checkpoint;
+use mpm_concrete::rundir::RunRecord;
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+
+const EXE: &str = env!("CARGO_BIN_EXE_mpm-concrete");
+
+/// The CT specimen of tests/run_safety.rs: 360 points, 1 us steps, a few ms per step.
+const TINY: &str = r#"
+[run]
+name = "tiny-ct"
+steps = 4
+output_every = 2
+
+[grid]
+cell_size = 4.0
+
+[ct]
+width = 40.0
+height = 40.0
+notch_length = 20.0
+notch_width = 8.0
+load_zone = [0.0, 8.0]
+loading_rate = 4300.0
+rise_time = 2.0e-6
+material = { model = "microplane", preset = "paper" }
+"#;
+
+/// A fresh scratch directory holding `tiny.toml`.
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mpmc-faults-{}-{tag}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    std::fs::write(dir.join("tiny.toml"), TINY).expect("config");
+    dir
+}
+
+/// `timeout 120 mpm-concrete ARGS` in `cwd`, not yet started.
+fn command(cwd: &Path, args: &[&str]) -> Command {
+    let mut c = Command::new("timeout");
+    c.current_dir(cwd).args(["120", EXE]).args(args);
+    c
+}
+
+/// Runs the program in `cwd` to its end.
+fn run(cwd: &Path, args: &[&str]) -> Output {
+    command(cwd, args).output().expect("start mpm-concrete")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn succeeds(o: &Output) {
+    assert!(o.status.success(), "{}\n{}", o.status, stderr(o));
+}
+
+/// Exit code 2, one `error:` line holding every `needle`, no panic; returns the line.
+fn refused(o: &Output, needles: &[&str]) -> String {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(lines.len(), 1, "one error line expected:\n{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(lines[0].contains(n), "`{n}` missing in: {}", lines[0]);
+    }
+    lines[0].to_owned()
+}
+
+fn record(dir: &Path) -> RunRecord {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).expect("run.json"))
+        .expect("run.json parses")
+}
+
+/// The lines of a child's standard error.
+type ErrLines = std::io::Lines<std::io::BufReader<std::process::ChildStderr>>;
+
+/// Reads `child`'s standard error until a line starts with `prefix`; returns what it read and the rest.
+fn wait_for_line(child: &mut Child, prefix: &str) -> (String, ErrLines) {
+    let mut lines = std::io::BufReader::new(child.stderr.take().expect("piped stderr")).lines();
+    let mut seen = String::new();
+    while let Some(Ok(line)) = lines.next() {
+        seen += &line;
+        seen.push('\n');
+        if line.starts_with(prefix) {
+            return (seen, lines);
+        }
+    }
+    panic!("no line starting with `{prefix}` in:\n{seen}");
+}
+
+/// A long run of the tiny specimen into `d` in `dir`, started and past its second step.
+fn long_run(dir: &Path) -> (Child, ErrLines) {
+    let mut child = command(
+        dir,
+        &[
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--steps",
+            "2000",
+        ],
+    )
+    .stderr(Stdio::piped())
+    .spawn()
+    .expect("start mpm-concrete");
+    let (_, rest) = wait_for_line(&mut child, "step 2:");
+    (child, rest)
+}
+
+#[test]
+fn a_directory_that_a_run_is_writing_is_refused_to_a_second_run() {
+    let dir = scratch("lock");
+    let (mut first, rest) = long_run(&dir);
+    let pid = first.id();
+    let holder = record(&dir.join("d"))
+        .holder
+        .expect("a running run names its holder");
+    // `timeout` runs the program as its child.
+    assert_ne!(holder.pid, pid);
+    let needles = [
+        "d: another run is writing into this directory (process ".to_owned(),
+        format!("process {} on {}", holder.pid, holder.host),
+        "wait until it has ended".to_owned(),
+    ];
+    let needles: Vec<&str> = needles.iter().map(String::as_str).collect();
+    for extra in [
+        &[][..],
+        &["--overwrite"],
+        &["--resume", "--steps", "3000"],
+        &["--set", "ct.loading_rate=35.0"],
+    ] {
+        let mut args = vec!["run", "tiny.toml", "--quiet", "--output", "d"];
+        args.extend(extra);
+        refused(&run(&dir, &args), &needles);
+    }
+    Command::new("kill")
+        .args(["-INT", &holder.pid.to_string()])
+        .status()
+        .expect("kill");
+    let rest: Vec<String> = rest.map_while(Result::ok).collect();
+    assert_eq!(first.wait().expect("wait").code(), Some(1), "{rest:?}");
+    let r = record(&dir.join("d"));
+    assert_eq!(r.status, "interrupted");
+    assert_eq!(r.holder, None, "a run that ended holds nothing");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn of_two_runs_started_together_into_one_directory_one_runs() {
+    let dir = scratch("race");
+    let start = |config: &str| {
+        command(&dir, &["run", config, "--quiet", "--output", "d"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start mpm-concrete")
+    };
+    std::fs::write(dir.join("other.toml"), TINY.replace("4300.0", "1000.0")).unwrap();
+    let (a, b) = (start("tiny.toml"), start("other.toml"));
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    let codes = [a.status.code(), b.status.code()];
+    assert!(
+        codes == [Some(0), Some(2)] || codes == [Some(2), Some(0)],
+        "{codes:?}\n{}\n{}",
+        stderr(&a),
+        stderr(&b)
+    );
+    let (won, lost) = if codes[0] == Some(0) {
+        (&a, &b)
+    } else {
+        (&b, &a)
+    };
+    succeeds(won);
+    refused(lost, &["d"]);
+    assert_eq!(record(&dir.join("d")).status, "finished");
+    assert!(checkpoint::read_header(&dir.join("d")).is_ok());
+    std::fs::remove_dir_all(&dir).ok();
+}
+/// The files of `dir` whose names end in `.tmp` or hold `.tmp-` (the temporaries of unfinished writes).
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .expect("dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp") || n.contains(".tmp-"))
+        .collect()
+}
+
+/// The parent process id and the process group of process `pid` (from /proc).
+fn parent_and_group(pid: u32) -> (u32, u32) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("/proc/PID/stat");
+    // After the command's name in parentheses: state, ppid, pgrp.
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .expect("stat")
+        .1
+        .split_whitespace()
+        .collect();
+    (fields[1].parse().unwrap(), fields[2].parse().unwrap())
+}
+
+/// Runs the resume command `hint` (printed for `--steps 2000`) for two more steps than `done`, in `dir`;
+/// checks that it continued from step `done`.
+fn resume_two_more(dir: &Path, hint: &str, done: usize) {
+    let hint = hint.replace("--steps 2000", &format!("--steps {}", done + 2));
+    let o = Command::new("timeout")
+        .current_dir(dir)
+        .args(["120", "sh", "-c", &hint])
+        .output()
+        .expect("sh");
+    succeeds(&o);
+    assert!(
+        stderr(&o).contains(&format!("resuming at step {done} ")),
+        "{}",
+        stderr(&o)
+    );
+    let r = record(&dir.join("d"));
+    assert_eq!(
+        (r.status.as_str(), r.steps_done, r.resumed_from_step),
+        ("finished", done + 2, Some(done))
+    );
+    let history = std::fs::read_to_string(dir.join("d/history.csv")).expect("history");
+    let steps: Vec<usize> = history
+        .lines()
+        .filter_map(|l| l.split(',').next()?.parse().ok())
+        .collect();
+    assert_eq!(
+        steps,
+        (1..=done + 2).collect::<Vec<_>>(),
+        "one row per step"
+    );
+    assert!(temporaries(&dir.join("d")).is_empty());
+}
+
+/// Ctrl-C on `mpirun -n 2` (SIGINT to its process group as a terminal sends it, or to mpirun alone; Open
+/// MPI forwards it to the processes as SIGTERM): both processes stop after the same step, the checkpoint
+/// of that step is complete, run.json says so, process 0 alone prints the resume command, which works.
+#[test]
+fn ctrl_c_on_several_processes_stops_them_at_one_saved_step() {
+    for target in ["group", "launcher"] {
+        let dir = scratch(&format!("mpi-int-{target}"));
+        let mut child = Command::new("timeout")
+            .current_dir(&dir)
+            .args(["120", "setsid", "mpirun", "--oversubscribe", "-n", "2", EXE])
+            .args([
+                "run",
+                "tiny.toml",
+                "--quiet",
+                "--output",
+                "d",
+                "--steps",
+                "2000",
+            ])
+            .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+            .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start timeout/setsid/mpirun (is Open MPI installed?)");
+        let (mut err, rest) = wait_for_line(&mut child, "step 3:");
+        // run.json names process 0; its parent is mpirun, the leader of its own process group.
+        let rank0 = record(&dir.join("d")).holder.expect("holder").pid;
+        let (mpirun, group) = parent_and_group(rank0);
+        let whom = match target {
+            "group" => format!("-{group}"),
+            _ => mpirun.to_string(),
+        };
+        let kill = Command::new("kill")
+            .args(["-INT", "--", &whom])
+            .status()
+            .expect("kill");
+        assert!(kill.success());
+        for line in rest.map_while(Result::ok) {
+            err += &line;
+            err.push('\n');
+        }
+        let code = child.wait().expect("wait").code();
+        assert!(
+            code != Some(0) && code != Some(124),
+            "{target}: {code:?}\n{err}"
+        );
+        let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+        assert_eq!(errors.len(), 1, "{target}: process 0 alone reports:\n{err}");
+        let (_, hint) = errors[0]
+            .split_once(": continue with ")
+            .unwrap_or_else(|| panic!("{target}: no resume command in:\n{err}"));
+        let d = dir.join("d");
+        let done = checkpoint::read_header(&d)
+            .expect("checkpoint")
+            .counters
+            .step;
+        let r = record(&d);
+        assert_eq!(
+            (r.status.as_str(), r.steps_done),
+            ("interrupted", done),
+            "{err}"
+        );
+        assert!(
+            errors[0].contains(&format!("interrupted after step {done};")),
+            "{err}"
+        );
+        assert!(d.join(format!("fields_{done:06}.h5")).is_file());
+        assert!(temporaries(&d).is_empty(), "{:?}", temporaries(&d));
+        resume_two_more(&dir, hint, done);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+/// `mpm-concrete ARGS` in `dir` under `timeout`, with writes limited to files of `kib` KiB (SIGXFSZ
+/// ignored, so a write beyond it fails with EFBIG, as on a full disk). Open MPI's start-up keeps its
+/// shared memory in files, which the limit would stop: `PMIX_MCA_gds=hash` keeps it in memory.
+fn run_limited(dir: &Path, kib: usize, args: &str) -> Output {
+    let script = format!("trap '' XFSZ; ulimit -f {kib}; exec {EXE} {args}");
+    Command::new("timeout")
+        .current_dir(dir)
+        .args(["120", "bash", "-c", &script])
+        .env("PMIX_MCA_gds", "hash")
+        .output()
+        .expect("timeout/bash")
+}
+
+/// A write that fails after the checkpoint of its step (here the index of the point fields grows beyond the
+/// limit) leaves that checkpoint, run.json says `failed` at the real step, the message names the file
+/// and the cause once, and the printed command resumes (writing the step's fields again if they are
+/// missing); a failure before any checkpoint says so, and the refusal of a new run does not offer
+/// --resume.
+#[test]
+fn a_failed_write_leaves_a_resumable_state_and_a_failed_record() {
+    let dir = scratch("full");
+    // The checkpoint grows by about 1.4 kB per step, the fields' index by 3.3 kB per snapshot: with one
+    // snapshot per step the index passes 400 KiB first, near step 120.
+    let o = run_limited(
+        &dir,
+        400,
+        "run tiny.toml --quiet --output d --steps 2000 --set run.output_every=1",
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .expect("error line");
+    assert_eq!(line.matches("File too large").count(), 1, "{line}");
+    assert!(line.contains("d/fields.xdmf"), "{line}");
+    let d = dir.join("d");
+    let done = checkpoint::read_header(&d)
+        .expect("checkpoint")
+        .counters
+        .step;
+    assert!(done > 10, "{done}");
+    let r = record(&d);
+    assert_eq!((r.status.as_str(), r.steps_done), ("failed", done), "{err}");
+    assert!(r.note.unwrap_or_default().contains("fields.xdmf"));
+    assert!(temporaries(&d).is_empty(), "{:?}", temporaries(&d));
+    refused(
+        &run(&dir, &["run", "tiny.toml", "--quiet", "--output", "d"]),
+        &[
+            &format!("failed at step {done} of 2000"),
+            "--resume to continue",
+        ],
+    );
+    // As if the fields file of that step had failed: the resumed run writes it again.
+    let fields = d.join(format!("fields_{done:06}.h5"));
+    std::fs::remove_file(&fields).expect("fields of the last step");
+    let (_, hint) = line
+        .split_once("(e.g. space freed): ")
+        .expect("resume command");
+    resume_two_more(&dir, hint, done);
+    assert!(fields.is_file());
+
+    // Before the first checkpoint: nothing to resume, and no offer to.
+    let o = run_limited(&dir, 100, "run tiny.toml --quiet --output e --steps 10");
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(
+            "checkpoint.h5: HDF5: writing failed: File too large; no checkpoint was written"
+        ),
+        "{err}"
+    );
+    let e = dir.join("e");
+    assert!(!e.join("checkpoint.h5").exists() && temporaries(&e).is_empty());
+    assert_eq!(record(&e).status, "failed");
+    refused(
+        &run(&dir, &["run", "tiny.toml", "--quiet", "--output", "e"]),
+        &["failed at step 1 of 10", "it left no checkpoint to resume"],
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Sets point 0 of the dataset `name` of the snapshot `file` to `value`.
+fn corrupt_point(file: &Path, name: &str, value: f64) {
+    let f = hdf5_metno::File::open_rw(file).expect("open the snapshot");
+    let ds = f.dataset(name).expect("dataset");
+    let mut values: Vec<f64> = ds.read_raw().expect("read");
+    values[0] = value;
+    ds.write_raw(&values).expect("write");
+}
+
+/// `crack RUN` verifies the snapshots it reads as a checkpoint is verified: a non-finite value or a damage
+/// outside [0, 1] is refused, naming the file and the dataset, and crack.json is not rewritten.
+#[test]
+fn crack_refuses_corrupt_snapshots_and_keeps_crack_json() {
+    let dir = scratch("crack-corrupt");
+    succeeds(&run(
+        &dir,
+        &["run", "tiny.toml", "--quiet", "--output", "d"],
+    ));
+    let d = dir.join("d");
+    let snapshot = d.join("fields_000002.h5");
+    let good = std::fs::read(&snapshot).expect("snapshot");
+    let crack_json = std::fs::read(d.join("crack.json")).expect("crack.json");
+    for (name, value, shown) in [
+        ("damage", f64::NAN, "holds NaN at point 0"),
+        ("damage", 1.0 + 1e-9, "(allowed: values in [0, 1])"),
+        ("damage", -0.5, "holds -0.5 at point 0"),
+        (
+            "position",
+            f64::INFINITY,
+            "holds inf at point 0 (allowed: finite values)",
+        ),
+        ("nonlocal_damage", f64::NAN, "`nonlocal_damage` holds NaN"),
+    ] {
+        std::fs::write(&snapshot, &good).expect("restore");
+        corrupt_point(&snapshot, name, value);
+        refused(
+            &run(&dir, &["crack", "d"]),
+            &[
+                "d/fields_000002.h5",
+                &format!("dataset `{name}`"),
+                shown,
+                "corrupt",
+            ],
+        );
+        assert_eq!(
+            std::fs::read(d.join("crack.json")).expect("crack.json"),
+            crack_json
+        );
+    }
+    std::fs::write(&snapshot, &good).expect("restore");
+    succeeds(&run(&dir, &["crack", "d"]));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A block and a rigid body 500 mm away: the grid grows from 11 x 11 to 258 x 258 cells.
+const FAR: &str = r#"
+[run]
+name = "far"
+steps = 1
+
+[grid]
+cell_size = 2.0
+
+[[body]]
+name = "b"
+density = 2.4e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
+material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
+
+[[rigid_body]]
+name = "far"
+geometry = { include = [{ type = "rect", min = [500.0, 500.0], max = [504.0, 504.0] }] }
+y = "fixed"
+"#;
+
+/// A rigid body far from the bodies that grows the grid is warned about, with the grid's size with and
+/// without it, and under mpirun once (by process 0).
+#[test]
+fn a_far_rigid_body_is_warned_about_once() {
+    let dir = scratch("far");
+    std::fs::write(dir.join("far.toml"), FAR).expect("config");
+    let warning =
+        "the grid is 258x258 cells, the bodies alone need 11x11: a [[rigid_body]] lies far";
+    let o = run(&dir, &["run", "far.toml", "--quiet", "--output", "d"]);
+    succeeds(&o);
+    assert_eq!(stderr(&o).matches(warning).count(), 1, "{}", stderr(&o));
+    let o = Command::new("timeout")
+        .current_dir(&dir)
+        .args(["120", "mpirun", "--oversubscribe", "-n", "2", EXE])
+        .args(["run", "far.toml", "--quiet", "--output", "e"])
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .output()
+        .expect("start timeout/mpirun (is Open MPI installed?)");
+    succeeds(&o);
+    assert_eq!(stderr(&o).matches(warning).count(), 1, "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).ok();
+}
