@@ -22,6 +22,22 @@
 
 use nalgebra::{Matrix2, SVector, Vector2};
 
+/// A converged solve as the contact updates read it.
+#[derive(Debug, Clone, Copy)]
+pub struct Converged<'a> {
+    /// The solution: displacement increments (mm), `nf` unknowns per node copy.
+    pub x: &'a [f64],
+    /// The physical residual at `x`: the forces of the devices and of the other bodies on the nodes (N per
+    /// mm thickness; N in 3D).
+    pub phys: &'a [f64],
+    /// Unknowns per node.
+    pub nf: usize,
+    /// Tolerance of the force sign tests (N per mm thickness; N in 3D).
+    pub force_tol: f64,
+    /// Tolerance of the gap sign tests (mm).
+    pub gap_tol: f64,
+}
+
 /// The contact law of a rigid device (`[[rigid_body]] contact = {...}`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Contact {
@@ -202,15 +218,10 @@ impl DeviceContact {
     /// sticking), sticking nodes outside the Coulomb cone slip, slipping nodes whose slip reverses stick.
     /// Returns the number of changes.
     ///
-    /// `force_tol` (N per mm thickness) and `gap_tol` (mm) are the tolerances of the sign tests.
-    pub fn update(
-        &mut self,
-        x: &[f64],
-        phys: &[f64],
-        nf: usize,
-        force_tol: f64,
-        gap_tol: f64,
-    ) -> usize {
+    /// `at.force_tol` (N per mm thickness) and `at.gap_tol` (mm) are the tolerances of the sign tests.
+    pub fn update(&mut self, at: Converged<'_>) -> usize {
+        let (x, phys, nf) = (at.x, at.phys, at.nf);
+        let (force_tol, gap_tol) = (at.force_tol, at.gap_tol);
         let (n, t, mu) = (self.normal, self.tangent(), self.friction);
         let closed = self.closed_status();
         let mut changes = 0;
@@ -452,14 +463,9 @@ impl<const D: usize> BodyContact<D> {
     /// Updates the statuses from a converged solve (`x` the solution, `phys` the physical residual):
     /// pairs pulling by more than `force_tol` (N per mm thickness; N in 3D) open, open pairs overlapping
     /// by more than `gap_tol` (mm) close. Returns the number of changes.
-    pub fn update(
-        &mut self,
-        x: &[f64],
-        phys: &[f64],
-        nf: usize,
-        force_tol: f64,
-        gap_tol: f64,
-    ) -> usize {
+    pub fn update(&mut self, at: Converged<'_>) -> usize {
+        let (x, phys, nf) = (at.x, at.phys, at.nf);
+        let (force_tol, gap_tol) = (at.force_tol, at.gap_tol);
         let mut changes = 0;
         for c in &mut self.pairs {
             let (a, b) = (c.row_a * nf, c.row_b * nf);
@@ -498,6 +504,17 @@ pub fn rotation(theta: f64) -> Matrix2<f64> {
 mod tests {
     use super::*;
 
+    /// The converged iterate `x`, `phys` of one 2D node with tight tolerances.
+    fn converged<'a>(x: &'a [f64], phys: &'a [f64]) -> Converged<'a> {
+        Converged {
+            x,
+            phys,
+            nf: 2,
+            force_tol: 1e-12,
+            gap_tol: 1e-12,
+        }
+    }
+
     fn device(status: NodeStatus, friction: f64) -> DeviceContact {
         DeviceContact {
             normal: Vector2::new(0.0, 1.0),
@@ -516,23 +533,23 @@ mod tests {
     fn statuses_follow_the_sign_tests() {
         // Compressive normal force (+y on the specimen), tangential force inside the cone: stays stuck.
         let mut d = device(NodeStatus::Stick, 0.5);
-        assert_eq!(d.update(&[0.2, -0.4], &[0.4, 1.0], 2, 1e-12, 1e-12), 0);
+        assert_eq!(d.update(converged(&[0.2, -0.4], &[0.4, 1.0])), 0);
         // Outside the cone: slips against the force on the specimen (F_x > 0: slides towards -x = +t).
-        assert_eq!(d.update(&[0.2, -0.4], &[0.6, 1.0], 2, 1e-12, 1e-12), 1);
+        assert_eq!(d.update(converged(&[0.2, -0.4], &[0.6, 1.0])), 1);
         assert_eq!(d.nodes[0].status, NodeStatus::Slip(1));
         // Tensile: opens.
-        d.update(&[0.2, -0.4], &[0.0, -1.0], 2, 1e-12, 1e-12);
+        d.update(converged(&[0.2, -0.4], &[0.0, -1.0]));
         assert_eq!(d.nodes[0].status, NodeStatus::Open);
         // Open and penetrating (gap 0.1 + (-0.5 + 0.3) < 0) without sliding: closes, sticking.
-        d.update(&[0.2, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        d.update(converged(&[0.2, -0.5], &[0.0, 0.0]));
         assert_eq!(d.nodes[0].status, NodeStatus::Stick);
         // Closing while sliding (t . (du - du_b) = -(0 - 0.2) > 0): slips that way.
         d.nodes[0].status = NodeStatus::Open;
-        d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        d.update(converged(&[0.0, -0.5], &[0.0, 0.0]));
         assert_eq!(d.nodes[0].status, NodeStatus::Slip(1));
         // Frictionless: closes sliding.
         let mut d = device(NodeStatus::Open, 0.0);
-        d.update(&[0.0, -0.5], &[0.0, 0.0], 2, 1e-12, 1e-12);
+        d.update(converged(&[0.0, -0.5], &[0.0, 0.0]));
         assert_eq!(d.nodes[0].status, NodeStatus::Slide);
     }
 

@@ -201,17 +201,10 @@ impl<const D: usize> ContactSet<D> {
 
     /// Updates the statuses at the converged iterate `x` with the forces `phys`; returns the number of
     /// changes.
-    pub(super) fn update(
-        &mut self,
-        x: &[f64],
-        phys: &[f64],
-        nf: usize,
-        force_tol: f64,
-        gap_tol: f64,
-    ) -> usize {
+    pub(super) fn update(&mut self, at: Converged<'_>) -> usize {
         match self {
-            Self::Device(d) => d.contact.update(x, phys, nf, force_tol, gap_tol),
-            Self::Bodies(b) => b.update(x, phys, nf, force_tol, gap_tol),
+            Self::Device(d) => d.contact.update(at),
+            Self::Bodies(b) => b.update(at),
         }
     }
 

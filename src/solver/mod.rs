@@ -7,7 +7,9 @@
 
 use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
 use crate::boundary::{Motion, prescribed_acceleration, prescribed_increment};
-use crate::contact::{self, BodyContact, ContactNode, DeviceContact, NodePair, NodeStatus};
+use crate::contact::{
+    self, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus,
+};
 use crate::dofs::{DofMap, INACTIVE};
 use crate::grid::Grid;
 use crate::material::Material;

@@ -103,9 +103,16 @@ fn update_contacts<const D: usize>(
         .map(|c| c.force_scale(phys, nf))
         .fold(0.0, f64::max);
     let (force_tol, gap_tol) = (1e-6 * force_scale.max(1e-300), 1e-6 * h);
+    let at = Converged {
+        x: xs,
+        phys,
+        nf,
+        force_tol,
+        gap_tol,
+    };
     let mut changes = 0;
     for c in contacts.iter_mut() {
-        changes += c.update(xs, phys, nf, force_tol, gap_tol);
+        changes += c.update(at);
     }
     let mut statuses = Vec::new();
     for c in contacts.iter() {
