@@ -38,6 +38,38 @@ pub struct Converged<'a> {
     pub gap_tol: f64,
 }
 
+/// Where a contact writes its Jacobian rows in the matrix values being filled.
+pub trait RowMap {
+    /// The start of block row `a` in the values, its number of block columns and the position of its
+    /// diagonal block; `None`: the row is not among the values (e.g. owned by another process).
+    fn row_of(&self, a: usize) -> Option<(usize, usize, usize)>;
+    /// The position of entry (row component `i`, block column `pos`, column component `k`) within a
+    /// block row of `ncols` block columns.
+    fn offset(&self, ncols: usize, i: usize, pos: usize, k: usize) -> usize;
+}
+
+/// A [`RowMap`] of two functions: `row_of` and `offset` as the trait's methods.
+pub struct BlockRows<R, O> {
+    /// [`RowMap::row_of`].
+    pub row_of: R,
+    /// [`RowMap::offset`].
+    pub offset: O,
+}
+
+impl<R, O> RowMap for BlockRows<R, O>
+where
+    R: Fn(usize) -> Option<(usize, usize, usize)>,
+    O: Fn(usize, usize, usize, usize) -> usize,
+{
+    fn row_of(&self, a: usize) -> Option<(usize, usize, usize)> {
+        (self.row_of)(a)
+    }
+
+    fn offset(&self, ncols: usize, i: usize, pos: usize, k: usize) -> usize {
+        (self.offset)(ncols, i, pos, k)
+    }
+}
+
 /// The contact law of a rigid device (`[[rigid_body]] contact = {...}`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Contact {
@@ -140,19 +172,8 @@ impl DeviceContact {
         }
     }
 
-    /// Rewrites the Jacobian block rows of the closed nodes in place: `row_of(a)` gives the start of
-    /// block row `a` in `values`, its number of block columns and the position of its diagonal block
-    /// (`None`: the row is not in `values`, e.g. owned by another process);
-    /// `offset(ncols, i, pos, k)` the position of entry (row component `i`, block column `pos`, column
-    /// component `k`) within the block row.
-    pub fn jacobian_rows(
-        &self,
-        nf: usize,
-        s: f64,
-        row_of: impl Fn(usize) -> Option<(usize, usize, usize)>,
-        values: &mut [f64],
-        offset: impl Fn(usize, usize, usize, usize) -> usize,
-    ) {
+    /// Rewrites the Jacobian block rows of the closed nodes in place, where `rows` places them.
+    pub fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
         let (n, t) = (self.normal, self.tangent());
         let ((rn, sn), (rt, st)) = self.row_order();
         let mut tangential = Vec::new();
@@ -160,10 +181,10 @@ impl DeviceContact {
             if !c.status.closed() {
                 continue;
             }
-            let Some((start, ncols, diag)) = row_of(c.row) else {
+            let Some((start, ncols, diag)) = rows.row_of(c.row) else {
                 continue;
             };
-            let at = |i, pos, k| start + offset(ncols, i, pos, k);
+            let at = |i, pos, k| start + rows.offset(ncols, i, pos, k);
             // The tangential row from the physical rows, before they are overwritten.
             tangential.clear();
             let w = match c.status {
@@ -385,8 +406,8 @@ impl<const D: usize> BodyContact<D> {
     pub fn residual_rows(&self, x: &[f64], r: &mut [f64], nf: usize, s: f64) {
         for c in self.pairs.iter().filter(|c| c.closed) {
             let n = c.normal;
-            let rows = c.rows();
-            let ((rn, sn, _), tangents) = (rows[0], &rows[1..]);
+            let constraint_rows = c.rows();
+            let ((rn, sn, _), tangents) = (constraint_rows[0], &constraint_rows[1..]);
             let (a, b) = (c.row_a * nf, c.row_b * nf);
             let (dua, dub, rb) = (block::<D>(x, a), block::<D>(x, b), block::<D>(r, b));
             for d in 0..D {
@@ -399,19 +420,12 @@ impl<const D: usize> BodyContact<D> {
         }
     }
 
-    /// Rewrites the Jacobian block rows of the closed pairs in place (`row_of` and `offset` as in
-    /// [`DeviceContact::jacobian_rows`]; the two rows of a pair have the same block columns).
-    pub fn jacobian_rows(
-        &self,
-        nf: usize,
-        s: f64,
-        row_of: impl Fn(usize) -> Option<(usize, usize, usize)>,
-        values: &mut [f64],
-        offset: impl Fn(usize, usize, usize, usize) -> usize,
-    ) {
+    /// Rewrites the Jacobian block rows of the closed pairs in place (placed by `rows`;
+    /// the two rows of a pair have the same block columns).
+    pub fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
         for c in self.pairs.iter().filter(|c| c.closed) {
             let (Some((sa, ncols, diag_a)), Some((sb, ncols_b, diag_b))) =
-                (row_of(c.row_a), row_of(c.row_b))
+                (rows.row_of(c.row_a), rows.row_of(c.row_b))
             else {
                 continue;
             };
@@ -420,24 +434,25 @@ impl<const D: usize> BodyContact<D> {
                 "the rows of a contact pair share their columns"
             );
             let n = c.normal;
-            let rows = c.rows();
-            let ((rn, sn, _), tangents) = (rows[0], &rows[1..]);
+            let constraint_rows = c.rows();
+            let ((rn, sn, _), tangents) = (constraint_rows[0], &constraint_rows[1..]);
             for pos in 0..ncols {
                 for k in 0..nf {
-                    let rb =
-                        SVector::<f64, D>::from_fn(|d, _| values[sb + offset(ncols, d, pos, k)]);
+                    let rb = SVector::<f64, D>::from_fn(|d, _| {
+                        values[sb + rows.offset(ncols, d, pos, k)]
+                    });
                     for d in 0..D {
-                        values[sa + offset(ncols, d, pos, k)] += rb[d];
+                        values[sa + rows.offset(ncols, d, pos, k)] += rb[d];
                     }
                     for &(rt, st, t) in tangents {
-                        values[sb + offset(ncols, rt, pos, k)] = st * t.dot(&rb);
+                        values[sb + rows.offset(ncols, rt, pos, k)] = st * t.dot(&rb);
                     }
-                    values[sb + offset(ncols, rn, pos, k)] = 0.0;
+                    values[sb + rows.offset(ncols, rn, pos, k)] = 0.0;
                 }
             }
             for k in 0..D {
-                values[sb + offset(ncols, rn, diag_b, k)] = sn * s * n[k];
-                values[sb + offset(ncols, rn, diag_a, k)] = -sn * s * n[k];
+                values[sb + rows.offset(ncols, rn, diag_b, k)] = sn * s * n[k];
+                values[sb + rows.offset(ncols, rn, diag_a, k)] = -sn * s * n[k];
             }
         }
     }

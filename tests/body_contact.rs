@@ -242,7 +242,7 @@ fn bars_on_one_field_stay_bonded() {
 #[test]
 fn pair_rows_match_finite_differences() {
     use contact_rows::{LinearRows, NF, row_of};
-    use mpm_concrete::contact::{BodyContact, NodePair};
+    use mpm_concrete::contact::{BlockRows, BodyContact, NodePair};
     let rows = LinearRows::new();
     let n = 2 * NF;
     let x0: Vec<f64> = (0..n).map(|i| 0.01 * (i as f64 + 1.0)).collect();
@@ -268,9 +268,11 @@ fn pair_rows_match_finite_differences() {
             r
         };
         let rewrite = |values: &mut [f64], layout: mpm_concrete::petsc::BlockLayout| {
-            bodies.jacobian_rows(NF, s, row_of, values, |ncols, i, pos, k| {
-                layout.offset(ncols, NF, i, pos, k)
-            })
+            let rows = BlockRows {
+                row_of,
+                offset: |ncols, i, pos, k| layout.offset(ncols, NF, i, pos, k),
+            };
+            bodies.jacobian_rows(NF, s, &rows, values)
         };
         let dense = rows.check(residual, rewrite, &x0, &format!("normal {normal:?}"));
         // Solve the rewritten (linear) system with one Newton step from x0 and check the pair.

@@ -241,7 +241,7 @@ fn frictionless_block_slides_at_constant_speed() {
 #[test]
 fn contact_rows_match_finite_differences() {
     use contact_rows::{LinearRows, NF, row_of};
-    use mpm_concrete::contact::{ContactNode, DeviceContact, NodeStatus};
+    use mpm_concrete::contact::{BlockRows, ContactNode, DeviceContact, NodeStatus};
     let rows = LinearRows::new();
     let x0: Vec<f64> = (0..NF * 2).map(|i| 0.01 * (i as f64 + 1.0)).collect();
     for status in [
@@ -268,9 +268,11 @@ fn contact_rows_match_finite_differences() {
             r
         };
         let rewrite = |values: &mut [f64], layout: mpm_concrete::petsc::BlockLayout| {
-            d.jacobian_rows(NF, s, row_of, values, |ncols, i, pos, k| {
-                layout.offset(ncols, NF, i, pos, k)
-            })
+            let rows = BlockRows {
+                row_of,
+                offset: |ncols, i, pos, k| layout.offset(ncols, NF, i, pos, k),
+            };
+            d.jacobian_rows(NF, s, &rows, values)
         };
         rows.check(residual, rewrite, &x0, &format!("{status:?}"));
     }

@@ -168,19 +168,11 @@ impl<const D: usize> ContactSet<D> {
         }
     }
 
-    /// Rewrites the Jacobian rows of the closed constraints in place (`row_of` and `offset` as in
-    /// [`DeviceContact::jacobian_rows`]).
-    pub(super) fn jacobian_rows(
-        &self,
-        nf: usize,
-        s: f64,
-        row_of: impl Fn(usize) -> Option<(usize, usize, usize)>,
-        values: &mut [f64],
-        offset: impl Fn(usize, usize, usize, usize) -> usize,
-    ) {
+    /// Rewrites the Jacobian rows of the closed constraints in place, where `rows` places them.
+    pub(super) fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
         match self {
-            Self::Device(d) => d.contact.jacobian_rows(nf, s, row_of, values, offset),
-            Self::Bodies(b) => b.jacobian_rows(nf, s, row_of, values, offset),
+            Self::Device(d) => d.contact.jacobian_rows(nf, s, rows, values),
+            Self::Bodies(b) => b.jacobian_rows(nf, s, rows, values),
         }
     }
 

@@ -8,7 +8,8 @@
 use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
 use crate::boundary::{Motion, prescribed_acceleration, prescribed_increment};
 use crate::contact::{
-    self, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus,
+    self, BlockRows, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus,
+    RowMap,
 };
 use crate::dofs::{DofMap, INACTIVE};
 use crate::grid::Grid;

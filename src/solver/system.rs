@@ -102,10 +102,12 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
                         .expect("diagonal block in the pattern");
                     Some((lo * nf * nf, hi - lo, diag))
                 };
+                let rows = BlockRows {
+                    row_of,
+                    offset: |ncols, i, pos, k| layout.offset(ncols, nf, i, pos, k),
+                };
                 for c in contacts {
-                    c.jacobian_rows(nf, s, row_of, values, |ncols, i, pos, k| {
-                        layout.offset(ncols, nf, i, pos, k)
-                    });
+                    c.jacobian_rows(nf, s, &rows, values);
                 }
             })
             .map_err(fatal);
