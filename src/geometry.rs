@@ -68,6 +68,19 @@ pub struct Seeding {
     pub body: u16,
 }
 
+#[cfg(test)]
+impl Seeding {
+    /// `n` points per cell and direction on cells of `h` (mm), concrete's density 2.4e-9 t/mm^3, body 0.
+    pub(crate) fn concrete(h: f64, n: usize) -> Self {
+        Self {
+            h,
+            points_per_cell: n,
+            density: 2.4e-9,
+            body: 0,
+        }
+    }
+}
+
 /// A malformed geometry: no include region, or a bad region.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum GeometryError {

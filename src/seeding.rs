@@ -147,18 +147,9 @@ mod tests {
         .unwrap()
     }
 
-    fn seeding(h: f64, n: usize) -> Seeding {
-        Seeding {
-            h,
-            points_per_cell: n,
-            density: 2.4e-9,
-            body: 0,
-        }
-    }
-
     #[test]
     fn particles_seed_ct_plate_count_volume_and_mass() {
-        let p = Particles::seed(&ct_geometry(), &seeding(1.0, 2)).unwrap();
+        let p = Particles::seed(&ct_geometry(), &Seeding::concrete(1.0, 2)).unwrap();
         assert_eq!(p.len(), 4 * (40_000 - 1_100));
         assert_eq!(p.len(), 155_600);
         let vol: f64 = p.vol0.iter().sum();
@@ -199,7 +190,7 @@ mod tests {
             }],
             exclude: vec![],
         };
-        let p = Particles::seed(&disk, &seeding(0.5, 2)).unwrap();
+        let p = Particles::seed(&disk, &Seeding::concrete(0.5, 2)).unwrap();
         let area: f64 = p.vol.iter().sum();
         assert!(
             (area / (std::f64::consts::PI * 100.0) - 1.0).abs() < 0.01,
@@ -230,7 +221,7 @@ mod tests {
             }],
             exclude: vec![],
         };
-        let p = Particles::seed(&tri, &seeding(1.0, 1)).unwrap();
+        let p = Particles::seed(&tri, &Seeding::concrete(1.0, 1)).unwrap();
         // Centres (i + 0.5, j + 0.5) with i + j + 1 <= 4: strictly inside for i + j <= 2 (6 points), on the
         // hypotenuse for i + j = 3 (4 points, kept because include regions are closed).
         assert_eq!(p.len(), 10);
@@ -239,13 +230,18 @@ mod tests {
             include: vec![rect([0.0, 0.0], [4.0, 4.0])],
             exclude: vec![rect([0.5, 0.0], [1.5, 4.0])],
         };
-        let p = Particles::seed(&strip, &seeding(1.0, 1)).unwrap();
+        let p = Particles::seed(&strip, &Seeding::concrete(1.0, 1)).unwrap();
         assert_eq!(p.len(), 16);
         let strip = Geometry {
             include: vec![rect([0.0, 0.0], [4.0, 4.0])],
             exclude: vec![rect([0.4, 0.0], [1.6, 4.0])],
         };
-        assert_eq!(Particles::seed(&strip, &seeding(1.0, 1)).unwrap().len(), 8);
+        assert_eq!(
+            Particles::seed(&strip, &Seeding::concrete(1.0, 1))
+                .unwrap()
+                .len(),
+            8
+        );
     }
 
     #[test]
@@ -255,7 +251,7 @@ mod tests {
             exclude: vec![],
         };
         assert_eq!(
-            Particles::seed(&empty, &seeding(1.0, 2)),
+            Particles::seed(&empty, &Seeding::concrete(1.0, 2)),
             Err(ParticleError::Geometry(GeometryError::EmptyGeometry))
         );
         let all_cut = Geometry {
@@ -263,12 +259,12 @@ mod tests {
             exclude: vec![rect([-1.0, -1.0], [3.0, 3.0])],
         };
         assert_eq!(
-            Particles::seed(&all_cut, &seeding(1.0, 2)),
+            Particles::seed(&all_cut, &Seeding::concrete(1.0, 2)),
             Err(ParticleError::NoPoints)
         );
         let bad_rect = rect_geometry([0.0, 0.0], [0.0, 2.0]);
         assert!(matches!(
-            Particles::seed(&bad_rect, &seeding(1.0, 2)),
+            Particles::seed(&bad_rect, &Seeding::concrete(1.0, 2)),
             Err(ParticleError::Geometry(GeometryError::InvalidRegion {
                 list: "include",
                 index: 0,
@@ -282,7 +278,7 @@ mod tests {
             }],
         };
         assert!(matches!(
-            Particles::seed(&bad_poly, &seeding(1.0, 2)),
+            Particles::seed(&bad_poly, &Seeding::concrete(1.0, 2)),
             Err(ParticleError::Geometry(GeometryError::InvalidRegion {
                 list: "exclude",
                 index: 0,
@@ -291,15 +287,15 @@ mod tests {
         ));
         let g = ct_geometry();
         assert!(matches!(
-            Particles::seed(&g, &seeding(0.0, 2)),
+            Particles::seed(&g, &Seeding::concrete(0.0, 2)),
             Err(ParticleError::InvalidSeeding { .. })
         ));
         assert!(matches!(
-            Particles::seed(&g, &seeding(1.0, 0)),
+            Particles::seed(&g, &Seeding::concrete(1.0, 0)),
             Err(ParticleError::InvalidSeeding { .. })
         ));
         assert!(matches!(
-            Particles::seed(&g, &seeding(1e-9, 2)),
+            Particles::seed(&g, &Seeding::concrete(1e-9, 2)),
             Err(ParticleError::InvalidSeeding { .. })
         ));
     }
@@ -323,14 +319,14 @@ mod tests {
     #[test]
     fn particles_append_and_history() {
         let g = ct_geometry();
-        let mut concrete = Particles::seed(&g, &seeding(2.0, 1)).unwrap();
+        let mut concrete = Particles::seed(&g, &Seeding::concrete(2.0, 1)).unwrap();
         let plate_geom = rect_geometry([0.0, 90.0], [30.0, 95.0]);
         let plate = Particles::seed(
             &plate_geom,
             &Seeding {
                 body: 1,
                 density: 7.85e-9,
-                ..seeding(1.0, 2)
+                ..Seeding::concrete(1.0, 2)
             },
         )
         .unwrap();

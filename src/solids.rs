@@ -176,15 +176,6 @@ mod tests {
     use crate::geometry::Seeding;
     use crate::particles::{ParticleError, Particles};
 
-    fn seeding(h: f64, n: usize) -> Seeding {
-        Seeding {
-            h,
-            points_per_cell: n,
-            density: 2.4e-9,
-            body: 0,
-        }
-    }
-
     #[test]
     fn a_notched_plate_seeds_its_volume_and_mass() {
         let plate: Solids = toml::from_str(
@@ -194,7 +185,7 @@ mod tests {
             "#,
         )
         .unwrap();
-        let p = Particles::<3>::seed(&plate, &seeding(1.0, 2)).unwrap();
+        let p = Particles::<3>::seed(&plate, &Seeding::concrete(1.0, 2)).unwrap();
         let volume = 20.0 * 20.0 * 5.0 - 11.0 * 2.0 * 5.0;
         assert_eq!(p.len(), 8 * volume as usize);
         assert!((p.vol0.iter().sum::<f64>() - volume).abs() < 1e-9);
@@ -232,7 +223,7 @@ mod tests {
             "#,
         )
         .unwrap();
-        let p = Particles::<3>::seed(&bodies, &seeding(0.5, 2)).unwrap();
+        let p = Particles::<3>::seed(&bodies, &Seeding::concrete(0.5, 2)).unwrap();
         let exact = std::f64::consts::PI * 25.0 * (8.0 + 4.0);
         let volume: f64 = p.vol0.iter().sum();
         assert!((volume / exact - 1.0).abs() < 0.01, "{volume} vs {exact}");
@@ -248,7 +239,7 @@ mod tests {
             include: vec![tilted],
             exclude: vec![],
         };
-        let p = Particles::<3>::seed(&body, &seeding(0.25, 2)).unwrap();
+        let p = Particles::<3>::seed(&body, &Seeding::concrete(0.25, 2)).unwrap();
         let exact = std::f64::consts::PI * 4.0 * 10.0;
         let volume: f64 = p.vol0.iter().sum();
         assert!((volume / exact - 1.0).abs() < 0.01, "{volume} vs {exact}");
@@ -263,7 +254,7 @@ mod tests {
             "#,
         )
         .unwrap();
-        let e = Particles::<3>::seed(&bad, &seeding(1.0, 2)).unwrap_err();
+        let e = Particles::<3>::seed(&bad, &Seeding::concrete(1.0, 2)).unwrap_err();
         assert!(
             matches!(
                 e,
@@ -287,7 +278,7 @@ mod tests {
             exclude: vec![],
         };
         assert_eq!(
-            Particles::<3>::seed(&empty, &seeding(1.0, 2)),
+            Particles::<3>::seed(&empty, &Seeding::concrete(1.0, 2)),
             Err(ParticleError::Geometry(GeometryError::EmptyGeometry))
         );
     }
