@@ -237,8 +237,42 @@ pub fn read_material_config(path: &Path) -> Result<MaterialConfig, DriverError> 
         .map_err(|e: toml::de::Error| err(e.to_string()))
 }
 
+/// Most load steps of a path or of a strength search (each holds one row of the curve).
+const MAX_STEPS: usize = 1_000_000;
+
+/// Refuses arguments that would fail after writing, or write elsewhere than `--out`, before any work.
+fn check_args(args: &DriverArgs) -> Result<(), DriverError> {
+    for (option, n) in [
+        ("--steps", args.steps),
+        ("--strength-steps", args.strength_steps),
+    ] {
+        if !(1..=MAX_STEPS).contains(&n) {
+            return Err(DriverError::Argument(format!(
+                "{option} {n}: a number of load steps in 1..={MAX_STEPS}"
+            )));
+        }
+    }
+    if let Some(max) = args.eta_bar_max
+        && !(max.is_finite() && max >= 0.0)
+    {
+        return Err(DriverError::Argument(format!(
+            "--eta-bar-max {max}: a finite nonlocal equivalent strain >= 0"
+        )));
+    }
+    if let Some(name) = &args.name
+        && (name.is_empty() || name.contains(['/', '\\']) || name.starts_with('.'))
+    {
+        return Err(DriverError::Argument(format!(
+            "--name {name:?}: a non-empty file name without / or \\ that does not start with a dot \
+             (it names NAME.csv and NAME.png in --out)"
+        )));
+    }
+    Ok(())
+}
+
 /// Runs the driver: builds the material, follows the path, writes CSV and PNG, measures strengths.
 pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, DriverError> {
+    check_args(args)?;
     let config = match &args.config {
         Some(p) => read_material_config(p)?,
         None => MaterialConfig::Microplane(MicroplaneConfig::preset(args.preset)),
@@ -259,12 +293,7 @@ pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, DriverError> {
         (None, _) => 0.01,
     };
     let eta_bar_path = match args.eta_bar_max {
-        Some(max) if max.is_finite() => EtaBarPath::Prescribed { max },
-        Some(max) => {
-            return Err(DriverError::Argument(format!(
-                "eta_bar_max = {max} must be finite"
-            )));
-        }
+        Some(max) => EtaBarPath::Prescribed { max },
         None => EtaBarPath::Local,
     };
     let points = run_path(&material, args.path, max_strain, args.steps, eta_bar_path)?;
@@ -366,5 +395,65 @@ mod tests {
         };
         assert!(matches!(run_driver(&bad), Err(DriverError::Config { .. })));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn arguments_that_would_fail_late_or_write_elsewhere_are_refused_before_any_work() {
+        let dir = std::env::temp_dir().join(format!("mpm_concrete_refused_{}", std::process::id()));
+        let good = DriverArgs {
+            config: None,
+            preset: Preset::Paper,
+            path: PathKind::UniaxialTension,
+            max_strain: None,
+            steps: 3,
+            eta_bar_max: None,
+            out: dir.clone(),
+            name: None,
+            strength_steps: 3,
+        };
+        let cases = [
+            (
+                "--steps",
+                DriverArgs {
+                    steps: usize::MAX,
+                    ..good.clone()
+                },
+            ),
+            (
+                "--strength-steps",
+                DriverArgs {
+                    strength_steps: 0,
+                    ..good.clone()
+                },
+            ),
+            (
+                "--eta-bar-max",
+                DriverArgs {
+                    eta_bar_max: Some(-1.0),
+                    ..good.clone()
+                },
+            ),
+            (
+                "--name",
+                DriverArgs {
+                    name: Some("../../evil".into()),
+                    ..good.clone()
+                },
+            ),
+            (
+                "--name",
+                DriverArgs {
+                    name: Some(String::new()),
+                    ..good.clone()
+                },
+            ),
+        ];
+        for (option, args) in cases {
+            match run_driver(&args) {
+                Err(DriverError::Argument(m)) => assert!(m.starts_with(option), "{m}"),
+                other => panic!("{option}: expected a refusal, got {other:?}"),
+            }
+        }
+        assert!(!dir.exists(), "nothing written");
     }
 }
