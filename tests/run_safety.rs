@@ -380,6 +380,14 @@ fn bad_input_is_refused_before_anything_is_written() {
             vec!["max strain -0.01 must lie in (0, 1)"],
         ),
         (
+            vec!["material-driver", "--strength-steps", "0", "--out", "out"],
+            vec!["--strength-steps 0: a number of load steps in 1..=1000000"],
+        ),
+        (
+            vec!["material-driver", "--name", "../evil", "--out", "out"],
+            vec!["--name \"../evil\"", "without /"],
+        ),
+        (
             vec!["run", "tiny.toml", "--output", "a_file"],
             vec!["a_file", "not a directory"],
         ),
