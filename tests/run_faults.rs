@@ -9,43 +9,13 @@
 //!
 //! Every child process runs under `timeout`, so a hang fails the test instead of blocking it.
 
+mod binary;
+
+use binary::{EXE, TINY, record, refused, scratch, stderr, succeeds};
 use mpm_concrete::checkpoint;
-use mpm_concrete::rundir::RunRecord;
 use std::io::BufRead;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
-
-const EXE: &str = env!("CARGO_BIN_EXE_mpm-concrete");
-
-/// The CT specimen of tests/run_safety.rs: 360 points, 1 us steps, a few ms per step.
-const TINY: &str = r#"
-[run]
-name = "tiny-ct"
-steps = 4
-output_every = 2
-
-[grid]
-cell_size = 4.0
-
-[ct]
-width = 40.0
-height = 40.0
-notch_length = 20.0
-notch_width = 8.0
-load_zone = [0.0, 8.0]
-loading_rate = 4300.0
-rise_time = 2.0e-6
-material = { model = "microplane", preset = "paper" }
-"#;
-
-/// A fresh scratch directory holding `tiny.toml`.
-fn scratch(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mpmc-faults-{}-{tag}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    std::fs::write(dir.join("tiny.toml"), TINY).expect("config");
-    dir
-}
 
 /// `timeout 120 mpm-concrete ARGS` in `cwd`, not yet started.
 fn command(cwd: &Path, args: &[&str]) -> Command {
@@ -57,32 +27,6 @@ fn command(cwd: &Path, args: &[&str]) -> Command {
 /// Runs the program in `cwd` to its end.
 fn run(cwd: &Path, args: &[&str]) -> Output {
     command(cwd, args).output().expect("start mpm-concrete")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn succeeds(o: &Output) {
-    assert!(o.status.success(), "{}\n{}", o.status, stderr(o));
-}
-
-/// Exit code 2, one `error:` line holding every `needle`, no panic; returns the line.
-fn refused(o: &Output, needles: &[&str]) -> String {
-    let err = stderr(o);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(lines.len(), 1, "one error line expected:\n{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    for n in needles {
-        assert!(lines[0].contains(n), "`{n}` missing in: {}", lines[0]);
-    }
-    lines[0].to_owned()
-}
-
-fn record(dir: &Path) -> RunRecord {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).expect("run.json"))
-        .expect("run.json parses")
 }
 
 /// The lines of a child's standard error.
@@ -125,7 +69,7 @@ fn long_run(dir: &Path) -> (Child, ErrLines) {
 
 #[test]
 fn a_directory_that_a_run_is_writing_is_refused_to_a_second_run() {
-    let dir = scratch("lock");
+    let dir = scratch("faults", "lock", &[]);
     let (mut first, rest) = long_run(&dir);
     let pid = first.id();
     let holder = record(&dir.join("d"))
@@ -163,7 +107,7 @@ fn a_directory_that_a_run_is_writing_is_refused_to_a_second_run() {
 
 #[test]
 fn of_two_runs_started_together_into_one_directory_one_runs() {
-    let dir = scratch("race");
+    let dir = scratch("faults", "race", &[]);
     let start = |config: &str| {
         command(&dir, &["run", config, "--quiet", "--output", "d"])
             .stdout(Stdio::null())
@@ -253,7 +197,7 @@ fn resume_two_more(dir: &Path, hint: &str, done: usize) {
 #[test]
 fn ctrl_c_on_several_processes_stops_them_at_one_saved_step() {
     for target in ["group", "launcher"] {
-        let dir = scratch(&format!("mpi-int-{target}"));
+        let dir = scratch("faults", &format!("mpi-int-{target}"), &[]);
         let mut child = Command::new("timeout")
             .current_dir(&dir)
             .args(["120", "setsid", "mpirun", "--oversubscribe", "-n", "2", EXE])
@@ -340,7 +284,7 @@ fn run_limited(dir: &Path, kib: usize, args: &str) -> Output {
 /// --resume.
 #[test]
 fn a_failed_write_leaves_a_resumable_state_and_a_failed_record() {
-    let dir = scratch("full");
+    let dir = scratch("faults", "full", &[]);
     // The checkpoint grows by about 1.4 kB per step, the fields' index by 3.3 kB per snapshot: with one
     // snapshot per step the index passes 400 KiB first, near step 120.
     let o = run_limited(
@@ -415,7 +359,7 @@ fn corrupt_point(file: &Path, name: &str, value: f64) {
 /// outside [0, 1] is refused, naming the file and the dataset, and crack.json is not rewritten.
 #[test]
 fn crack_refuses_corrupt_snapshots_and_keeps_crack_json() {
-    let dir = scratch("crack-corrupt");
+    let dir = scratch("faults", "crack-corrupt", &[]);
     succeeds(&run(
         &dir,
         &["run", "tiny.toml", "--quiet", "--output", "d"],
@@ -481,7 +425,7 @@ y = "fixed"
 /// without it, and under mpirun once (by process 0).
 #[test]
 fn a_far_rigid_body_is_warned_about_once() {
-    let dir = scratch("far");
+    let dir = scratch("faults", "far", &[]);
     std::fs::write(dir.join("far.toml"), FAR).expect("config");
     let warning =
         "the grid is 258x258 cells, the bodies alone need 11x11: a [[rigid_body]] lies far";

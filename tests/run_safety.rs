@@ -8,32 +8,12 @@
 //!   converged step and a resume command that works as printed;
 //! * a run that ended before its requested end time says so.
 
+mod binary;
+
+use binary::{EXE, record, refused, scratch, stderr, succeeds};
 use mpm_concrete::checkpoint;
-use mpm_concrete::rundir::RunRecord;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
-
-const EXE: &str = env!("CARGO_BIN_EXE_mpm-concrete");
-
-const TINY: &str = r#"
-[run]
-name = "tiny-ct"
-steps = 4
-output_every = 2
-
-[grid]
-cell_size = 4.0
-
-[ct]
-width = 40.0
-height = 40.0
-notch_length = 20.0
-notch_width = 8.0
-load_zone = [0.0, 8.0]
-loading_rate = 4300.0
-rise_time = 2.0e-6
-material = { model = "microplane", preset = "paper" }
-"#;
 
 /// A block with a held base, for the sections the CT generator does not have.
 const BLOCK: &str = r#"
@@ -58,16 +38,6 @@ max = [11.0, 0.1]
 y = "fixed"
 "#;
 
-/// A fresh scratch directory with the two configurations.
-fn scratch(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mpmc-safety-{}-{tag}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    std::fs::write(dir.join("tiny.toml"), TINY).expect("config");
-    std::fs::write(dir.join("block.toml"), BLOCK).expect("config");
-    dir
-}
-
 /// Runs the program in `cwd`.
 fn run(cwd: &Path, args: &[&str]) -> Output {
     Command::new(EXE)
@@ -84,33 +54,6 @@ fn run_tiny(cwd: &Path, extra: &[&str]) -> Output {
     run(cwd, &args)
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn succeeds(o: &Output) {
-    assert!(
-        o.status.success(),
-        "{}\n{}{}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        stderr(o)
-    );
-}
-
-/// Exit code 2, one `error:` line holding every `needle`, no panic.
-fn refused(o: &Output, needles: &[&str]) -> String {
-    let err = stderr(o);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(lines.len(), 1, "one error line expected:\n{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    for n in needles {
-        assert!(lines[0].contains(n), "`{n}` missing in: {}", lines[0]);
-    }
-    lines[0].to_owned()
-}
-
 /// Names and contents of the files in `dir`.
 fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
@@ -125,14 +68,9 @@ fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
     files
 }
 
-fn record(dir: &Path) -> RunRecord {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).expect("run.json"))
-        .expect("run.json parses")
-}
-
 #[test]
 fn bad_input_is_refused_before_anything_is_written() {
-    let dir = scratch("bad");
+    let dir = scratch("safety", "bad", &[("block.toml", BLOCK)]);
     std::fs::write(dir.join("a_file"), "").unwrap();
     std::fs::write(
         dir.join("sets.txt"),
@@ -420,7 +358,7 @@ fn bad_input_is_refused_before_anything_is_written() {
 
 #[test]
 fn an_output_directory_belongs_to_one_run() {
-    let dir = scratch("own");
+    let dir = scratch("safety", "own", &[("block.toml", BLOCK)]);
     succeeds(&run(
         &dir,
         &["run", "tiny.toml", "--quiet", "--output", "d"],
@@ -502,7 +440,7 @@ fn data_offset(file: &Path, dataset: &str) -> u64 {
 
 #[test]
 fn a_corrupt_checkpoint_is_refused_and_changes_nothing() {
-    let dir = scratch("corrupt");
+    let dir = scratch("safety", "corrupt", &[("block.toml", BLOCK)]);
     succeeds(&run_tiny(&dir, &["--steps", "2"]));
     let d = dir.join("d");
     let ck = d.join(checkpoint::FILE);
@@ -526,7 +464,7 @@ fn a_corrupt_checkpoint_is_refused_and_changes_nothing() {
 
 #[test]
 fn resume_refuses_other_physics_and_no_steps_left_and_accepts_run_control() {
-    let dir = scratch("resume");
+    let dir = scratch("safety", "resume", &[("block.toml", BLOCK)]);
     succeeds(&run_tiny(&dir, &["--steps", "2"]));
     let d = dir.join("d");
     let before = snapshot(&d);
@@ -572,7 +510,7 @@ fn resume_refuses_other_physics_and_no_steps_left_and_accepts_run_control() {
 
 #[test]
 fn a_failed_run_keeps_a_checkpoint_of_its_last_converged_step() {
-    let dir = scratch("failed");
+    let dir = scratch("safety", "failed", &[("block.toml", BLOCK)]);
     // Two Newton iterations with GMRES and one with the fallback are too few for step 2, and dt_min = dt
     // forbids halving: the run fails for good at step 2.
     let args = [
@@ -624,7 +562,7 @@ fn a_failed_run_keeps_a_checkpoint_of_its_last_converged_step() {
 
 #[test]
 fn an_interrupted_run_prints_a_resume_command_that_works() {
-    let dir = scratch("interrupt");
+    let dir = scratch("safety", "interrupt", &[("block.toml", BLOCK)]);
     let mut child = Command::new(EXE)
         .current_dir(&dir)
         .args([
@@ -694,7 +632,7 @@ fn an_interrupted_run_prints_a_resume_command_that_works() {
 
 #[test]
 fn a_run_that_ended_early_says_so() {
-    let dir = scratch("early");
+    let dir = scratch("safety", "early", &[("block.toml", BLOCK)]);
     // Step 2 needs three Newton iterations: with two (GMRES), then one (fallback) to a relative residual
     // of 1e-3, it is halved until one iteration gets there (at dt/4), so the two steps end well before
     // 2 us.
@@ -733,7 +671,7 @@ fn a_run_that_ended_early_says_so() {
 
 #[test]
 fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
-    let dir = scratch("crack");
+    let dir = scratch("safety", "crack", &[("block.toml", BLOCK)]);
     succeeds(&run_tiny(&dir, &[]));
     let states = |d: &Path| -> Vec<serde_json::Value> {
         let text = std::fs::read_to_string(d.join("crack.json")).expect("crack.json");
@@ -798,7 +736,7 @@ fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
 /// step is retried with the fallback solver and reported.
 #[test]
 fn a_petsc_error_inside_a_solve_fails_the_attempt_not_the_run() {
-    let dir = scratch("petsc-error");
+    let dir = scratch("safety", "petsc-error", &[("block.toml", BLOCK)]);
     let o = run_tiny(&dir, &["-snes_max_it", "1", "-snes_error_if_not_converged"]);
     succeeds(&o);
     let err = stderr(&o);
@@ -822,7 +760,7 @@ fn a_petsc_error_inside_a_solve_fails_the_attempt_not_the_run() {
 /// straight to a smaller step, the fallback solver being for failures of the linear solver.
 #[test]
 fn a_reduced_step_grows_back_after_three_calm_steps() {
-    let dir = scratch("grow");
+    let dir = scratch("safety", "grow", &[("block.toml", BLOCK)]);
     // Two Newton iterations are too few at the nominal step from step 2 on, enough at half of it.
     let o = run_tiny(&dir, &["--steps", "12", "-snes_max_it", "2"]);
     succeeds(&o);
