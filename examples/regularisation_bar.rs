@@ -39,6 +39,7 @@
 //! full width at half maximum of the damage profile.
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::crack::band_width_1d;
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
@@ -112,20 +113,6 @@ impl BarRun {
     }
     fn end(&self) -> (f64, f64) {
         *self.dissipated.last().unwrap_or(&(0.0, 0.0))
-    }
-}
-
-/// Width of the zone where the sorted profile `(x, d)` is at or above `level` (mm), from the outermost
-/// interpolated crossings; 0 if nothing reaches it.
-fn zone_width(profile: &[(f64, f64)], level: f64) -> f64 {
-    let crossings: Vec<f64> = profile
-        .windows(2)
-        .filter(|w| (w[0].1 >= level) != (w[1].1 >= level))
-        .map(|w| w[0].0 + (level - w[0].1) / (w[1].1 - w[0].1) * (w[1].0 - w[0].0))
-        .collect();
-    match crossings.as_slice() {
-        [a, .., b] => b - a,
-        _ => 0.0,
     }
 }
 
@@ -276,7 +263,7 @@ fn run_bar(s: &SessionGuard, bar: Bar, h: f64, dl: f64, case: &Case) -> Result<B
                 run.curve.push((d, r.reactions[0].1[0] / h));
                 run.dissipated.push((d, diss));
                 if run.marks.len() < MARKS.len() && d >= MARKS[run.marks.len()] - 1e-12 {
-                    let w = zone_width(&damage_profile(&sim, &x0, centre), 0.5);
+                    let w = band_width_1d(&damage_profile(&sim, &x0, centre), 0.5);
                     run.marks.push((d, w, diss));
                 }
                 track_strength(&sim, &x0, centre, &mut run);
@@ -320,9 +307,9 @@ fn run_json(h: f64, r: &BarRun) -> Value {
         "peak_stress": round6(r.peak()),
         "final_elongation": round6(r.end().0),
         "dissipated_end": round6(r.end().1),
-        "band_width_end": round6(zone_width(&r.damage, 0.5)),
-        "band_width_d0.9_end": round6(zone_width(&r.damage, 0.9)),
-        "band_width_in_cells_end": round6(zone_width(&r.damage, 0.5) / h),
+        "band_width_end": round6(band_width_1d(&r.damage, 0.5)),
+        "band_width_d0.9_end": round6(band_width_1d(&r.damage, 0.9)),
+        "band_width_in_cells_end": round6(band_width_1d(&r.damage, 0.5) / h),
         "marks": r.marks.iter().map(|m| json!({"elongation": round6(m.0), "band_width": round6(m.1),
             "dissipated": round6(m.2)})).collect::<Vec<_>>(),
         "failed_at": r.failed_at,
@@ -337,7 +324,7 @@ fn comparisons(runs: &[(f64, BarRun)]) -> Vec<Value> {
     runs.windows(2)
         .map(|w| {
             let ((hc, c), (hf, f)) = (&w[0], &w[1]);
-            let (wc, wf) = (zone_width(&c.damage, 0.5), zone_width(&f.damage, 0.5));
+            let (wc, wf) = (band_width_1d(&c.damage, 0.5), band_width_1d(&f.damage, 0.5));
             json!({"h_coarse": hc, "h_fine": hf,
                 "band_width": round6(rel(wc, wf)), "dissipated": round6(rel(c.end().1, f.end().1)),
                 "peak_stress": round6(rel(c.peak(), f.peak()))})
@@ -355,8 +342,8 @@ fn study_case(s: &SessionGuard, o: &Options, case: &Case) -> Result<Value> {
             "{} h = {h}: peak {:.3} MPa, band (d >= 0.5) {:.3} mm = {:.1} cells, D = {:.5} N mm/mm^2 at dL = {:.3}, marks {:?}",
             case.label,
             r.peak(),
-            zone_width(&r.damage, 0.5),
-            zone_width(&r.damage, 0.5) / h,
+            band_width_1d(&r.damage, 0.5),
+            band_width_1d(&r.damage, 0.5) / h,
             r.end().1,
             r.end().0,
             r.marks

@@ -260,6 +260,21 @@ fn classify(
     (bands, classification)
 }
 
+/// Width of a damage band along a line (mm): the distance between the outermost points where the
+/// profile `(x, d)`, sorted by `x` (mm), crosses the damage `level`, linearly interpolated between its
+/// samples; 0 if the profile never crosses it twice.
+pub fn band_width_1d(profile: &[(f64, f64)], level: f64) -> f64 {
+    let crossings: Vec<f64> = profile
+        .windows(2)
+        .filter(|w| (w[0].1 >= level) != (w[1].1 >= level))
+        .map(|w| w[0].0 + (level - w[0].1) / (w[1].1 - w[0].1) * (w[1].0 - w[0].0))
+        .collect();
+    match crossings.as_slice() {
+        [a, .., b] => b - a,
+        _ => 0.0,
+    }
+}
+
 /// The band crossings of the crack points `crack` on the circle of radius `r` around `centre`.
 fn crossings(
     x: &[Vector2<f64>],
@@ -393,5 +408,21 @@ mod tests {
         let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert_eq!(s.classification, "none");
         assert_eq!(s.length, 0.0);
+    }
+
+    #[test]
+    fn band_width_1d_interpolates_the_outermost_crossings() {
+        let profile = [
+            (0.0, 0.0),
+            (1.0, 0.4),
+            (2.0, 1.0),
+            (3.0, 0.8),
+            (4.0, 0.2),
+            (5.0, 0.0),
+        ];
+        // 0.5 is crossed at x = 1 + 0.1/0.6 and x = 3 + 0.3/0.6.
+        let w = band_width_1d(&profile, 0.5);
+        assert!((w - (3.5 - (1.0 + 1.0 / 6.0))).abs() < 1e-12, "{w}");
+        assert_eq!(band_width_1d(&profile, 1.5), 0.0);
     }
 }

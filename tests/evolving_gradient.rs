@@ -15,6 +15,7 @@
 //! half-wavelength (plus one cell for the point sampling) at every opening.
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::crack::band_width_1d;
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::MaterialConfig;
@@ -63,20 +64,6 @@ fn session() -> SessionGuard {
     )
     .expect("options");
     s
-}
-
-/// Width of the zone where the sorted profile `(x, d)` is at or above `level` (mm), from interpolated
-/// crossings; 0 if nothing reaches it.
-fn zone_width(profile: &[(f64, f64)], level: f64) -> f64 {
-    let crossings: Vec<f64> = profile
-        .windows(2)
-        .filter(|w| (w[0].1 >= level) != (w[1].1 >= level))
-        .map(|w| w[0].0 + (level - w[0].1) / (w[1].1 - w[0].1) * (w[1].0 - w[0].0))
-        .collect();
-    match crossings.as_slice() {
-        [a, .., b] => b - a,
-        _ => 0.0,
-    }
 }
 
 /// Speed of the pulled end (mm/s; 0.1 m/s), its rise time (s) and the time step (s). The bar's first
@@ -207,10 +194,10 @@ fn run_bar_with(
             .unwrap_or_else(|e| panic!("h = {h}, {activity}: step failed: {e}"));
         d = r.displacements[0].1[0];
         if onset.is_none() && sim.state.particles.damage.iter().any(|&v| v >= 0.5) {
-            onset = Some(zone_width(&profile(&sim), 0.25));
+            onset = Some(band_width_1d(&profile(&sim), 0.25));
         }
         if next < marks.len() && d >= marks[next] - 1e-12 {
-            widths.push((d, zone_width(&profile(&sim), 0.9)));
+            widths.push((d, band_width_1d(&profile(&sim), 0.9)));
             next += 1;
         }
         last = Some(r);

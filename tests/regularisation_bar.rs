@@ -19,6 +19,7 @@
 //! (12.5 %), so this test fails with it.
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::crack::band_width_1d;
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
@@ -56,19 +57,6 @@ fn session() -> SessionGuard {
     )
     .expect("options");
     s
-}
-
-/// Distance between the outermost crossings of `level` by the sorted profile `(x, d)` (mm).
-fn zone_width(profile: &[(f64, f64)], level: f64) -> f64 {
-    let crossings: Vec<f64> = profile
-        .windows(2)
-        .filter(|w| (w[0].1 >= level) != (w[1].1 >= level))
-        .map(|w| w[0].0 + (level - w[0].1) / (w[1].1 - w[0].1) * (w[1].0 - w[0].0))
-        .collect();
-    match crossings.as_slice() {
-        [a, .., b] => b - a,
-        _ => 0.0,
-    }
 }
 
 fn material(c0: f64, activity: &str, gamma_0: f64) -> Material {
@@ -178,7 +166,7 @@ fn run_bar(s: &SessionGuard, h: f64, case: (f64, &str)) -> Outcome {
     profile.sort_by(|a, b| a.0.total_cmp(&b.0));
     profile.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
     Outcome {
-        width: zone_width(&profile, 0.5),
+        width: band_width_1d(&profile, 0.5),
         dissipated,
     }
 }
