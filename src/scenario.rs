@@ -2,7 +2,7 @@
 //! built), the rigid bodies and the background grid, and the compact tension (CT) specimen of the source
 //! paper; with `[extrusion]` the plane set-up is extruded to a plate ([`build_run`]).
 
-use crate::boundary::{NodalLoad, NodeBox, RigidBody};
+use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
 use crate::config::{
     ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction, LoadSection,
     Materials, MotionSpec, NotchTip, RigidBodySection, RunConfig,
@@ -13,6 +13,7 @@ use crate::grid::{Grid, GridError};
 use crate::material::Material;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles};
+use crate::space::{Frame, lift3};
 use nalgebra::Vector2;
 use std::collections::HashMap;
 
@@ -157,8 +158,14 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     }
     let (fields, field_of) = velocity_fields(&bodies);
     let seeder = Seeder::new(cfg);
-    let (particles, materials) = seeder.bodies(bodies)?;
-    let (rigid, rigid_points) = seeder.rigid_bodies(&rigid_defs, &field_of)?;
+    let (mut particles, materials) = seeder.bodies(bodies)?;
+    let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid_defs, &field_of)?;
+    let frame = Frame::from_degrees(cfg.grid.rotation);
+    if !frame.is_identity() {
+        turn_points(&frame, &mut particles);
+        rigid_points.iter_mut().for_each(|p| turn_points(&frame, p));
+        rigid.iter_mut().for_each(|r| turn_rigid_body(&frame, r));
+    }
     let grid = covering_grid(cfg, &particles, &rigid_points)?;
     let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
     let t = &cfg.time;
@@ -176,7 +183,7 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
                 quasi_static: t.quasi_static,
                 initial_acceleration: t.initial_acceleration,
             },
-            body_force: Vector2::new(cfg.body_force[0], cfg.body_force[1]),
+            body_force: frame.to_grid(Vector2::new(cfg.body_force[0], cfg.body_force[1])),
             body_force_ramp: cfg.body_force_ramp,
             boxes,
             rigid,
@@ -189,6 +196,34 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
         particles,
         rigid_points,
     })
+}
+
+/// The points of a set-up turned by `frame` inside the grid: positions, velocities, accelerations, CPDI
+/// half-edges and corners by `R`, the deformation gradient and the stress by `R . R^T`.
+fn turn_points(frame: &Frame, p: &mut Particles) {
+    let r = frame.matrix();
+    let rt = r.transpose();
+    let vectors = p.x.iter_mut().chain(&mut p.v).chain(&mut p.a);
+    vectors.chain(&mut p.corners).for_each(|x| *x = r * *x);
+    p.r.iter_mut().chain(&mut p.r0).for_each(|m| *m = r * *m);
+    p.f.iter_mut().for_each(|f| *f = r * *f * rt);
+    let r3 = lift3(&r);
+    p.stress
+        .iter_mut()
+        .for_each(|s| *s = r3 * *s * r3.transpose());
+}
+
+/// A rigid body of a set-up turned by `frame`: its velocity, contact normal and pin turned (the
+/// configuration's checks let through only motions free or prescribed in both components).
+fn turn_rigid_body(frame: &Frame, body: &mut RigidBody) {
+    if let [Motion::Velocity(vx), Motion::Velocity(vy)] = body.motion {
+        let v = frame.to_grid(Vector2::new(vx, vy));
+        body.motion = [Motion::Velocity(v.x), Motion::Velocity(v.y)];
+    }
+    if let Some(c) = &mut body.contact {
+        c.normal = frame.to_grid(c.normal);
+        c.pin = c.pin.map(|pin| frame.to_grid(pin));
+    }
 }
 
 /// A material the configuration's checks built (`what` names it in the error when there is none).

@@ -1,7 +1,7 @@
 //! Small dense algebra that does not depend on the space dimension `D` (2 or 3): determinants and
 //! cofactor matrices without inversion, and the lift of an in-plane deformation gradient to 3 x 3.
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector2};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2};
 
 /// The cofactor matrix `cof A = det(A) A^-T` of a 2 x 2 or 3 x 3 matrix, defined also for singular `A`.
 #[inline]
@@ -66,10 +66,72 @@ pub fn rotation_xy<const D: usize>(theta: f64) -> SMatrix<f64, D, D> {
     })
 }
 
+/// The frame of a set-up rotated inside the axis-aligned background grid (`[grid] rotation`): the
+/// specimen frame turned by `theta` counter-clockwise about the out-of-plane axis through the origin.
+/// A vector `v` of the specimen is `R(theta) v` on the grid; results are reported back in the specimen's
+/// frame with `R(theta)^T`. Theta = 0 is the identity, exactly (no arithmetic is done).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// `cos theta`, `sin theta`; `None`: theta = 0.
+    turn: Option<(f64, f64)>,
+}
+
+impl Frame {
+    /// The specimen on the grid's axes.
+    pub const IDENTITY: Frame = Frame { turn: None };
+
+    /// The frame turned by `degrees` (counter-clockwise).
+    pub fn from_degrees(degrees: f64) -> Self {
+        if degrees == 0.0 {
+            return Self::IDENTITY;
+        }
+        let (s, c) = degrees.to_radians().sin_cos();
+        Self { turn: Some((c, s)) }
+    }
+
+    /// True for theta = 0.
+    pub fn is_identity(&self) -> bool {
+        self.turn.is_none()
+    }
+
+    /// `R(theta)` (the identity for theta = 0).
+    pub fn matrix(&self) -> Matrix2<f64> {
+        match self.turn {
+            None => Matrix2::identity(),
+            Some((c, s)) => Matrix2::new(c, -s, s, c),
+        }
+    }
+
+    /// A vector (or point, mm) of the specimen on the grid: `R v`.
+    pub fn to_grid(&self, v: Vector2<f64>) -> Vector2<f64> {
+        match self.turn {
+            None => v,
+            Some(_) => self.matrix() * v,
+        }
+    }
+
+    /// A vector (or point, mm) on the grid in the specimen's frame: `R^T v`.
+    pub fn to_specimen(&self, v: Vector2<f64>) -> Vector2<f64> {
+        match self.turn {
+            None => v,
+            Some(_) => self.matrix().transpose() * v,
+        }
+    }
+
+    /// The in-plane (first two) components of `v` turned back into the specimen's frame (`R^T`); other
+    /// components (z) are kept.
+    pub fn components_to_specimen(&self, v: &mut [f64]) {
+        if let (Some(_), [x, y, ..]) = (self.turn, &mut *v) {
+            let w = self.to_specimen(Vector2::new(*x, *y));
+            (*x, *y) = (w.x, w.y);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Matrix2, Matrix3};
+    use nalgebra::Matrix3;
 
     #[test]
     fn cofactor_is_det_times_inverse_transpose() {
@@ -84,5 +146,22 @@ mod tests {
         assert_eq!(lift3(&a2)[(2, 2)], 1.0);
         assert_eq!(lift3(&a2)[(0, 1)], 0.4);
         assert_eq!(lift3(&a3), a3);
+    }
+
+    #[test]
+    fn frame_turns_counter_clockwise_and_back() {
+        let f = Frame::from_degrees(30.0);
+        let x = Vector2::new(1.0, 0.0);
+        let g = f.to_grid(x);
+        assert!((g - Vector2::new(0.75_f64.sqrt(), 0.5)).norm() < 1e-15);
+        assert!((f.to_specimen(g) - x).norm() < 1e-15);
+        let mut v = [g.x, g.y, 7.0];
+        f.components_to_specimen(&mut v);
+        assert!((v[0] - 1.0).abs() < 1e-15 && v[1].abs() < 1e-15 && v[2] == 7.0);
+        let id = Frame::from_degrees(0.0);
+        assert!(id.is_identity() && !f.is_identity());
+        let y = Vector2::new(-0.3, 1e300);
+        assert_eq!(id.to_grid(y), y);
+        assert_eq!(id.to_specimen(y), y);
     }
 }

@@ -480,6 +480,7 @@ fn open_output<'a, const D: usize>(
     if let Some(z) = cfg.extrusion.as_ref().and_then(|e| e.section_z) {
         out.set_section(z);
     }
+    out.set_frame(crate::space::Frame::from_degrees(cfg.grid.rotation));
     if let Some(ct) = &cfg.ct {
         out.track_crack(
             nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),

@@ -101,6 +101,11 @@ pub struct GridSection {
     /// only touch the fringe of a particle domain and would make the system nearly singular).
     #[serde(default = "default_mass_tolerance")]
     pub mass_tolerance: f64,
+    /// The whole set-up turned by this angle (degrees, counter-clockwise, about the out-of-plane axis
+    /// through the origin) inside the axis-aligned grid, to measure the grid's bias; results are
+    /// reported back in the specimen's frame. Default 0 (plane runs only).
+    #[serde(default)]
+    pub rotation: f64,
 }
 
 fn default_mass_tolerance() -> f64 {
@@ -211,6 +216,13 @@ impl GridSection {
                 "grid.mass_tolerance",
                 self.mass_tolerance.to_string(),
                 "a fraction in [0, 0.01)",
+            ));
+        }
+        if !(self.rotation.is_finite() && self.rotation.abs() <= 360.0) {
+            return Err(c.bad(
+                "grid.rotation",
+                self.rotation.to_string(),
+                "an angle from -360 to 360 (degrees)",
             ));
         }
         Ok(())

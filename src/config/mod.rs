@@ -386,11 +386,54 @@ impl RunConfig {
             None => (None, None),
         };
         bodies::validate_names(c, &self.history_names())?;
+        self.check_rotation(c)?;
         Ok(Materials {
             concrete,
             insert,
             bodies,
         })
+    }
+
+    /// What a set-up turned inside the grid (`grid.rotation` != 0) cannot have: a plate (the turn is
+    /// about z, the extrusion is not turned), node boxes and nodal loads (they select grid nodes along
+    /// the grid's axes), a rigid body with one component free and the other prescribed (a motion along
+    /// one specimen axis is along no grid axis).
+    fn check_rotation(&self, c: Check) -> Result<(), ConfigError> {
+        if self.grid.rotation == 0.0 {
+            return Ok(());
+        }
+        let value = self.grid.rotation.to_string();
+        let refuse = |what: &str| {
+            Err(c.bad(
+                "grid.rotation",
+                value.clone(),
+                &format!("0 with {what} (a turned set-up is plane, with [ct] specimens, [[body]] and [[rigid_body]] sections whose x and y motions are both free or both prescribed)"),
+            ))
+        };
+        if self.extrusion.is_some() {
+            return refuse("[extrusion]");
+        }
+        if !self.constraint.is_empty() {
+            return refuse("[[constraint]] (node boxes along the grid's axes)");
+        }
+        if !self.load.is_empty() {
+            return refuse("[[load]] (segments along grid lines)");
+        }
+        let free = |m: &MotionSpec| *m == MotionSpec::Keyword(Keyword::Free);
+        if let Some(rb) = self.rigid_body.iter().find(|r| free(&r.x) != free(&r.y)) {
+            return refuse(&format!(
+                "[[rigid_body]] `{}`, x free and y not or y free and x not",
+                rb.name
+            ));
+        }
+        if let Some(ct) = &self.ct
+            && ct.load_introduction == LoadIntroduction::Glued
+        {
+            return refuse(
+                "ct.load_introduction = \"glued\" (the glued plates' x is free or held, their y driven)",
+            );
+        }
+        Ok(())
     }
 
     /// The sets that name history.csv columns, (section, name) in the order of the file: [ct]'s two

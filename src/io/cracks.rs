@@ -4,6 +4,7 @@
 use super::{OutputError, file, io_err, write_atomic};
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::plot::LinePlot;
+use crate::space::Frame;
 use nalgebra::Vector2;
 use std::path::Path;
 
@@ -109,6 +110,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         spacing: h / cfg.shape.points_per_cell as f64,
         criteria: CrackCriteria::for_notch(ct.notch_width, h),
         section_z: cfg.extrusion.as_ref().map(|e| e.section_z),
+        frame: Frame::from_degrees(cfg.grid.rotation),
     };
     let old: Vec<CrackState> = std::fs::read_to_string(dir.join(file::CRACK))
         .ok()
@@ -147,13 +149,16 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
 }
 
 /// How the crack is measured on a run's snapshots: the notch tip (mm), the cell size h and the point
-/// spacing (mm), the criteria, and for a plate the z of the section (`Some(None)`: the mid-plane).
+/// spacing (mm), the criteria, for a plate the z of the section (`Some(None)`: the mid-plane), and the
+/// specimen's frame on the grid.
 struct Measure {
     tip: Vector2<f64>,
     h: f64,
     spacing: f64,
     criteria: CrackCriteria,
     section_z: Option<Option<f64>>,
+    /// The specimen's frame on the grid (`grid.rotation`): the crack is measured in the specimen's.
+    frame: Frame,
 }
 
 /// The values of the dataset `name` of the snapshot `file` (at `path`), verified as a checkpoint's are:
@@ -234,7 +239,10 @@ fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputErro
     };
     let x: Vec<Vector2<f64>> = section
         .iter()
-        .map(|&k| Vector2::new(position[width * k], position[width * k + 1]))
+        .map(|&k| {
+            how.frame
+                .to_specimen(Vector2::new(position[width * k], position[width * k + 1]))
+        })
         .collect();
     let layer_damage: Vec<f64> = section.iter().map(|&k| damage[k]).collect();
     let mut state = crack::measure(

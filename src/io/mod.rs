@@ -17,7 +17,7 @@ use crate::model::{Model, State};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::schema::{file, history};
 use crate::solver::StepReport;
-use crate::space::xy;
+use crate::space::{Frame, xy};
 pub use cracks::remeasure_cracks;
 use cracks::{mid_z, save_line_plot, section_layer, write_crack_json};
 use hdf5_metno::types::VarLenUnicode;
@@ -328,6 +328,9 @@ pub struct RunOutput {
     /// 3D: the z (mm) of the section whose layer of points the crack metrics and damage maps show;
     /// `None`: the middle of the points' initial z range.
     section_z: Option<f64>,
+    /// The specimen's frame on the grid (`grid.rotation`): reactions, displacements, crack metrics and
+    /// damage maps are reported in the specimen's frame.
+    frame: Frame,
 }
 
 impl RunOutput {
@@ -366,7 +369,13 @@ impl RunOutput {
             cracks: Vec::new(),
             dimension: 2,
             section_z: None,
+            frame: Frame::IDENTITY,
         }
+    }
+
+    /// A set-up turned inside the grid by `frame`: report its results in the specimen's frame.
+    pub fn set_frame(&mut self, frame: Frame) {
+        self.frame = frame;
     }
 
     /// 3D: measure the crack and draw the damage maps on the layer of points seeded nearest `z` (mm)
@@ -428,8 +437,11 @@ impl RunOutput {
         &self.dir
     }
 
-    /// Records a step and rewrites `history.csv`.
-    pub fn record(&mut self, report: StepReport) -> Result<(), OutputError> {
+    /// Records a step (its reactions and displacements turned into the specimen's frame) and rewrites
+    /// `history.csv`.
+    pub fn record(&mut self, mut report: StepReport) -> Result<(), OutputError> {
+        let vectors = report.reactions.iter_mut().chain(&mut report.displacements);
+        vectors.for_each(|(_, v)| self.frame.components_to_specimen(v));
         self.rows.push(report);
         if !self.writes {
             return Ok(());
@@ -530,7 +542,10 @@ impl RunOutput {
         };
         let (section, _) = self.section(state);
         let p = &state.particles;
-        let x: Vec<Vector2<f64>> = section.iter().map(|&k| xy(&p.x[k])).collect();
+        let x: Vec<Vector2<f64>> = section
+            .iter()
+            .map(|&k| self.frame.to_specimen(xy(&p.x[k])))
+            .collect();
         let damage: Vec<f64> = section.iter().map(|&k| p.damage[k]).collect();
         let mut measured = crack::measure(
             &x,
@@ -694,6 +709,10 @@ impl RunOutput {
         path: &Path,
     ) -> Result<(), OutputError> {
         let p = &state.particles;
+        let x: Vec<Vector2<f64>> = section
+            .iter()
+            .map(|&k| self.frame.to_specimen(xy(&p.x[k])))
+            .collect();
         let plane = match layer {
             Some(z) => format!(", layer z = {z:.1} mm"),
             None => String::new(),
@@ -704,8 +723,8 @@ impl RunOutput {
                 self.title,
                 state.counters.time * 1e6
             ),
-            x: section.iter().map(|&k| p.x[k][0]).collect(),
-            y: section.iter().map(|&k| p.x[k][1]).collect(),
+            x: x.iter().map(|x| x.x).collect(),
+            y: x.iter().map(|x| x.y).collect(),
             value: section.iter().map(|&k| p.damage[k]).collect(),
             value_label: "damage [-]".into(),
             range: Some((0.0, 1.0)),
