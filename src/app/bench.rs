@@ -130,6 +130,7 @@ pub fn run(exe: &Path, cases: &[Case], petsc_options: &str, dir: &Path) -> Resul
     let set = OptionSet {
         name: "default".into(),
         options: petsc_options.into(),
+        ..OptionSet::default()
     };
     let mut results = Vec::new();
     for case in cases {

@@ -78,8 +78,9 @@ pub fn bench(
     Ok(())
 }
 
-/// `study CONFIG`: the configuration for `steps` steps with each option set of the file `sets` (the
-/// default sets when None), results in `output` (default `runs/study-<config name>`).
+/// `study CONFIG`: the configuration for `steps` steps with each set of the file `sets` (PETSc options,
+/// configuration overrides, program options; the default solver sets when None), results in `output`
+/// (default `runs/study-<config name>`).
 pub fn study(
     config: &Path,
     steps: usize,
@@ -98,10 +99,21 @@ pub fn study(
     }
     RunConfig::from_file(config).map_err(bad)?;
     let sets = match sets {
-        Some(p) => study::read_sets(p).map_err(bad)?,
+        Some(p) => {
+            let sets = study::read_sets(p).map_err(bad)?;
+            // Every override of every set is checked before the first run starts.
+            study::check_sets(config, &sets, p).map_err(bad)?;
+            sets
+        }
         None => study::default_sets(),
     };
     let dir = output.unwrap_or_else(|| study::default_dir(config));
+    if dir.exists() && !dir.is_dir() {
+        return Err(bad(format!(
+            "{}: exists and is not a directory (give another --output)",
+            dir.display()
+        )));
+    }
     if dir.join(study::REPORT).exists() && !overwrite {
         return Err(bad(format!(
             "{} holds an earlier study ({}): use --overwrite to replace it, or another --output",
@@ -114,7 +126,7 @@ pub fn study(
     let failed = results.iter().filter(|r| !r.completed).count();
     println!("{}", std::fs::read_to_string(dir.join(study::REPORT))?);
     println!(
-        "{} of {} option sets completed; results in {}",
+        "{} of {} sets completed; results in {}",
         results.len() - failed,
         results.len(),
         dir.display()

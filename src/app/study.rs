@@ -1,10 +1,13 @@
-//! Solver-comparison study: one configuration, several PETSc option sets, one table.
+//! Studies: one configuration run with several sets, each of PETSc options, configuration overrides
+//! (`--set key=value`) and program options (`--steps`, `--allow-large`), one table: a solver comparison,
+//! or a sweep over cell sizes, grid rotations, erosion thresholds.
 //!
-//! Every option set runs as its own `mpm-concrete run` process (so a failing set is reported, not fatal,
+//! Every set runs as its own `mpm-concrete run` process (so a failing set is reported, not fatal,
 //! and its peak memory is its own) with `-log_view` written beside its results; the study reads each run's
-//! `history.csv` and summary and writes `study.md`, `study.csv` and `study_*.png` (Newton iterations and wall
-//! time per step for every set).
+//! `history.csv`, `crack.json` and summary and writes `study.md`, `study.csv` and `study_*.png` (Newton
+//! iterations and wall time per step for every set).
 
+use crate::crack::CrackState;
 use crate::io::write_atomic;
 use crate::plot::{LinePlot, Series};
 use crate::schema::{file, history};
@@ -15,13 +18,21 @@ use std::process::Command;
 /// The study's report in its output directory.
 pub const REPORT: &str = "study.md";
 
-/// A named PETSc option set.
-#[derive(Debug, Clone, PartialEq)]
+/// A named set of a study: PETSc options, configuration overrides and program options of its run.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct OptionSet {
     /// Short name (directory and table row).
     pub name: String,
     /// PETSc options, e.g. `-ksp_type gmres -pc_type hypre`.
     pub options: String,
+    /// Configuration overrides `key=value` (`--set` of `run`), e.g. `grid.cell_size=1`.
+    pub overrides: Vec<String>,
+    /// Steps of this set's run (`--steps`); `None`: the study's.
+    pub steps: Option<usize>,
+    /// Start the run even above the memory estimate (`--allow-large`).
+    pub allow_large: bool,
+    /// Line of the sets file (0 for the default sets), for the errors of the checks.
+    pub line: usize,
 }
 
 /// The sets compared when none are given: direct solvers, Krylov with algebraic multigrid, ILU and the
@@ -30,6 +41,7 @@ pub fn default_sets() -> Vec<OptionSet> {
     let set = |name: &str, options: &str| OptionSet {
         name: name.into(),
         options: options.into(),
+        ..OptionSet::default()
     };
     vec![
         set(
@@ -62,23 +74,25 @@ pub fn default_sets() -> Vec<OptionSet> {
     ]
 }
 
-/// Reads option sets from a text file: one set per line, `name: options`; `#` starts a comment. Names must
-/// be unique (each names a directory) and the values of common options are checked
-/// ([`crate::preflight::check_petsc_options`]).
+/// The program options a set line may carry before its PETSc options.
+const SET_PROGRAM_OPTIONS: &str = "--set KEY=VALUE, --steps N, --allow-large";
+
+/// Reads the sets of a study from a text file: one set per line, `name: [program options] [PETSc
+/// options]`, the program options `--set KEY=VALUE` (repeatable), `--steps N` and `--allow-large` before
+/// the first PETSc option (one dash); `#` starts a comment. Names must be unique (each names a directory)
+/// and the values of common PETSc options are checked ([`crate::preflight::check_petsc_options`]); the
+/// overrides are checked against a configuration by [`check_sets`].
 pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut sets: Vec<(usize, OptionSet)> = Vec::new();
+    let mut sets: Vec<OptionSet> = Vec::new();
     for (i, line) in text.lines().enumerate() {
+        let at = format!("{}:{}", path.display(), i + 1);
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
             continue;
         }
-        let (name, options) = line.split_once(':').ok_or_else(|| {
-            format!(
-                "{}:{}: expected `name: -petsc -options`",
-                path.display(),
-                i + 1
-            )
+        let (name, rest) = line.split_once(':').ok_or_else(|| {
+            format!("{at}: expected `name: [--set key=value ...] -petsc -options`")
         })?;
         let name = name.trim();
         if name.is_empty()
@@ -87,32 +101,84 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
                 .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
         {
             return Err(format!(
-                "{}:{}: set name {name:?} must be letters, digits, - or _",
-                path.display(),
-                i + 1
+                "{at}: set name {name:?} must be letters, digits, - or _"
             ));
         }
-        if let Some((line, _)) = sets.iter().find(|(_, s)| s.name == name) {
+        if let Some(s) = sets.iter().find(|s| s.name == name) {
             return Err(format!(
-                "{}:{}: set name {name:?} is already used on line {line} (each set writes into the directory of its name)",
-                path.display(),
-                i + 1
+                "{at}: set name {name:?} is already used on line {} (each set writes into the directory of its name)",
+                s.line
             ));
         }
-        crate::preflight::check_petsc_options(options)
-            .map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))?;
-        sets.push((
-            i + 1,
-            OptionSet {
-                name: name.into(),
-                options: options.trim().into(),
-            },
-        ));
+        let mut set = parse_set_line(rest).map_err(|e| format!("{at}: set `{name}`: {e}"))?;
+        crate::preflight::check_petsc_options(&set.options).map_err(|e| format!("{at}: {e}"))?;
+        set.name = name.into();
+        set.line = i + 1;
+        sets.push(set);
     }
     if sets.is_empty() {
         return Err(format!("{}: no option sets", path.display()));
     }
-    Ok(sets.into_iter().map(|(_, s)| s).collect())
+    Ok(sets)
+}
+
+/// The options of a set line after its name: program options, then PETSc options (everything from the
+/// first token with one dash on).
+fn parse_set_line(rest: &str) -> Result<OptionSet, String> {
+    let mut set = OptionSet::default();
+    let mut tokens = rest.split_whitespace().peekable();
+    while let Some(&token) = tokens.peek() {
+        if token.starts_with('-') && !token.starts_with("--") {
+            break;
+        }
+        tokens.next();
+        let mut value = |option: &str| {
+            tokens
+                .next()
+                .ok_or_else(|| format!("{option} needs a value ({SET_PROGRAM_OPTIONS})"))
+        };
+        match token.split_once('=') {
+            Some(("--set", kv)) => set.overrides.push(kv.to_owned()),
+            _ if token == "--set" => set.overrides.push(value("--set")?.to_owned()),
+            _ if token == "--steps" => {
+                let n = value("--steps")?;
+                set.steps = Some(
+                    n.parse()
+                        .ok()
+                        .filter(|&n: &usize| n >= 1)
+                        .ok_or_else(|| format!("--steps {n}: a number of steps >= 1"))?,
+                );
+            }
+            _ if token == "--allow-large" => set.allow_large = true,
+            _ => {
+                return Err(format!(
+                    "`{token}` is no option of a set line (allowed: {SET_PROGRAM_OPTIONS}, then PETSc \
+                     options with one dash)"
+                ));
+            }
+        }
+    }
+    if let Some(bad) = set.overrides.iter().find(|o| !o.contains('=')) {
+        return Err(format!(
+            "--set {bad}: expected key=value (e.g. grid.cell_size=2.5)"
+        ));
+    }
+    set.options = tokens.collect::<Vec<_>>().join(" ");
+    Ok(set)
+}
+
+/// Checks every set's overrides on `config` before any run starts: each key exists, each value parses
+/// and passes the configuration's checks, and the PETSc options the overrides set (`run.petsc_options`)
+/// are valid; the error names the sets file `sets_file`, the set's line, the set and the key.
+pub fn check_sets(config: &Path, sets: &[OptionSet], sets_file: &Path) -> Result<(), String> {
+    for set in sets.iter().filter(|s| !s.overrides.is_empty()) {
+        let at = format!("{}:{}: set `{}`", sets_file.display(), set.line, set.name);
+        let (cfg, _) = crate::config::RunConfig::load(config, &set.overrides)
+            .map_err(|e| format!("{at}: {e}"))?;
+        crate::preflight::check_petsc_options(&cfg.run.petsc_options)
+            .map_err(|e| format!("{at}: run.petsc_options: {e}"))?;
+    }
+    Ok(())
 }
 
 /// Result of one option set.
@@ -148,6 +214,11 @@ pub struct SetResult {
     pub new_patterns: usize,
     /// Error message of a failed run.
     pub error: Option<String>,
+    /// The last crack state of `crack.json` (CT runs): length, bands, dissipated energy.
+    pub crack: Option<CrackState>,
+    /// The largest reaction force magnitude `|F|` over the steps and the sets of `history.csv` (N per mm
+    /// thickness in 2D, N in 3D; specimen frame) and the set it acts on.
+    pub peak_reaction: Option<(String, f64)>,
 }
 
 /// Runs every set for `steps` steps of `config`, results under `dir/<set name>` (replacing an earlier
@@ -162,7 +233,13 @@ pub fn run(
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let mut results = Vec::new();
     for set in sets {
-        eprintln!("study: {} ({})", set.name, set.options);
+        let overrides: Vec<String> = set.overrides.iter().map(|o| format!("--set {o}")).collect();
+        eprintln!(
+            "study: {} ({} {})",
+            set.name,
+            overrides.join(" "),
+            set.options
+        );
         results.push(run_one(exe, config, steps, set, &dir.join(&set.name))?);
     }
     write_report(dir, config, steps, &results)?;
@@ -181,6 +258,7 @@ pub fn run_one(
 ) -> Result<SetResult, String> {
     let log = out.join("log_view.txt");
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let steps = set.steps.unwrap_or(steps);
     let start = std::time::Instant::now();
     let output = Command::new(exe)
         .arg("run")
@@ -193,6 +271,8 @@ pub fn run_one(
             "--output",
         ])
         .arg(out)
+        .args(set.overrides.iter().flat_map(|o| ["--set", o.as_str()]))
+        .args(set.allow_large.then_some("--allow-large"))
         .args(set.options.split_whitespace())
         .arg("-log_view")
         .arg(format!(":{}", log.display()))
@@ -209,16 +289,45 @@ pub fn run_one(
             .unwrap_or("failed")
             .to_owned()
     });
-    Ok(read_result(
-        set,
-        &out.join(file::HISTORY),
-        &stdout,
-        total,
-        steps,
-        error,
-    ))
+    let mut result = read_result(set, &out.join(file::HISTORY), &stdout, total, steps, error);
+    result.crack = last_crack_state(&out.join(file::CRACK));
+    Ok(result)
 }
 
+/// The last state of a run's `crack.json`; `None` without one (no CT) or if it cannot be read.
+fn last_crack_state(path: &Path) -> Option<CrackState> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let mut json: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let states: Vec<CrackState> = serde_json::from_value(json["states"].take()).ok()?;
+    states.into_iter().last()
+}
+
+/// The largest reaction magnitude over the rows `f` of `history.csv` whose columns are `header`: each
+/// set's force components `<set>_fx`, `<set>_fy` (and `<set>_fz`), and the set.
+fn peak_reaction<'h>(header: &[&'h str], rows: &[Vec<f64>]) -> Option<(&'h str, f64)> {
+    let mut sets: Vec<(&str, Vec<usize>)> = Vec::new();
+    for (i, h) in header.iter().enumerate() {
+        let Some(set) = ["_fx", "_fy", "_fz"].iter().find_map(|c| h.strip_suffix(c)) else {
+            continue;
+        };
+        match sets.iter_mut().find(|(s, _)| *s == set) {
+            Some((_, columns)) => columns.push(i),
+            None => sets.push((set, vec![i])),
+        }
+    }
+    let mut peak: Option<(&str, f64)> = None;
+    for row in rows {
+        for (set, columns) in &sets {
+            let f = columns.iter().map(|&i| row[i] * row[i]).sum::<f64>().sqrt();
+            if f.is_finite() && peak.is_none_or(|(_, p)| f > p) {
+                peak = Some((set, f));
+            }
+        }
+    }
+    peak
+}
+
+/// The figures of a set's run from its `history.csv` at `csv` and the summary on its `stdout`.
 fn read_result(
     set: &OptionSet,
     csv: &Path,
@@ -243,6 +352,8 @@ fn read_result(
         unknowns: f64::NAN,
         new_patterns: 0,
         error,
+        crack: None,
+        peak_reaction: None,
     };
     let text = std::fs::read_to_string(csv).unwrap_or_default();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
@@ -250,16 +361,18 @@ fn read_result(
         .next()
         .map(|h| h.split(',').collect())
         .unwrap_or_default();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            (0..header.len())
+                .map(|i| f.get(i).and_then(|v| v.parse().ok()).unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
     let col = |name: &str| header.iter().position(|h| *h == name);
     let (mut newton_sum, mut linear_sum, mut unknowns_sum) = (0.0, 0.0, 0.0);
-    for line in lines {
-        let f: Vec<&str> = line.split(',').collect();
-        let num = |name: &str| {
-            col(name)
-                .and_then(|i| f.get(i))
-                .and_then(|v| v.parse::<f64>().ok())
-                .unwrap_or(f64::NAN)
-        };
+    for row in &rows {
+        let num = |name: &str| col(name).map_or(f64::NAN, |i| row[i]);
         r.steps += 1;
         r.newton.push(num(history::NEWTON_ITS));
         newton_sum += num(history::NEWTON_ITS);
@@ -272,6 +385,7 @@ fn read_result(
         unknowns_sum += num(history::UNKNOWNS);
         r.new_patterns += usize::from(num(history::NEW_PATTERN) == 1.0);
     }
+    r.peak_reaction = peak_reaction(&header, &rows).map(|(set, f)| (set.to_owned(), f));
     r.unknowns = unknowns_sum / r.steps.max(1) as f64;
     r.linear_per_newton = if newton_sum > 0.0 {
         linear_sum / newton_sum
@@ -303,17 +417,22 @@ fn write_report(
     write_plots(dir, results)
 }
 
-/// The report's Markdown (a table of the sets and their options) and the same figures as CSV.
+/// The report's Markdown (a table of the sets, their options and results) and the same figures as CSV.
 fn report_tables(config: &Path, steps: usize, results: &[SetResult]) -> (String, String) {
     let mut md = format!(
-        "# Solver study: `{}`, {steps} steps\n\nWall times in s, memory in MB (peak resident set of the run's process). \
-         PETSc's profile of each set: `<set>/log_view.txt`.\n\n",
+        "# Study: `{}`, {steps} steps\n\nWall times in s, memory in MB (peak resident set of the run's process). \
+         Crack length (mm), branches and band angles (deg against the notch axis) of the last crack state \
+         in `crack.json`, the energy the damage dissipated under tension / compression and the largest \
+         reaction |F| of the run (N per mm thickness; N in 3D), all in the specimen's frame (also with \
+         `grid.rotation`). PETSc's profile of each set: `<set>/log_view.txt`.\n\n",
         config.display()
     );
-    md.push_str("| set | converged | steps | Newton/step | KSP/Newton | set-up | assembly | PETSc solve | total | peak MB | retries |\n");
-    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| set | converged | steps | Newton/step | KSP/Newton | set-up | assembly | PETSc solve | total | peak MB | retries | crack | branches | angles | dissipated | peak reaction |\n");
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let mut csv = String::from(
-        "set,converged,steps,newton_per_step,ksp_per_newton,setup_s,assembly_s,solve_s,total_s,peak_mb,retries,options,error\n",
+        "set,converged,steps,newton_per_step,ksp_per_newton,setup_s,assembly_s,solve_s,total_s,peak_mb,retries,\
+         crack_length_mm,branches,band_angles_deg,classification,dissipated_tension,dissipated_compression,\
+         peak_reaction,peak_reaction_set,overrides,options,error\n",
     );
     for r in results {
         let newton = if r.steps > 0 {
@@ -340,22 +459,89 @@ fn report_tables(config: &Path, steps: usize, results: &[SetResult]) -> (String,
             let _ = write!(md, " {v:.md_decimals$} |");
             let _ = write!(csv, ",{v:.csv_decimals$}");
         }
-        let _ = writeln!(md, " {retries} |");
+        let _ = write!(md, " {retries} |");
+        let _ = write!(csv, ",{retries}");
+        let (md_results, csv_results) = result_cells(r);
+        let _ = writeln!(md, "{md_results}");
         let error = r.error.clone().unwrap_or_default().replace('"', "'");
-        let _ = writeln!(csv, ",{retries},\"{}\",\"{error}\"", r.set.options);
+        let _ = writeln!(
+            csv,
+            "{csv_results},\"{}\",\"{}\",\"{error}\"",
+            r.set.overrides.join(" "),
+            r.set.options
+        );
     }
-    md.push_str("\nOption sets:\n\n");
+    md.push_str("\nSets:\n\n");
     for r in results {
+        let overrides: Vec<String> = r
+            .set
+            .overrides
+            .iter()
+            .map(|o| format!("--set {o}"))
+            .collect();
+        let options = [overrides.join(" "), r.set.options.clone()].join(" ");
         let _ = writeln!(
             md,
             "- `{}`: `{}`{}",
             r.set.name,
-            r.set.options,
+            options.trim(),
             r.error
                 .as_ref()
                 .map(|e| format!(" — failed: {e}"))
                 .unwrap_or_default()
         );
+    }
+    (md, csv)
+}
+
+/// The result cells of a set's row in the Markdown table (crack length, branches, band angles, dissipated
+/// energy, peak reaction; `-` where the run has none) and in the CSV (from a leading comma to the peak
+/// reaction's set).
+fn result_cells(r: &SetResult) -> (String, String) {
+    let (mut md, mut csv) = (String::new(), String::new());
+    match &r.crack {
+        Some(c) => {
+            let angles: Vec<String> = c
+                .bands
+                .iter()
+                .map(|b| format!("{:.0}", b.angle_degrees))
+                .collect();
+            let [t, k] = c.dissipated;
+            let _ = write!(
+                md,
+                " {:.1} | {} | {} | {t:.2} / {k:.2} |",
+                c.length,
+                c.bands.len(),
+                angles.join(", ")
+            );
+            let precise: Vec<String> = c
+                .bands
+                .iter()
+                .map(|b| format!("{:.2}", b.angle_degrees))
+                .collect();
+            let _ = write!(
+                csv,
+                ",{:.3},{},\"{}\",{},{t:.6e},{k:.6e}",
+                c.length,
+                c.bands.len(),
+                precise.join(" "),
+                c.classification
+            );
+        }
+        None => {
+            md.push_str(" - | - | - | - |");
+            csv.push_str(",,,,,,");
+        }
+    }
+    match &r.peak_reaction {
+        Some((set, f)) => {
+            let _ = write!(md, " {f:.2} ({set}) |");
+            let _ = write!(csv, ",{f:.6e},{set}");
+        }
+        None => {
+            md.push_str(" - |");
+            csv.push_str(",,");
+        }
     }
     (md, csv)
 }
@@ -429,9 +615,45 @@ mod tests {
             sets[1],
             OptionSet {
                 name: "ilu".into(),
-                options: "-pc_type ilu".into()
+                options: "-pc_type ilu".into(),
+                line: 4,
+                ..OptionSet::default()
             }
         );
+        std::fs::write(
+            &p,
+            "h1: --set grid.cell_size=1 --set=ct.notch_width=1 --steps 3 --allow-large -pc_type lu\n",
+        )
+        .expect("write");
+        let sets = read_sets(&p).expect("valid");
+        assert_eq!(
+            sets[0],
+            OptionSet {
+                name: "h1".into(),
+                options: "-pc_type lu".into(),
+                overrides: vec!["grid.cell_size=1".into(), "ct.notch_width=1".into()],
+                steps: Some(3),
+                allow_large: true,
+                line: 1,
+            }
+        );
+        for (line, needle) in [
+            ("a: --sets x=1\n", "`--sets` is no option of a set line"),
+            ("a: --set\n", "--set needs a value"),
+            (
+                "a: --set grid.cell_size\n",
+                "--set grid.cell_size: expected key=value",
+            ),
+            ("a: --steps 0\n", "--steps 0: a number of steps >= 1"),
+            ("a: grid.cell_size=1\n", "`grid.cell_size=1` is no option"),
+        ] {
+            std::fs::write(&p, line).expect("write");
+            let e = read_sets(&p).unwrap_err();
+            assert!(
+                e.contains("sets.txt:1: set `a`") && e.contains(needle),
+                "{e}"
+            );
+        }
         std::fs::write(&p, "a: -pc_type lu\nb: -pc_type ilu\na: -pc_type jacobi\n").expect("write");
         let e = read_sets(&p).unwrap_err();
         assert!(
@@ -447,7 +669,7 @@ mod tests {
         std::fs::write(&p, "no colon here\n").expect("write");
         let e = read_sets(&p).unwrap_err();
         assert!(
-            e.contains("sets.txt:1") && e.contains("name: -petsc"),
+            e.contains("sets.txt:1") && e.contains("name: [--set key=value ...] -petsc"),
             "{e}"
         );
         std::fs::remove_dir_all(&dir).ok();
@@ -459,6 +681,7 @@ mod tests {
             set: OptionSet {
                 name: name.into(),
                 options: "-pc_type lu".into(),
+                ..OptionSet::default()
             },
             steps,
             completed: error.is_none(),
@@ -474,16 +697,51 @@ mod tests {
             unknowns: 100.0,
             new_patterns: 0,
             error: error.map(str::to_string),
+            crack: None,
+            peak_reaction: None,
         };
-        let results = [row("lu", 2, None), row("ilu", 0, Some("diverged \"x\""))];
+        let mut lu = row("lu", 2, None);
+        lu.set.overrides = vec!["grid.rotation=15".into()];
+        let state = serde_json::json!({
+            "time": 3e-4, "length": 101.84, "tip": [150.0, 7.0],
+            "bands": [{ "angle_degrees": -94.04, "points": 3 }, { "angle_degrees": -68.0, "points": 3 }],
+            "classification": "branching", "crossings": [], "band_width": 4.0, "band_width_max": 6.0,
+            "dissipated": [88.834, 3.41]
+        });
+        lu.crack = Some(serde_json::from_value(state).expect("a crack state"));
+        lu.peak_reaction = Some(("loading_plate".into(), 2276.0751));
+        let results = [lu, row("ilu", 0, Some("diverged \"x\""))];
         let (md, csv) = report_tables(Path::new("c.toml"), 2, &results);
-        assert!(md.contains(
-            "| lu | yes | 2 | 3.50 | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 |\n\
-             | ilu | **no** | 0 | NaN | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 |\n"
-        ));
-        assert!(csv.ends_with(
-            "lu,true,2,3.5000,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,\"-pc_type lu\",\"\"\n\
-             ilu,false,0,NaN,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,\"-pc_type lu\",\"diverged 'x'\"\n"
-        ));
+        assert!(
+            md.contains(
+                "| lu | yes | 2 | 3.50 | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 | 101.8 | 2 | -94, -68 | 88.83 / 3.41 | 2276.08 (loading_plate) |\n\
+                 | ilu | **no** | 0 | NaN | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 | - | - | - | - | - |\n"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("- `lu`: `--set grid.rotation=15 -pc_type lu`"),
+            "{md}"
+        );
+        assert!(
+            csv.ends_with(
+                "lu,true,2,3.5000,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,101.840,2,\"-94.04 -68.00\",branching,\
+                 8.883400e1,3.410000e0,2.276075e3,loading_plate,\"grid.rotation=15\",\"-pc_type lu\",\"\"\n\
+                 ilu,false,0,NaN,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,,,,,,,,,\"\",\"-pc_type lu\",\"diverged 'x'\"\n"
+            ),
+            "{csv}"
+        );
+    }
+
+    #[test]
+    fn the_peak_reaction_is_the_largest_force_magnitude_of_any_set() {
+        let header = ["step", "a_ux", "a_fx", "a_fy", "b_fx", "b_fy", "b_uy"];
+        let rows = vec![
+            vec![1.0, 0.0, 3.0, 4.0, 1.0, 1.0, 9e9],
+            vec![2.0, 0.0, 0.0, 1.0, -6.0, 0.0, 9e9],
+            vec![3.0, 0.0, f64::NAN, 1.0, 0.0, 0.0, 9e9],
+        ];
+        assert_eq!(peak_reaction(&header, &rows), Some(("b", 6.0)));
+        assert_eq!(peak_reaction(&header[..2], &rows), None);
     }
 }
