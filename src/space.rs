@@ -72,13 +72,18 @@ pub fn rotation_xy<const D: usize>(theta: f64) -> SMatrix<f64, D, D> {
 /// frame with `R(theta)^T`. Theta = 0 is the identity, exactly (no arithmetic is done).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Frame {
+    /// Theta (degrees).
+    degrees: f64,
     /// `cos theta`, `sin theta`; `None`: theta = 0.
     turn: Option<(f64, f64)>,
 }
 
 impl Frame {
     /// The specimen on the grid's axes.
-    pub const IDENTITY: Frame = Frame { turn: None };
+    pub const IDENTITY: Frame = Frame {
+        degrees: 0.0,
+        turn: None,
+    };
 
     /// The frame turned by `degrees` (counter-clockwise).
     pub fn from_degrees(degrees: f64) -> Self {
@@ -86,7 +91,15 @@ impl Frame {
             return Self::IDENTITY;
         }
         let (s, c) = degrees.to_radians().sin_cos();
-        Self { turn: Some((c, s)) }
+        Self {
+            degrees,
+            turn: Some((c, s)),
+        }
+    }
+
+    /// Theta (degrees); `None` for theta = 0.
+    pub fn degrees(&self) -> Option<f64> {
+        self.turn.map(|_| self.degrees)
     }
 
     /// True for theta = 0.
@@ -160,6 +173,8 @@ mod tests {
         assert!((v[0] - 1.0).abs() < 1e-15 && v[1].abs() < 1e-15 && v[2] == 7.0);
         let id = Frame::from_degrees(0.0);
         assert!(id.is_identity() && !f.is_identity());
+        assert_eq!(id.degrees(), None);
+        assert_eq!(f.degrees(), Some(30.0));
         let y = Vector2::new(-0.3, 1e300);
         assert_eq!(id.to_grid(y), y);
         assert_eq!(id.to_specimen(y), y);

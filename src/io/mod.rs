@@ -460,6 +460,13 @@ impl RunOutput {
             3 => "# units: time s, dt s, displacement mm, force N (3D: of the whole plate), rotation rad, energy N mm, wall s\n",
             _ => "# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s\n",
         });
+        if let Some(degrees) = self.frame.degrees() {
+            let _ = writeln!(
+                s,
+                "# frame: the set-up ran turned by {degrees} deg inside the grid (grid.rotation); displacements \
+                 and forces are turned back into the specimen's frame"
+            );
+        }
         let mut columns: Vec<String> = history::LEADING.map(String::from).to_vec();
         if let Some(r) = self.rows.first() {
             for (name, _) in &r.reactions {
