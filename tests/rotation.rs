@@ -68,12 +68,20 @@ fn turned(dir: &Path, degrees: f64) -> Vec<[f64; 8]> {
         .expect("start mpm-concrete");
     succeeds(&o);
     let text = std::fs::read_to_string(dir.join(&out).join("history.csv")).expect("history");
+    assert_eq!(
+        text.contains("# frame: the set-up ran turned by"),
+        degrees != 0.0,
+        "the history says whether its vectors were turned back"
+    );
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
     let at = PLATE_COLUMNS.map(|c| header.iter().position(|h| *h == c).expect(c));
     lines
         .map(|l| {
-            let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect();
+            let f: Vec<f64> = l
+                .split(',')
+                .map(|v| v.parse().unwrap_or(f64::NAN))
+                .collect();
             at.map(|i| f[i])
         })
         .collect()
