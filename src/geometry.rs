@@ -123,6 +123,18 @@ impl Region {
                 if !vertices.iter().all(finite) {
                     return Err("polygon vertices must be finite".into());
                 }
+                if let Some((k, l, x)) = polygon_crossing(vertices) {
+                    let n = vertices.len();
+                    return Err(format!(
+                        "polygon edges {k} (vertices {k} to {}) and {l} (vertices {l} to {}) meet at \
+                         ({:.3}, {:.3}) mm: a simple polygon, whose edges meet only their neighbours at \
+                         shared vertices",
+                        (k + 1) % n,
+                        (l + 1) % n,
+                        x.x,
+                        x.y
+                    ));
+                }
             }
             Region::Disk { centre, radius } => {
                 if !(finite(centre) && radius.is_finite() && *radius > 0.0) {
@@ -210,6 +222,45 @@ impl Region {
     pub fn in_closure(&self, x: Vector2<f64>) -> bool {
         self.on_boundary(x) || self.in_interior(x)
     }
+}
+
+/// The first pair of edges `(k, l)` of a polygon that are not neighbours and meet (cross, touch or
+/// overlap), with a point they share; edge `k` runs from vertex `k` to vertex `k + 1` (the last one back to
+/// vertex 0).
+fn polygon_crossing(vertices: &[[f64; 2]]) -> Option<(usize, usize, Vector2<f64>)> {
+    let edges: Vec<_> = polygon_edges(vertices).collect();
+    let n = edges.len();
+    (0..n)
+        .flat_map(|k| (k + 2..n).map(move |l| (k, l)))
+        .filter(|&(k, l)| !(k == 0 && l == n - 1))
+        .find_map(|(k, l)| segments_meet(edges[k], edges[l]).map(|x| (k, l, x)))
+}
+
+/// A point the closed segments `a`-`b` and `c`-`d` share, if they meet.
+fn segments_meet(
+    (a, b): (Vector2<f64>, Vector2<f64>),
+    (c, d): (Vector2<f64>, Vector2<f64>),
+) -> Option<Vector2<f64>> {
+    let cross = |u: Vector2<f64>, v: Vector2<f64>| u.x * v.y - u.y * v.x;
+    let (ab, cd) = (b - a, d - c);
+    let (o1, o2) = (cross(ab, c - a), cross(ab, d - a));
+    let (o3, o4) = (cross(cd, a - c), cross(cd, b - c));
+    let apart = |p: f64, q: f64| (p > 0.0 && q > 0.0) || (p < 0.0 && q < 0.0);
+    if apart(o1, o2) || apart(o3, o4) {
+        return None;
+    }
+    if o1 == 0.0 && o2 == 0.0 {
+        // Collinear: they meet where their extents overlap.
+        let within = |p: Vector2<f64>, (u, v): (Vector2<f64>, Vector2<f64>)| {
+            (0..2).all(|i| p[i] >= u[i].min(v[i]) && p[i] <= u[i].max(v[i]))
+        };
+        return [c, d, a, b]
+            .into_iter()
+            .zip([(a, b), (a, b), (c, d), (c, d)])
+            .find_map(|(p, seg)| within(p, seg).then_some(p));
+    }
+    let t = o3 / (o3 - o4);
+    Some(a + ab * if t.is_finite() { t } else { 0.0 })
 }
 
 fn polygon_edges(vertices: &[[f64; 2]]) -> impl Iterator<Item = (Vector2<f64>, Vector2<f64>)> + '_ {
@@ -335,5 +386,61 @@ impl Body<2> for Geometry {
 
     fn bounding_box(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
         Geometry::bounding_box(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn polygon(vertices: &[[f64; 2]]) -> Region {
+        Region::Polygon {
+            vertices: vertices.to_vec(),
+        }
+    }
+
+    #[test]
+    fn a_self_crossing_polygon_is_refused_naming_its_edges() {
+        // A bow tie: edges 0 (0,0)-(10,10) and 2 (10,0)-(0,10) cross at (5, 5).
+        let e = polygon(&[[0.0, 0.0], [10.0, 10.0], [10.0, 0.0], [0.0, 10.0]])
+            .validate()
+            .unwrap_err();
+        assert!(
+            e.contains("edges 0 (vertices 0 to 1) and 2 (vertices 2 to 3) meet at (5.000, 5.000)"),
+            "{e}"
+        );
+        // A vertex on a non-adjacent edge touches it, and a spike folds back over an edge.
+        let touch = [
+            [0.0, 0.0],
+            [10.0, 0.0],
+            [10.0, 10.0],
+            [5.0, 0.0],
+            [0.0, 10.0],
+        ];
+        assert!(polygon(&touch).validate().is_err());
+        let fold = [
+            [0.0, 0.0],
+            [10.0, 0.0],
+            [10.0, 10.0],
+            [10.0, -5.0],
+            [0.0, 10.0],
+        ];
+        assert!(polygon(&fold).validate().is_err());
+        // Simple polygons pass, convex or not, in either orientation.
+        let l_shape = [
+            [0.0, 0.0],
+            [10.0, 0.0],
+            [10.0, 4.0],
+            [4.0, 4.0],
+            [4.0, 10.0],
+            [0.0, 10.0],
+        ];
+        assert_eq!(polygon(&l_shape).validate(), Ok(()));
+        let reversed: Vec<[f64; 2]> = l_shape.iter().rev().copied().collect();
+        assert_eq!(polygon(&reversed).validate(), Ok(()));
+        assert_eq!(
+            polygon(&[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]).validate(),
+            Ok(())
+        );
     }
 }

@@ -2,7 +2,10 @@
 //! and `[[rigid_body]]` (with its `contact`), with their checks and the rule for the names that become
 //! history.csv columns.
 
-use super::{Check, ConfigError, density_ok, finite, time_ok};
+use super::{
+    Check, ConfigError, DENSITY_ALLOWED, SPEED_ALLOWED, density_ok, finite, shown, speed_ok,
+    time_ok,
+};
 use crate::geometry::Geometry;
 use crate::material::{Material, MaterialConfig};
 use serde::Deserialize;
@@ -250,21 +253,21 @@ pub(super) fn validate_bodies(
         if !density_ok(b.density) {
             return Err(c.bad(
                 &format!("body[{i}].density"),
-                b.density.to_string(),
-                "a density > 0 (t/mm^3)",
+                shown(b.density),
+                DENSITY_ALLOWED,
             ));
         }
-        if !finite(&b.initial_velocity) {
+        if !speed_ok(&b.initial_velocity) {
             return Err(c.bad(
                 &format!("body[{i}].initial_velocity"),
                 format!("{:?}", b.initial_velocity),
-                "finite components (mm/s)",
+                SPEED_ALLOWED,
             ));
         }
         b.geometry.validate().map_err(|e| {
             c.bad(
                 &format!("body[{i}].geometry"),
-                String::new(),
+                format!("(body {:?})", b.name),
                 &e.to_string(),
             )
         })?;
@@ -296,21 +299,22 @@ fn validate_motion(
 ) -> Result<(), ConfigError> {
     for (axis, m) in [("x", x), ("y", y)] {
         let ok = match m {
-            MotionSpec::Velocity { velocity } => velocity.is_finite(),
+            MotionSpec::Velocity { velocity } => speed_ok(&[*velocity]),
             MotionSpec::Keyword(_) => true,
         };
         if !ok {
             return Err(c.bad(
                 &format!("{field}.{axis}"),
                 format!("{m:?}"),
-                "\"free\", \"fixed\" or { velocity = v } with a finite v (mm/s)",
+                "\"free\", \"fixed\" or { velocity = v } with a finite v of at most 1e7 mm/s (10 \
+                 km/s) in magnitude",
             ));
         }
     }
     if !time_ok(rise_time) {
         return Err(c.bad(
             &format!("{field}.rise_time"),
-            rise_time.to_string(),
+            shown(rise_time),
             "a time >= 0 (s)",
         ));
     }
@@ -381,7 +385,7 @@ impl ContactSection {
         if !(self.friction.is_finite() && self.friction >= 0.0) {
             return Err(c.bad(
                 &format!("{field}.contact.friction"),
-                self.friction.to_string(),
+                shown(self.friction),
                 "a Coulomb coefficient >= 0 (0 = frictionless)",
             ));
         }
@@ -428,7 +432,7 @@ impl LoadSection {
         if !time_ok(self.rise_time) {
             return Err(c.bad(
                 &format!("load[{i}] ({}).rise_time", self.name),
-                self.rise_time.to_string(),
+                shown(self.rise_time),
                 "a time >= 0 (s)",
             ));
         }

@@ -1,6 +1,6 @@
 //! The run-control sections: `[run]`, `[time]`, `[grid]`, `[shape]` and `[extrusion]`, with their checks.
 
-use super::{Check, ConfigError};
+use super::{Check, ConfigError, shown};
 use crate::model::{InitialAcceleration, Method};
 use crate::shape::ShapeKind;
 use serde::Deserialize;
@@ -175,27 +175,28 @@ impl RunSection {
 impl TimeSection {
     /// Checks `[time]`.
     pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(c.bad("time.dt", self.dt.to_string(), "a time step > 0 (s)"));
+        let (lo, hi) = super::DT_RANGE;
+        if !(self.dt.is_finite() && self.dt >= lo && self.dt <= hi) {
+            return Err(c.bad(
+                "time.dt",
+                shown(self.dt),
+                "a time step in [1e-12, 1000] s (the CT demo takes 1e-6)",
+            ));
         }
         if let Some(m) = self.dt_min
             && !(m > 0.0 && m <= self.dt)
         {
-            return Err(c.bad("time.dt_min", m.to_string(), "0 < dt_min <= dt (s)"));
+            return Err(c.bad("time.dt_min", shown(m), "0 < dt_min <= dt (s)"));
         }
         if !(self.beta > 0.0 && self.beta <= 0.5) {
             return Err(c.bad(
                 "time.beta",
-                self.beta.to_string(),
+                shown(self.beta),
                 "Newmark beta in (0, 0.5]; 0 (explicit) is not supported",
             ));
         }
         if !(0.5..=1.0).contains(&self.gamma) {
-            return Err(c.bad(
-                "time.gamma",
-                self.gamma.to_string(),
-                "Newmark gamma in [0.5, 1]",
-            ));
+            return Err(c.bad("time.gamma", shown(self.gamma), "Newmark gamma in [0.5, 1]"));
         }
         Ok(())
     }
@@ -207,14 +208,14 @@ impl GridSection {
         if !(self.cell_size.is_finite() && self.cell_size > 0.0) {
             return Err(c.bad(
                 "grid.cell_size",
-                self.cell_size.to_string(),
+                shown(self.cell_size),
                 "a cell size > 0 (mm)",
             ));
         }
         if !(0.0..1e-2).contains(&self.mass_tolerance) {
             return Err(c.bad(
                 "grid.mass_tolerance",
-                self.mass_tolerance.to_string(),
+                shown(self.mass_tolerance),
                 "a fraction in [0, 0.01)",
             ));
         }
@@ -268,7 +269,7 @@ impl ExtrusionSection {
         {
             return Err(c.bad(
                 "extrusion.thickness",
-                self.thickness.to_string(),
+                shown(self.thickness),
                 &format!("a plate thickness > 0 (mm), a multiple of grid.cell_size = {h}"),
             ));
         }
@@ -284,7 +285,7 @@ impl ExtrusionSection {
         {
             return Err(c.bad(
                 "extrusion.section_z",
-                z.to_string(),
+                shown(z),
                 &format!("a z within the plate, 0 to {} (mm)", self.thickness),
             ));
         }

@@ -1,7 +1,7 @@
 //! `[ct]`: the compact tension specimen generator's section, its keyword values and its checks.
 
 use super::choice::Choice;
-use super::{Check, ConfigError, density_ok, time_ok};
+use super::{Check, ConfigError, DENSITY_ALLOWED, SPEED_MAX, density_ok, shown, time_ok};
 use crate::material::{ElasticConfig, Material, MaterialConfig};
 use serde::Deserialize;
 
@@ -203,25 +203,18 @@ impl CtSection {
         self.validate_plates(c)?;
         let insert = self.validate_inserts(c, h)?;
         if !density_ok(self.density) {
-            return Err(c.bad(
-                "ct.density",
-                self.density.to_string(),
-                "a density > 0 (t/mm^3)",
-            ));
+            return Err(c.bad("ct.density", shown(self.density), DENSITY_ALLOWED));
         }
-        if !self.loading_rate.is_finite() {
+        if !(self.loading_rate > 0.0 && self.loading_rate <= SPEED_MAX) {
             return Err(c.bad(
                 "ct.loading_rate",
-                self.loading_rate.to_string(),
-                "a finite velocity (mm/s)",
+                shown(self.loading_rate),
+                "an opening rate > 0 and at most 1e7 mm/s (10 km/s); the direction is fixed by the \
+                 set-up (the loading plate moves down, away from the upper notch face)",
             ));
         }
         if !time_ok(self.rise_time) {
-            return Err(c.bad(
-                "ct.rise_time",
-                self.rise_time.to_string(),
-                "a time >= 0 (s)",
-            ));
+            return Err(c.bad("ct.rise_time", shown(self.rise_time), "a time >= 0 (s)"));
         }
         let concrete = self
             .material
@@ -234,27 +227,27 @@ impl CtSection {
     fn validate_notch(&self, c: Check) -> Result<(), ConfigError> {
         for (field, v) in [("ct.width", self.width), ("ct.height", self.height)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(c.bad(field, v.to_string(), "a length > 0 (mm)"));
+                return Err(c.bad(field, shown(v), "a length > 0 (mm)"));
             }
         }
         if !(self.notch_length > 0.0 && self.notch_length < self.width) {
             return Err(c.bad(
                 "ct.notch_length",
-                self.notch_length.to_string(),
+                shown(self.notch_length),
                 "0 < notch_length < width (mm)",
             ));
         }
         if !(self.notch_width > 0.0 && self.notch_width < self.height) {
             return Err(c.bad(
                 "ct.notch_width",
-                self.notch_width.to_string(),
+                shown(self.notch_width),
                 "0 < notch_width < height (mm)",
             ));
         }
         if self.notch_tip == NotchTip::Round && self.notch_length <= 0.5 * self.notch_width {
             return Err(c.bad(
                 "ct.notch_length",
-                self.notch_length.to_string(),
+                shown(self.notch_length),
                 "notch_length > notch_width / 2 with notch_tip = \"round\" (mm)",
             ));
         }
@@ -291,7 +284,7 @@ impl CtSection {
         if !(self.friction.is_finite() && self.friction >= 0.0) {
             return Err(c.bad(
                 "ct.friction",
-                self.friction.to_string(),
+                shown(self.friction),
                 "a Coulomb coefficient >= 0 (0 = frictionless)",
             ));
         }
@@ -309,7 +302,7 @@ impl CtSection {
         if self.load_introduction == LoadIntroduction::Glued && self.friction != 0.0 {
             return Err(c.bad(
                 "ct.friction",
-                self.friction.to_string(),
+                shown(self.friction),
                 "only with load_introduction = \"contact\", \"pin\" or \"inserts\" (glued plates do \
                  not slide)",
             ));
@@ -320,7 +313,7 @@ impl CtSection {
             if !(px > a.max(s[0]) && px < b.min(s[1])) {
                 return Err(c.bad(
                     "ct.pin_x",
-                    px.to_string(),
+                    shown(px),
                     "an x strictly inside both plates (load_zone and support_zone, mm): a massless \
                      plate pinned outside its contact face cannot balance its moment and overturns",
                 ));
@@ -331,14 +324,14 @@ impl CtSection {
         {
             return Err(c.bad(
                 "ct.pin_offset",
-                o.to_string(),
+                shown(o),
                 "a distance >= 0 from the contact face into the plate (mm)",
             ));
         }
         if !(self.plate_thickness > 0.0 && 2.0 * self.plate_thickness < self.notch_width) {
             return Err(c.bad(
                 "ct.plate_thickness",
-                self.plate_thickness.to_string(),
+                shown(self.plate_thickness),
                 "0 < plate_thickness < notch_width / 2 (mm)",
             ));
         }
@@ -353,7 +346,7 @@ impl CtSection {
             (false, Some(ti)) => {
                 return Err(c.bad(
                     "ct.insert_thickness",
-                    ti.to_string(),
+                    shown(ti),
                     "only with load_introduction = \"inserts\"",
                 ));
             }
@@ -370,7 +363,7 @@ impl CtSection {
                 if !(ti >= h - 1e-9 && room >= h - 1e-9) {
                     return Err(c.bad(
                         "ct.insert_thickness",
-                        ti.to_string(),
+                        shown(ti),
                         &format!(
                             "at least one cell ({h} mm), with a cell left free between the two \
                              inserts and their plates: notch_width - 2 (insert_thickness + \
@@ -387,8 +380,8 @@ impl CtSection {
         if !density_ok(self.insert_density) {
             return Err(c.bad(
                 "ct.insert_density",
-                self.insert_density.to_string(),
-                "a density > 0 (t/mm^3)",
+                shown(self.insert_density),
+                DENSITY_ALLOWED,
             ));
         }
         let steel = self.insert_material.build().map_err(|e| {

@@ -126,6 +126,108 @@ fn descend<'t>(t: &'t mut toml::Table, k: &str) -> Result<&'t mut toml::Table, S
     }
 }
 
+/// A number as the errors show it: plainly (`-0.000001`, `4300`), or in scientific notation when that
+/// would take more than 16 digits (`1e300`, `5e-324`).
+pub fn shown(v: f64) -> String {
+    let a = v.abs();
+    if a.is_finite() && a != 0.0 && !(1e-6..1e16).contains(&a) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
+/// Refuses an array of numbers at `path` (a dotted key, `""` at the top) or below it whose length is not 2:
+/// every vector, point and range of a configuration (`body_force`, `initial_velocity`, corners, vertices,
+/// normals, pins, forces, `load_zone`) has an x and a y component, the set-up being plane (`[extrusion]`
+/// extrudes it along z).
+fn check_vector_lengths(v: &toml::Value, path: &str, c: Check) -> Result<(), ConfigError> {
+    let join = |k: &str| match path {
+        "" => k.to_owned(),
+        _ => format!("{path}.{k}"),
+    };
+    match v {
+        toml::Value::Table(t) => t
+            .iter()
+            .try_for_each(|(k, v)| check_vector_lengths(v, &join(k), c)),
+        toml::Value::Array(items) => {
+            let numeric =
+                |x: &toml::Value| matches!(x, toml::Value::Integer(_) | toml::Value::Float(_));
+            if !items.is_empty() && items.iter().all(numeric) {
+                if items.len() == 2 {
+                    return Ok(());
+                }
+                return Err(c.bad(
+                    path,
+                    v.to_string(),
+                    &format!(
+                        "2 components (x, y), not {}: the configuration describes a plane set-up, a \
+                         2D run ([extrusion] extrudes it along z)",
+                        items.len()
+                    ),
+                ));
+            }
+            items
+                .iter()
+                .enumerate()
+                .try_for_each(|(i, x)| check_vector_lengths(x, &format!("{path}[{i}]"), c))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The sections of a configuration that are tables (`[ct]`), each with a key to show as an example.
+const TABLE_SECTIONS: [(&str, &str); 6] = [
+    ("run", "steps"),
+    ("time", "dt"),
+    ("grid", "cell_size"),
+    ("shape", "kind"),
+    ("ct", "loading_rate"),
+    ("extrusion", "thickness"),
+];
+
+/// Why `--set KEY=value` may not put the non-table `value` where the file has the table `old` (or where
+/// a top-level section, `top`, is a table): a table is changed key by key; `None` when it may.
+fn replaces_table(
+    old: Option<&toml::Value>,
+    top: bool,
+    key: &str,
+    value: &toml::Value,
+) -> Option<String> {
+    if value.is_table() {
+        return None;
+    }
+    let listed = |t: &toml::Table| t.keys().cloned().collect::<Vec<_>>().join(", ");
+    match old {
+        Some(toml::Value::Table(t)) => {
+            let example = TABLE_SECTIONS
+                .iter()
+                .find(|(name, _)| top && *name == key)
+                .map(|(_, k)| *k)
+                .or_else(|| t.keys().next().map(String::as_str))
+                .unwrap_or("KEY");
+            Some(format!(
+                "`{key}` is a table: --set names a key inside it, e.g. --set {key}.{example}=...; its \
+                 keys in the file: {}",
+                listed(t)
+            ))
+        }
+        Some(toml::Value::Array(a)) if !value.is_array() && a.iter().all(toml::Value::is_table) => {
+            Some(format!(
+                "`{key}` is an array of tables ([[{key}]]): --set names a key of one entry, e.g. \
+                 --set {key}[0].name=..."
+            ))
+        }
+        _ if top => TABLE_SECTIONS
+            .iter()
+            .find(|(name, _)| *name == key)
+            .map(|(name, example)| {
+                format!("`{name}` is a table ([{name}]): --set names a key inside it, e.g. --set {name}.{example}=...")
+            }),
+        _ => None,
+    }
+}
+
 /// All components finite.
 fn finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
@@ -136,10 +238,36 @@ fn time_ok(t: f64) -> bool {
     t.is_finite() && t >= 0.0
 }
 
-/// A density (t/mm^3) > 0.
+/// The densities a real solid can have (t/mm^3): from aerogels (1e-12) with room to spare down to 1e-15, up
+/// to 1e-6 (forty times osmium's 2.26e-8); outside, the points' masses overflow or vanish.
+pub const DENSITY_RANGE: (f64, f64) = (1e-15, 1e-6);
+
+/// What a density must be, as the errors say it.
+const DENSITY_ALLOWED: &str = "a density in [1e-15, 1e-6] t/mm^3 (concrete 2.4e-9, steel 7.85e-9)";
+
+/// A density (t/mm^3) within [`DENSITY_RANGE`].
 fn density_ok(d: f64) -> bool {
-    d.is_finite() && d > 0.0
+    d.is_finite() && (DENSITY_RANGE.0..=DENSITY_RANGE.1).contains(&d)
 }
+
+/// The largest speed (mm/s) of a prescribed or initial velocity: 1e7 mm/s = 10 km/s, beyond any impact
+/// test on concrete; faster, a step moves the bodies through many cells.
+pub const SPEED_MAX: f64 = 1e7;
+
+/// What a velocity must be, as the errors say it.
+const SPEED_ALLOWED: &str = "finite components of at most 1e7 mm/s (10 km/s) in magnitude";
+
+/// All components finite and at most [`SPEED_MAX`] in magnitude (mm/s).
+fn speed_ok(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite() && x.abs() <= SPEED_MAX)
+}
+
+/// The range of the time step (s): 1 ps to 1000 s (a quasi-static load step); outside, 1 / (beta dt^2)
+/// or the prescribed displacement of a step overflows and the first step gives NaN.
+pub const DT_RANGE: (f64, f64) = (1e-12, 1e3);
+
+/// The largest body force per unit mass (mm/s^2): 1e9, about 1e5 g (gravity is 9810).
+pub const BODY_FORCE_MAX: f64 = 1e9;
 
 /// The whole run configuration.
 #[derive(Debug, Clone, Deserialize)]
@@ -298,7 +426,11 @@ impl RunConfig {
             for k in &keys[..keys.len() - 1] {
                 t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {o}: {e}")))?;
             }
-            t.insert(keys[keys.len() - 1].to_string(), value);
+            let last = keys[keys.len() - 1];
+            if let Some(e) = replaces_table(t.get(last), keys.len() == 1, key.trim(), &value) {
+                return Err(parse_err(&file, format!("--set {o}: {e}")));
+            }
+            t.insert(last.to_string(), value);
         }
         let named = source_label(&file, overrides);
         let canonical = toml::to_string(&table).map_err(|e| parse_err(&named, e.to_string()))?;
@@ -314,6 +446,10 @@ impl RunConfig {
 
     /// As [`RunConfig::from_str_named`]; `position`: errors give the line and column in `text`.
     fn parse(text: &str, file: &str, position: bool) -> Result<Self, ConfigError> {
+        // Lengths first: serde reads a fixed-size array from the first items and ignores the rest.
+        if let Ok(table) = toml::from_str::<toml::Table>(text) {
+            check_vector_lengths(&toml::Value::Table(table), "", Check { file })?;
+        }
         let cfg: RunConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             file: file.to_owned(),
             message: toml_message(&e, text, position),
@@ -346,17 +482,21 @@ impl RunConfig {
         if let Some(e) = &self.extrusion {
             e.validate(c, self.grid.cell_size, self.shape.method)?;
         }
-        if !finite(&self.body_force) {
+        if !self
+            .body_force
+            .iter()
+            .all(|g| g.is_finite() && g.abs() <= BODY_FORCE_MAX)
+        {
             return Err(c.bad(
                 "body_force",
                 format!("{:?}", self.body_force),
-                "finite components (mm/s^2)",
+                "finite components of at most 1e9 mm/s^2 in magnitude (gravity is [0, -9810])",
             ));
         }
         if !time_ok(self.body_force_ramp) {
             return Err(c.bad(
                 "body_force_ramp",
-                self.body_force_ramp.to_string(),
+                shown(self.body_force_ramp),
                 "a time >= 0 (s)",
             ));
         }
@@ -387,11 +527,93 @@ impl RunConfig {
         };
         bodies::validate_names(c, &self.history_names())?;
         self.check_rotation(c)?;
-        Ok(Materials {
+        self.check_cell_size(c)?;
+        let materials = Materials {
             concrete,
             insert,
             bodies,
-        })
+        };
+        self.check_derived(c, &materials)?;
+        Ok(materials)
+    }
+
+    /// Refuses a cell size larger than the bodies (the [ct] plate and the `[[body]]` regions together)
+    /// in either direction: the grid would have less than one cell across them, and no point would be
+    /// seeded.
+    fn check_cell_size(&self, c: Check) -> Result<(), ConfigError> {
+        let plate = self.ct.as_ref().map(|ct| {
+            (
+                nalgebra::Vector2::zeros(),
+                nalgebra::Vector2::new(ct.width, ct.height),
+            )
+        });
+        let Some((lo, hi)) = plate
+            .into_iter()
+            .chain(self.body.iter().filter_map(|b| b.geometry.bounding_box()))
+            .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
+        else {
+            return Ok(());
+        };
+        let (extent, h) = (hi - lo, self.grid.cell_size);
+        if h <= extent.min() {
+            return Ok(());
+        }
+        let cells = extent / h;
+        Err(c.bad(
+            "grid.cell_size",
+            shown(h),
+            &format!(
+                "a cell size of at most {} mm: the bodies span {} x {} mm, {} x {} cells of this size \
+                 (at least one cell across them in each direction)",
+                shown(extent.min()),
+                shown(extent.x),
+                shown(extent.y),
+                shown(cells.x),
+                shown(cells.y)
+            ),
+        ))
+    }
+
+    /// The quantities the first step derives from the inputs, each finite and > 0 for every material and
+    /// its density: the P-wave modulus `M = K + 4G/3` (MPa), the wave speed `c = sqrt(M / rho)` (mm/s),
+    /// the Courant number `c dt / h` and the ratio `r = rho h^2 / (beta dt^2 M)` of inertia to stiffness
+    /// (`docs/theory.md`); a value that overflows or vanishes would give NaN in the first step.
+    fn check_derived(&self, c: Check, materials: &Materials) -> Result<(), ConfigError> {
+        let mut pairs: Vec<(String, f64, String, &Material)> = Vec::new();
+        if let (Some(ct), Some(m)) = (&self.ct, &materials.concrete) {
+            pairs.push(("ct.density".into(), ct.density, "ct.material".into(), m));
+            if let Some(steel) = &materials.insert {
+                let (d, k) = ("ct.insert_density".into(), "ct.insert_material".into());
+                pairs.push((d, ct.insert_density, k, steel));
+            }
+        }
+        for (i, (b, m)) in self.body.iter().zip(&materials.bodies).enumerate() {
+            let (d, k) = (format!("body[{i}].density"), format!("body[{i}].material"));
+            pairs.push((d, b.density, k, m));
+        }
+        let (h, dt, beta) = (self.grid.cell_size, self.time.dt, self.time.beta);
+        for (density_key, rho, material_key, m) in pairs {
+            let moduli = m.elastic_moduli();
+            let p_wave = moduli.bulk + 4.0 * moduli.shear / 3.0;
+            let speed = (p_wave / rho).sqrt();
+            let courant = speed * dt / h;
+            let ratio = rho * h * h / (beta * dt * dt * p_wave);
+            let sane = |v: f64| v.is_finite() && v > 0.0;
+            if ![p_wave, speed, courant, ratio].into_iter().all(sane) {
+                return Err(c.bad(
+                    "time.dt",
+                    shown(dt),
+                    &format!(
+                        "with grid.cell_size = {h} mm, {density_key} = {rho} t/mm^3 and \
+                         {material_key} (P-wave modulus {p_wave:e} MPa) the wave speed is {speed:e} \
+                         mm/s, the Courant number c dt / h {courant:e} and the ratio of inertia to \
+                         stiffness {ratio:e}: each must be finite and > 0 (choose dt, the cell size, \
+                         the density and the moduli nearer the values of a real run)"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// What a set-up turned inside the grid (`grid.rotation` != 0) cannot have: a plate (the turn is

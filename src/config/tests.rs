@@ -10,14 +10,16 @@ use crate::shape::ShapeKind;
 fn the_shipped_configurations_are_valid() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
     let mut checked = 0;
-    for entry in std::fs::read_dir(&dir).expect("configs/") {
-        let path = entry.expect("entry").path();
-        if path.extension().is_some_and(|e| e == "toml") {
-            RunConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
-            checked += 1;
+    for sub in [dir.clone(), dir.join("bench")] {
+        for entry in std::fs::read_dir(&sub).expect("configs/") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                RunConfig::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+                checked += 1;
+            }
         }
     }
-    assert!(checked >= 10, "{checked} configurations");
+    assert!(checked >= 13, "{checked} configurations");
     let plane = RunConfig::from_file(&dir.join("ct-demo.toml")).expect("ct-demo");
     let plate = RunConfig::from_file(&dir.join("ct-3d-demo.toml")).expect("ct-3d-demo");
     assert!(plane.extrusion.is_none());

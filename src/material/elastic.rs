@@ -51,6 +51,25 @@ impl ElasticModuli {
     }
 }
 
+/// The range of an elastic modulus (Young's, bulk or shear; MPa) a real solid can have: from soft foams
+/// (1e-6 MPa) to ten times diamond's Young's modulus (1.2e6 MPa); outside it the stiffness or the wave
+/// speed of a run overflows or vanishes and the first step gives NaN.
+pub const MODULUS_RANGE: (f64, f64) = (1e-6, 1e7);
+
+/// An elastic modulus `v` (MPa) within [`MODULUS_RANGE`].
+pub(crate) fn modulus(field: &'static str, v: f64) -> Result<f64, MaterialError> {
+    if v.is_finite() && (MODULUS_RANGE.0..=MODULUS_RANGE.1).contains(&v) {
+        Ok(v)
+    } else {
+        invalid(
+            field,
+            v,
+            "a modulus in [1e-6, 1e7] MPa (concrete about 3e4, steel 2.1e5, diamond 1.2e6)",
+        )
+    }
+}
+
+/// A finite value `v` > 0.
 pub(crate) fn positive(field: &'static str, v: f64) -> Result<f64, MaterialError> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
@@ -69,7 +88,7 @@ impl ElasticConfig {
             self.shear_modulus,
         ) {
             (Some(e), Some(nu), None, None) => {
-                let e = positive("youngs_modulus", e)?;
+                let e = modulus("youngs_modulus", e)?;
                 if !(nu.is_finite() && nu > -1.0 && nu < 0.5) {
                     return invalid("poisson_ratio", nu, "-1 < nu < 0.5");
                 }
@@ -79,8 +98,8 @@ impl ElasticConfig {
                 })
             }
             (None, None, Some(k), Some(g)) => Ok(ElasticModuli {
-                bulk: positive("bulk_modulus", k)?,
-                shear: positive("shear_modulus", g)?,
+                bulk: modulus("bulk_modulus", k)?,
+                shear: modulus("shear_modulus", g)?,
             }),
             (None, None, None, None) => Err(MaterialError::MissingParameter {
                 field: "youngs_modulus",

@@ -34,7 +34,7 @@ use nalgebra::{Matrix3, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
 use super::activity::GradientActivity;
-use super::elastic::positive;
+use super::elastic::{modulus, positive};
 use super::{
     Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, PointUpdate, Response, Sym6,
     check_softening, first_piola_from_pk2, green_lagrange, invalid, sym_to_matrix,
@@ -115,7 +115,7 @@ pub struct IsotropicDamage {
 impl IsotropicDamageConfig {
     /// Validates the parameters and builds the material.
     pub fn build(&self) -> Result<IsotropicDamage, MaterialError> {
-        let e = positive("youngs_modulus", self.youngs_modulus)?;
+        let e = modulus("youngs_modulus", self.youngs_modulus)?;
         let nu = self.poisson_ratio;
         if !(nu.is_finite() && nu > -1.0 && nu < 0.5) {
             return invalid("poisson_ratio", nu, "-1 < nu < 0.5");

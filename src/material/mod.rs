@@ -104,7 +104,7 @@ impl Default for Response {
 #[derive(Clone, Debug, thiserror::Error)]
 pub enum MaterialError {
     /// A parameter is outside its admissible range.
-    #[error("material parameter `{field}` = {value} is invalid: allowed is {allowed}")]
+    #[error("material parameter `{field}` = {} is invalid: allowed is {allowed}", crate::config::shown(*.value))]
     InvalidParameter {
         /// The parameter's config key.
         field: &'static str,

@@ -45,7 +45,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::activity::GradientActivity;
-use super::elastic::positive;
+use super::elastic::{modulus, positive};
 use super::quadrature::Quadrature;
 use super::{
     Constitutive, MaterialError, PAIRS, PointUpdate, Response, Sym6, check_softening, invalid,
@@ -257,8 +257,8 @@ impl MicroplaneParams {
 
     /// Checks every parameter range.
     pub fn validate(&self) -> Result<(), MaterialError> {
-        positive("bulk_modulus", self.bulk_modulus)?;
-        positive("shear_modulus", self.shear_modulus)?;
+        modulus("bulk_modulus", self.bulk_modulus)?;
+        modulus("shear_modulus", self.shear_modulus)?;
         positive("gamma_0", self.gamma_0)?;
         let nu = self.poisson_ratio;
         if !(nu.is_finite() && (0.0..0.5).contains(&nu)) {
