@@ -8,7 +8,7 @@
 //! options, output directory, checkpoint, memory), with one line that says what and why.
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use mpm_concrete::app::args::{launcher_rank, misplaced_program_option, split_args};
 use mpm_concrete::app::run::{self, RunFlags};
 use mpm_concrete::app::{
@@ -111,7 +111,10 @@ fn main() -> std::process::ExitCode {
         })
         .init();
     let (own, petsc_args) = split_args(std::env::args().collect());
-    let cli = Cli::parse_from(&own);
+    let cli = match Cli::try_parse_from(&own) {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e, &own),
+    };
     if let Some(message) = misplaced_program_option(&petsc_args) {
         eprintln!("error: {message}");
         return std::process::ExitCode::from(2);
@@ -142,6 +145,42 @@ fn main() -> std::process::ExitCode {
             }
         },
     }
+}
+
+/// A command-line usage error in two lines, the error (with clap's continuation lines, such as the
+/// possible values or a tip, joined onto it) and where the help is, exit code 2; help and version requests
+/// are printed as clap prints them.
+fn usage_error(e: clap::Error, own: &[String]) -> std::process::ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    let text = e.render().to_string();
+    let mut lines = text.lines().map(str::trim);
+    let mut message = lines.next().unwrap_or("error: bad command line").to_owned();
+    for more in lines
+        .filter(|l| !l.is_empty())
+        .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
+    {
+        message = format!("{message} {more}");
+    }
+    let cli = Cli::command();
+    let sub = own
+        .iter()
+        .skip(1)
+        .find(|a| cli.get_subcommands().any(|c| c.get_name() == a.as_str()));
+    let program = cli.get_name().to_owned();
+    eprintln!("{message}");
+    match sub {
+        Some(sub) => eprintln!("For more information, try '{program} {sub} --help'."),
+        None => eprintln!("For more information, try '{program} --help'."),
+    }
+    std::process::ExitCode::from(2)
 }
 
 /// Runs the command `cli` names; `own_args` are the program's arguments, `petsc_args` PETSc's (starting with

@@ -135,6 +135,13 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
     if flags.steps == Some(0) {
         return Err(bad("--steps must be at least 1"));
     }
+    // --steps N reaches the configuration as run.steps=N, a TOML integer: at most i64::MAX.
+    if let Some(n) = flags.steps.filter(|&n| i64::try_from(n).is_err()) {
+        return Err(bad(format!(
+            "--steps {n}: a number of steps from 1 to {}",
+            i64::MAX
+        )));
+    }
     let mut overrides = flags.set.clone();
     if let Some(n) = flags.steps {
         overrides.push(format!("run.steps={n}"));
