@@ -226,7 +226,7 @@ pub fn read_material_config(path: &Path) -> Result<MaterialConfig, DriverError> 
         message,
     };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    let table: toml::Table = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+    let table: toml::Table = toml::from_str(&text).map_err(|e| err(one_line(&e, &text)))?;
     let section = match table.get("material") {
         Some(toml::Value::Table(t)) => t.clone(),
         Some(_) => return Err(err("`material` must be a table".into())),
@@ -234,7 +234,18 @@ pub fn read_material_config(path: &Path) -> Result<MaterialConfig, DriverError> 
     };
     section
         .try_into()
-        .map_err(|e: toml::de::Error| err(e.to_string()))
+        .map_err(|e: toml::de::Error| err(one_line(&e, "")))
+}
+
+/// A TOML error on one line: `line L: message` when it points into `text`, else the message alone.
+fn one_line(e: &toml::de::Error, text: &str) -> String {
+    let message = e.message().trim().replace('\n', " ");
+    match e.span().and_then(|s| text.get(..s.start)) {
+        Some(before) if !text.is_empty() => {
+            format!("line {}: {message}", before.matches('\n').count() + 1)
+        }
+        _ => message,
+    }
 }
 
 /// Most load steps of a path or of a strength search (each holds one row of the curve).
@@ -257,6 +268,12 @@ fn check_args(args: &DriverArgs) -> Result<(), DriverError> {
     {
         return Err(DriverError::Argument(format!(
             "--eta-bar-max {max}: a finite nonlocal equivalent strain >= 0"
+        )));
+    }
+    if args.out.exists() && !args.out.is_dir() {
+        return Err(DriverError::Argument(format!(
+            "--out {}: exists and is not a directory (give another --out)",
+            args.out.display()
         )));
     }
     if let Some(name) = &args.name
@@ -292,6 +309,12 @@ pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, DriverError> {
         }
         (None, _) => 0.01,
     };
+    std::fs::create_dir_all(&args.out).map_err(|e| {
+        DriverError::Argument(format!(
+            "--out {}: cannot create the output directory: {e} (give another --out)",
+            args.out.display()
+        ))
+    })?;
     let eta_bar_path = match args.eta_bar_max {
         Some(max) => EtaBarPath::Prescribed { max },
         None => EtaBarPath::Local,
