@@ -180,8 +180,23 @@ impl Header {
 fn open(dir: &Path) -> Result<(hdf5_metno::File, Header, PathBuf), CheckpointError> {
     let path = dir.join(FILE);
     let shown = path.display().to_string();
-    if !path.is_file() {
-        return Err(CheckpointError::Missing { path: shown });
+    match std::fs::metadata(&path) {
+        Ok(m) if m.is_file() => {}
+        Ok(m) => {
+            let kind = if m.is_dir() {
+                "a directory"
+            } else {
+                "not a regular file"
+            };
+            return Err(CheckpointError::Unusable {
+                path: shown,
+                detail: format!(
+                    "is {kind}, not a checkpoint file (a run writes checkpoint.h5 as a file): remove it, \
+                     or start the run without --resume"
+                ),
+            });
+        }
+        Err(_) => return Err(CheckpointError::Missing { path: shown }),
     }
     let corrupt = |detail: String| CheckpointError::Corrupt {
         path: shown.clone(),

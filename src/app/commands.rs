@@ -6,6 +6,7 @@ use super::{bad, bench, no_petsc_options, study};
 use crate::config::RunConfig;
 use crate::io::{self, OutputError};
 use crate::preflight;
+use crate::rundir;
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -13,7 +14,21 @@ use std::path::{Path, PathBuf};
 /// crack.json and prints the states.
 pub fn crack(run_dir: &Path, petsc_args: &[String]) -> Result<()> {
     no_petsc_options("crack", "", petsc_args)?;
-    // A directory that is no CT run (or no run at all) is bad input; unreadable snapshots are not.
+    // The run's lock, held while crack.json is rewritten: a run still writing into the directory is
+    // refused (its snapshots and crack.json are still changing).
+    let _lock = if run_dir.is_dir() {
+        let advice = |e: String| {
+            bad(e.replace(
+                "or give another --output",
+                "then re-measure (crack rewrites crack.json)",
+            ))
+        };
+        Some(rundir::lock(run_dir).map_err(advice)?)
+    } else {
+        None
+    };
+    // A directory that is no CT run (or no run at all) and a corrupt or unreadable snapshot are bad
+    // input; a failed write of crack.json is not.
     let states = io::remeasure_cracks(run_dir).map_err(|e| match e {
         OutputError::Run { .. } | OutputError::Io { .. } => bad(e),
         other => other.into(),

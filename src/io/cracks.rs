@@ -161,6 +161,20 @@ struct Measure {
     frame: Frame,
 }
 
+/// A snapshot that HDF5 cannot read (not an HDF5 file, a missing dataset or attribute) is corrupt: the
+/// error of the snapshot at `path`, as a bad input.
+fn unreadable(path: &Path, e: &hdf5_metno::Error) -> OutputError {
+    let detail = e.to_string().replace('\n', " ");
+    OutputError::Run {
+        path: path.display().to_string(),
+        message: format!(
+            "not readable as a snapshot ({}): the snapshot is corrupt, nothing was re-measured and \
+             crack.json is unchanged",
+            detail.trim()
+        ),
+    }
+}
+
 /// The values of the dataset `name` of the snapshot `file` (at `path`), verified as a checkpoint's are:
 /// finite, within `range` if given, and `per_point` values for each of `points` points (if given).
 fn verified(
@@ -173,7 +187,7 @@ fn verified(
     let values: Vec<f64> = file
         .dataset(name)
         .and_then(|d| d.read_raw())
-        .map_err(|e| OutputError::hdf5(path, &e))?;
+        .map_err(|e| unreadable(path, &e))?;
     let corrupt = |what: String| OutputError::Run {
         path: path.display().to_string(),
         message: format!(
@@ -206,7 +220,7 @@ fn verified(
 /// The crack state of the snapshot `path` (its time, damage and positions; for a plate on the section
 /// layer), measured as `how` says; the values it reads are verified first ([`verified`]).
 fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
-    let h5 = |e: hdf5_metno::Error| OutputError::hdf5(path, &e);
+    let h5 = |e: hdf5_metno::Error| unreadable(path, &e);
     let file = hdf5_metno::File::open(path).map_err(h5)?;
     let time: f64 = file
         .attr("time_s")

@@ -100,6 +100,7 @@ pub(super) fn check_resume(
     steps: usize,
 ) -> Result<checkpoint::Header> {
     let header = checkpoint::read_header(dir).map_err(bad)?;
+    check_record(dir)?;
     let file = dir.join(checkpoint::FILE);
     let changes = header.identity.physics_changes(identity);
     if !changes.is_empty() {
@@ -139,6 +140,34 @@ pub(super) fn check_resume(
         );
     }
     Ok(header)
+}
+
+/// The run record `dir/run.json` of a run to resume is advisory: the run continues from the checkpoint,
+/// which its checksums verify, and writes a new record. A record that is no run record is noted and
+/// ignored; one that is not a file would make that write fail after the work, so it is refused.
+fn check_record(dir: &Path) -> Result<()> {
+    let path = dir.join(crate::rundir::RUN_FILE);
+    match std::fs::metadata(&path) {
+        Ok(m) if !m.is_file() => Err(bad(format!(
+            "{}: is not a file: the run record a resumed run rewrites (remove it)",
+            path.display()
+        ))),
+        Ok(_) => {
+            let read = std::fs::read_to_string(&path).map_err(|e| e.to_string());
+            let parsed = read.and_then(|t| {
+                serde_json::from_str::<crate::rundir::RunRecord>(&t).map_err(|e| e.to_string())
+            });
+            if let Err(e) = parsed {
+                eprintln!(
+                    "note: {}: not a run record ({e}); ignored: the run continues from the checkpoint, \
+                     which its checksums verify, and writes a new run.json",
+                    path.display()
+                );
+            }
+            Ok(())
+        }
+        Err(_) => Ok(()),
+    }
 }
 
 #[cfg(test)]
