@@ -251,7 +251,7 @@ fn bad_input_is_refused_before_anything_is_written() {
                 "--set",
                 "body[0].density=-1",
             ],
-            vec!["body[0].density", "= -1", "a density > 0"],
+            vec!["body[0].density", "= -1", "a density in [1e-15, 1e-6]"],
         ),
         (
             vec![

@@ -1,0 +1,284 @@
+//! Inputs a hostile user tries, on the real binary and a tiny CT specimen (360 points): extreme finite
+//! values, vectors of the wrong length, a self-crossing polygon, a grid coarser than the bodies, options
+//! named as the user typed them, whole tables replaced by `--set`, corrupt or locked run directories for
+//! `crack` and `--resume`, `material-driver`'s output and configuration, and clap's usage errors. Each is
+//! refused with exit code 2 and one line (two for a usage error: the error and where the help is), and
+//! nothing is written.
+//!
+//! Units: mm, s, N, MPa, t.
+
+mod binary;
+
+use binary::{EXE, record, refused, scratch, stderr, succeeds};
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// A block on a held base: the `[[body]]`, `[[constraint]]` and `body_force` keys.
+const BLOCK: &str = r#"
+[run]
+name = "block"
+steps = 2
+
+[grid]
+cell_size = 2.0
+
+[[body]]
+name = "b"
+density = 2.4e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
+material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
+
+[[constraint]]
+name = "base"
+min = [-1.0, -0.1]
+max = [11.0, 0.1]
+y = "fixed"
+"#;
+
+/// Runs the program in `cwd`.
+fn run(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(EXE)
+        .current_dir(cwd)
+        .args(args)
+        .output()
+        .expect("start mpm-concrete")
+}
+
+#[test]
+fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_written() {
+    let dir = scratch("hostile", "values", &[("block.toml", BLOCK)]);
+    // (config, --set overrides or other arguments, what the error line must name)
+    let cases: Vec<(&str, Vec<&str>, Vec<&str>)> = vec![
+        (
+            "tiny.toml",
+            vec!["--set", "time.dt=1e300"],
+            vec!["tiny.toml", "`time.dt` = 1e300", "[1e-12, 1000] s"],
+        ),
+        (
+            "tiny.toml",
+            vec!["--set", "ct.material.bulk_modulus=1e308"],
+            vec!["`bulk_modulus` = 1e308", "[1e-6, 1e7] MPa"],
+        ),
+        (
+            "tiny.toml",
+            vec!["--set", "ct.density=1e300"],
+            vec!["`ct.density` = 1e300", "[1e-15, 1e-6] t/mm^3"],
+        ),
+        (
+            "tiny.toml",
+            vec!["--set", "ct.loading_rate=-4300"],
+            vec!["`ct.loading_rate` = -4300", "> 0", "direction is fixed"],
+        ),
+        (
+            "block.toml",
+            vec!["--set", "body_force=[0,1,2,3]"],
+            vec![
+                "`body_force` = [0, 1, 2, 3]",
+                "2 components (x, y), not 4",
+                "2D",
+            ],
+        ),
+        (
+            "block.toml",
+            vec!["--set", "body[0].initial_velocity=[1.0,0.0,0.0]"],
+            vec!["`body[0].initial_velocity`", "not 3"],
+        ),
+        (
+            "block.toml",
+            vec!["--set", "constraint[0].max=[11.0]"],
+            vec!["`constraint[0].max`", "not 1"],
+        ),
+        (
+            "block.toml",
+            vec![
+                "--set",
+                "body[0].geometry={include=[{type=\"polygon\",vertices=[[0.0,0.0],[10.0,10.0],[10.0,0.0],[0.0,10.0]]}]}",
+            ],
+            vec![
+                "`body[0].geometry` = (body \"b\")",
+                "edges 0 (vertices 0 to 1) and 2 (vertices 2 to 3) meet at (5.000, 5.000) mm",
+            ],
+        ),
+        (
+            "tiny.toml",
+            vec!["--set", "grid.cell_size=1e300"],
+            vec![
+                "`grid.cell_size` = 1e300",
+                "at most 40 mm",
+                "4e-299 x 4e-299 cells",
+            ],
+        ),
+        (
+            "tiny.toml",
+            vec!["--steps", "18446744073709551615"],
+            vec![
+                "--steps 18446744073709551615",
+                "from 1 to 9223372036854775807",
+            ],
+        ),
+        (
+            "tiny.toml",
+            vec!["--set", "ct=5"],
+            vec![
+                "--set ct=5",
+                "`ct` is a table",
+                "--set ct.loading_rate=...",
+                "width",
+            ],
+        ),
+        (
+            "block.toml",
+            vec!["--set", "extrusion=5"],
+            vec![
+                "`extrusion` is a table ([extrusion])",
+                "extrusion.thickness",
+            ],
+        ),
+    ];
+    for (config, extra, needles) in &cases {
+        let mut args = vec!["run", config, "--quiet", "--output", "out"];
+        args.extend(extra);
+        let line = refused(&run(&dir, &args), needles);
+        assert!(!dir.join("out").exists(), "{args:?} wrote out/: {line}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn crack_refuses_an_unreadable_snapshot_and_a_directory_a_run_still_holds() {
+    let dir = scratch("hostile", "crack", &[]);
+    succeeds(&run(
+        &dir,
+        &["run", "tiny.toml", "--quiet", "--output", "d"],
+    ));
+    let d = dir.join("d");
+    let crack_json = std::fs::read(d.join("crack.json")).expect("crack.json");
+    // Random bytes instead of a snapshot: bad input, crack.json untouched.
+    let noise: Vec<u8> = (0..3000u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+        .collect();
+    std::fs::write(d.join("fields_000002.h5"), noise).unwrap();
+    refused(
+        &run(&dir, &["crack", "d"]),
+        &[
+            "fields_000002.h5",
+            "not readable as a snapshot",
+            "crack.json is unchanged",
+        ],
+    );
+    assert_eq!(std::fs::read(d.join("crack.json")).unwrap(), crack_json);
+    // A run still writing into the directory (its lock held): refused, crack.json untouched.
+    let lock = mpm_concrete::rundir::lock(&d).expect("lock");
+    refused(
+        &run(&dir, &["crack", "d"]),
+        &[
+            "another run is writing into this directory",
+            "then re-measure",
+        ],
+    );
+    drop(lock);
+    assert_eq!(std::fs::read(d.join("crack.json")).unwrap(), crack_json);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn resume_names_a_checkpoint_that_is_a_directory_and_ignores_a_garbage_record_aloud() {
+    let dir = scratch("hostile", "resume", &[]);
+    succeeds(&run(
+        &dir,
+        &["run", "tiny.toml", "--quiet", "--output", "d"],
+    ));
+    std::fs::write(dir.join("d/run.json"), "garbage").unwrap();
+    let resumed = run(
+        &dir,
+        &[
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--output",
+            "d",
+            "--resume",
+            "--steps",
+            "6",
+        ],
+    );
+    succeeds(&resumed);
+    assert!(
+        stderr(&resumed).contains("d/run.json: not a run record")
+            && stderr(&resumed).contains("ignored"),
+        "{}",
+        stderr(&resumed)
+    );
+    assert_eq!(record(&dir.join("d")).steps_done, 6);
+    std::fs::remove_file(dir.join("d/checkpoint.h5")).unwrap();
+    std::fs::create_dir(dir.join("d/checkpoint.h5")).unwrap();
+    refused(
+        &run(
+            &dir,
+            &[
+                "run",
+                "tiny.toml",
+                "--quiet",
+                "--output",
+                "d",
+                "--resume",
+                "--steps",
+                "8",
+            ],
+        ),
+        &["d/checkpoint.h5: is a directory, not a checkpoint file"],
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn material_driver_and_usage_errors_are_short() {
+    let dir = scratch("hostile", "usage", &[("a_file", "")]);
+    std::fs::write(dir.join("mat.toml"), "model = \"svk\"\nyoungs_modulus = \n").unwrap();
+    refused(
+        &run(&dir, &["material-driver", "--out", "a_file"]),
+        &["--out a_file: exists and is not a directory"],
+    );
+    for config in ["mat.toml", "tiny.toml"] {
+        let o = run(
+            &dir,
+            &["material-driver", "--config", config, "--out", "out"],
+        );
+        refused(&o, &["cannot read material config"]);
+        assert_eq!(stderr(&o).lines().count(), 1, "{}", stderr(&o));
+    }
+    assert!(!dir.join("out").exists());
+    // Usage errors: the error line (with clap's continuation folded in) and where the help is.
+    let usage: Vec<(Vec<&str>, &str, &str)> = vec![
+        (vec!["run"], "<CONFIG>", "try 'mpm-concrete run --help'"),
+        (
+            vec!["run", "tiny.toml", "--steps", "-1"],
+            "'-1'",
+            "run --help",
+        ),
+        (
+            vec!["material-driver", "--path", "shear"],
+            "[possible values: uniaxial-tension",
+            "material-driver --help",
+        ),
+        (vec!["bogus"], "'bogus'", "try 'mpm-concrete --help'"),
+        (
+            vec!["run", "tiny.toml", "--resume", "--overwrite"],
+            "cannot be used with",
+            "run --help",
+        ),
+    ];
+    for (args, error, help) in &usage {
+        let o = run(&dir, args);
+        let err = stderr(&o);
+        let lines: Vec<&str> = err.lines().collect();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(lines.len(), 2, "{args:?}: {err}");
+        assert!(
+            lines[0].starts_with("error: ") && lines[0].contains(error),
+            "{err}"
+        );
+        assert!(lines[1].contains(help), "{err}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
