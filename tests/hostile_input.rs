@@ -104,7 +104,7 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
             vec!["--set", "grid.cell_size=1e300"],
             vec![
                 "`grid.cell_size` = 1e300",
-                "at most 40 mm",
+                "at most 160 mm",
                 "4e-299 x 4e-299 cells",
             ],
         ),
@@ -127,6 +127,19 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
             ],
         ),
         (
+            "tiny.toml",
+            vec!["--set", "time.dt_min=1e-300"],
+            vec!["`time.dt_min` = 1e-300", "1e-12 <= dt_min <= dt"],
+        ),
+        (
+            "block.toml",
+            vec!["--set", "body[0]=5"],
+            vec![
+                "`body[0]` is an entry of [[body]]",
+                "--set body[0].name=...",
+            ],
+        ),
+        (
             "block.toml",
             vec!["--set", "extrusion=5"],
             vec![
@@ -141,6 +154,28 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
         let line = refused(&run(&dir, &args), needles);
         assert!(!dir.join("out").exists(), "{args:?} wrote out/: {line}");
     }
+    // A configuration that is a FIFO would block the read; bad options in PETSc's environment variable.
+    let fifo = Command::new("mkfifo").arg(dir.join("fifo.toml")).status();
+    assert!(fifo.is_ok_and(|s| s.success()), "mkfifo");
+    refused(
+        &run(&dir, &["run", "fifo.toml", "--output", "out"]),
+        &["fifo.toml: cannot read: not a regular file"],
+    );
+    let env = Command::new(binary::EXE)
+        .current_dir(&dir)
+        .env("PETSC_OPTIONS", "-ksp_rtol -5")
+        .args(["run", "tiny.toml", "--quiet", "--output", "out"])
+        .output()
+        .expect("start mpm-concrete");
+    refused(
+        &env,
+        &[
+            "environment variable PETSC_OPTIONS",
+            "-ksp_rtol -5",
+            "[0, 1)",
+        ],
+    );
+    assert!(!dir.join("out").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -225,7 +225,7 @@ pub fn read_material_config(path: &Path) -> Result<MaterialConfig, DriverError> 
         path: path.display().to_string(),
         message,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let text = crate::config::read_regular(path).map_err(|e| err(e.to_string()))?;
     let table: toml::Table = toml::from_str(&text).map_err(|e| err(one_line(&e, &text)))?;
     let section = match table.get("material") {
         Some(toml::Value::Table(t)) => t.clone(),
@@ -309,17 +309,18 @@ pub fn run_driver(args: &DriverArgs) -> Result<DriverSummary, DriverError> {
         }
         (None, _) => 0.01,
     };
+    let eta_bar_path = match args.eta_bar_max {
+        Some(max) => EtaBarPath::Prescribed { max },
+        None => EtaBarPath::Local,
+    };
+    let points = run_path(&material, args.path, max_strain, args.steps, eta_bar_path)?;
+    // The path's own arguments are checked by run_path: the directory is made once they have passed.
     std::fs::create_dir_all(&args.out).map_err(|e| {
         DriverError::Argument(format!(
             "--out {}: cannot create the output directory: {e} (give another --out)",
             args.out.display()
         ))
     })?;
-    let eta_bar_path = match args.eta_bar_max {
-        Some(max) => EtaBarPath::Prescribed { max },
-        None => EtaBarPath::Local,
-    };
-    let points = run_path(&material, args.path, max_strain, args.steps, eta_bar_path)?;
     let name = args
         .name
         .clone()

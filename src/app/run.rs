@@ -152,6 +152,11 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
     let command_options = petsc_args[1..].join(" ");
     preflight::check_petsc_options(&command_options)
         .map_err(|e| bad(format!("command line: {e}")))?;
+    // PETSc also reads options from the environment.
+    if let Ok(env) = std::env::var("PETSC_OPTIONS") {
+        preflight::check_petsc_options(&env)
+            .map_err(|e| bad(format!("environment variable PETSC_OPTIONS: {e}")))?;
+    }
     let dir = flags.output.clone().unwrap_or_else(|| cfg.output_dir());
     let petsc_options = format!("{} {command_options}", cfg.run.petsc_options)
         .trim()

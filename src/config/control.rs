@@ -184,9 +184,13 @@ impl TimeSection {
             ));
         }
         if let Some(m) = self.dt_min
-            && !(m > 0.0 && m <= self.dt)
+            && !(m >= lo && m <= self.dt)
         {
-            return Err(c.bad("time.dt_min", shown(m), "0 < dt_min <= dt (s)"));
+            return Err(c.bad(
+                "time.dt_min",
+                shown(m),
+                "1e-12 <= dt_min <= dt (s): the smallest step of the retry halving",
+            ));
         }
         if !(self.beta > 0.0 && self.beta <= 0.5) {
             return Err(c.bad(

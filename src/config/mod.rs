@@ -321,6 +321,18 @@ pub struct Materials {
     pub bodies: Vec<Material>,
 }
 
+/// The text of the file `path`, which must be a regular file (or a directory, refused by the read): a FIFO,
+/// socket or device would block the program or be read as an endless stream.
+pub fn read_regular(path: &Path) -> std::io::Result<String> {
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() && !meta.is_dir() {
+        return Err(std::io::Error::other(
+            "not a regular file (a FIFO, socket or device): give the configuration as a file",
+        ));
+    }
+    std::fs::read_to_string(path)
+}
+
 /// How errors name a configuration file read with `overrides`: `configs/x.toml (with --set a=1)`.
 pub fn source_label(file: &str, overrides: &[String]) -> String {
     if overrides.is_empty() {
@@ -378,7 +390,7 @@ impl RunConfig {
     /// Reads and validates a configuration file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = read_regular(path).map_err(|source| ConfigError::Read {
             file: file.clone(),
             source,
         })?;
@@ -392,7 +404,7 @@ impl RunConfig {
     /// the same configuration.
     pub fn load(path: &Path, overrides: &[String]) -> Result<(Self, String), ConfigError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = read_regular(path).map_err(|source| ConfigError::Read {
             file: file.clone(),
             source,
         })?;
@@ -427,6 +439,15 @@ impl RunConfig {
                 t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {o}: {e}")))?;
             }
             let last = keys[keys.len() - 1];
+            if let Some((name, _)) = last.strip_suffix(']').and_then(|r| r.split_once('[')) {
+                return Err(parse_err(
+                    &file,
+                    format!(
+                        "--set {o}: `{last}` is an entry of [[{name}]]: --set names a key inside it, \
+                         e.g. --set {last}.name=..."
+                    ),
+                ));
+            }
             if let Some(e) = replaces_table(t.get(last), keys.len() == 1, key.trim(), &value) {
                 return Err(parse_err(&file, format!("--set {o}: {e}")));
             }
@@ -537,9 +558,9 @@ impl RunConfig {
         Ok(materials)
     }
 
-    /// Refuses a cell size larger than the bodies (the [ct] plate and the `[[body]]` regions together)
-    /// in either direction: the grid would have less than one cell across them, and no point would be
-    /// seeded.
+    /// Refuses a cell size so large that no point could be seeded: the bodies (the [ct] plate and the
+    /// `[[body]]` regions together) span less than half a point spacing `h / (2 n)` in a direction (`n`
+    /// points per cell and direction, the first of them half a spacing inside its cell).
     fn check_cell_size(&self, c: Check) -> Result<(), ConfigError> {
         let plate = self.ct.as_ref().map(|ct| {
             (
@@ -555,7 +576,8 @@ impl RunConfig {
             return Ok(());
         };
         let (extent, h) = (hi - lo, self.grid.cell_size);
-        if h <= extent.min() {
+        let most = 2.0 * self.shape.points_per_cell as f64 * extent.min();
+        if h <= most {
             return Ok(());
         }
         let cells = extent / h;
@@ -563,9 +585,9 @@ impl RunConfig {
             "grid.cell_size",
             shown(h),
             &format!(
-                "a cell size of at most {} mm: the bodies span {} x {} mm, {} x {} cells of this size \
-                 (at least one cell across them in each direction)",
-                shown(extent.min()),
+                "a cell size of at most {} mm: the bodies span {} x {} mm, {} x {} cells of this size, \
+                 less than half a point spacing (no point would be seeded)",
+                shown(most),
                 shown(extent.x),
                 shown(extent.y),
                 shown(cells.x),

@@ -63,7 +63,7 @@ fn errors_name_file_field_and_allowed_range() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("t.toml") && e.contains("time.dt") && e.contains("> 0"),
+        e.contains("t.toml") && e.contains("time.dt") && e.contains("[1e-12, 1000] s"),
         "{e}"
     );
     let typo = MINIMAL.replace("cell_size", "cell_sise");
