@@ -57,7 +57,7 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
         (
             "tiny.toml",
             vec!["--set", "ct.material.bulk_modulus=1e308"],
-            vec!["`bulk_modulus` = 1e308", "[1e-6, 1e7] MPa"],
+            vec!["`ct.material.bulk_modulus` = 1e308", "[1e-6, 1e7] MPa"],
         ),
         (
             "tiny.toml",
@@ -176,6 +176,75 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
         ],
     );
     assert!(!dir.join("out").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A block under a load on its top edge: the `[[load]]` keys.
+const LOADED: &str = r#"
+[[load]]
+name = "top"
+from = [0.0, 10.0]
+to = [10.0, 10.0]
+force = [0.0, -1.0]
+"#;
+
+#[test]
+fn damage_parameters_times_loads_and_names_beyond_any_real_run_are_refused() {
+    let block = format!("{BLOCK}{LOADED}");
+    let dir = scratch("hostile", "bounds", &[("block.toml", &block)]);
+    let long = format!("run.name=\"{}\"", "n".repeat(256));
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        (
+            "tiny.toml",
+            "ct.material.gamma_0=1e300".into(),
+            vec!["`ct.material.gamma_0` = 1e300", "0 < gamma_0 <= 0.1"],
+        ),
+        (
+            "tiny.toml",
+            "ct.material.beta=1e300".into(),
+            vec!["`ct.material.beta` = 1e300", "0 <= beta <= 1e7"],
+        ),
+        (
+            "tiny.toml",
+            "ct.material.c=1e300".into(),
+            vec!["`ct.material.c` = 1e300", "0 <= c <= 1e6 (mm^2"],
+        ),
+        (
+            "tiny.toml",
+            "ct.material.k_r=1e300".into(),
+            vec!["`ct.material.k_r` = 1e300", "1 < k_r <= 1000"],
+        ),
+        (
+            "tiny.toml",
+            "ct.rise_time=1e300".into(),
+            vec!["`ct.rise_time` = 1e300", "[0, 1000] s"],
+        ),
+        (
+            "block.toml",
+            "load[0].force=[1e300,0.0]".into(),
+            vec!["`load[0] (top).from/to/force`", "at most 1e9 N"],
+        ),
+        (
+            "tiny.toml",
+            "run.name=\"a\u{202e}b\"".into(),
+            vec!["`run.name` = \"a\\u{202e}b\"", "invisible format"],
+        ),
+        (
+            "tiny.toml",
+            long,
+            vec!["`run.name` = \"nnnn", "(256 bytes)", "at most 255 bytes"],
+        ),
+    ];
+    for (config, set, needles) in &cases {
+        let args = ["run", config, "--quiet", "--output", "out", "--set", set];
+        let line = refused(&run(&dir, &args), needles);
+        assert!(!dir.join("out").exists(), "{args:?} wrote out/: {line}");
+    }
+    // The smoke lattice's springs diverge beyond a load of about 0.07 per node.
+    refused(
+        &run(&dir, &["smoke", "--load", "1e300"]),
+        &["--load", "|load| <= 0.05"],
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -325,6 +325,9 @@ pub fn jacobian_fd_error(s: &SessionGuard, p: SmokeParams, x0: &[f64]) -> petsc:
     Ok(max_diff / max_j)
 }
 
+/// The largest `--load` per node of the smoke lattice (in the stiffness's units).
+const LOAD_MAX: f64 = 0.05;
+
 /// `smoke`: solves the `n` x `n` lattice under `load` with the PETSc options of the command line
 /// (`petsc_args`, starting with the program name; default a direct solve), prints the solver's
 /// statistics (and with `print_solution` the solution as JSON) and fails on unused options or when the
@@ -332,6 +335,12 @@ pub fn jacobian_fd_error(s: &SessionGuard, p: SmokeParams, x0: &[f64]) -> petsc:
 pub fn command(petsc_args: &[String], n: usize, load: f64, print_solution: bool) -> Result<()> {
     if n < 2 {
         return Err(bad(format!("--n must be at least 2 (got {n})")));
+    }
+    if load.is_nan() || load.abs() > LOAD_MAX {
+        return Err(bad(format!(
+            "--load must be a number with |load| <= {LOAD_MAX} (the springs converge up to about 0.07 \
+             per node; got {load})"
+        )));
     }
     preflight::check_petsc_options(&petsc_args[1..].join(" "))
         .map_err(|e| bad(format!("command line: {e}")))?;

@@ -3,8 +3,8 @@
 //! history.csv columns.
 
 use super::{
-    Check, ConfigError, DENSITY_ALLOWED, SPEED_ALLOWED, density_ok, finite, shown, speed_ok,
-    time_ok,
+    Check, ConfigError, DENSITY_ALLOWED, LOAD_FORCE_MAX, SPEED_ALLOWED, TIME_ALLOWED, density_ok,
+    finite, shown, speed_ok, time_ok,
 };
 use crate::geometry::Geometry;
 use crate::material::{Material, MaterialConfig};
@@ -271,13 +271,11 @@ pub(super) fn validate_bodies(
                 &e.to_string(),
             )
         })?;
-        materials.push(b.material.build().map_err(|e| {
-            c.bad(
-                &format!("body[{i}].material"),
-                String::new(),
-                &e.to_string(),
-            )
-        })?);
+        materials.push(
+            b.material
+                .build()
+                .map_err(|e| c.material(&format!("body[{i}].material"), &e))?,
+        );
         if b.own_field && i == 0 && !ct {
             return Err(c.bad(
                 "body[0].own_field",
@@ -315,7 +313,7 @@ fn validate_motion(
         return Err(c.bad(
             &format!("{field}.rise_time"),
             shown(rise_time),
-            "a time >= 0 (s)",
+            TIME_ALLOWED,
         ));
     }
     Ok(())
@@ -419,21 +417,24 @@ impl LoadSection {
         let axis_aligned = self.from[0] == self.to[0] || self.from[1] == self.to[1];
         if !finite(&self.from)
             || !finite(&self.to)
-            || !finite(&self.force)
+            || !self
+                .force
+                .iter()
+                .all(|f| f.is_finite() && f.abs() <= LOAD_FORCE_MAX)
             || !axis_aligned
             || self.from == self.to
         {
             return Err(c.bad(
                 &format!("load[{i}] ({}).from/to/force", self.name),
                 format!("{:?}/{:?}/{:?}", self.from, self.to, self.force),
-                "finite values and a horizontal or vertical segment of non-zero length (mm)",
+                "finite values, force components of at most 1e9 N and a horizontal or vertical segment of non-zero length (mm)",
             ));
         }
         if !time_ok(self.rise_time) {
             return Err(c.bad(
                 &format!("load[{i}] ({}).rise_time", self.name),
                 shown(self.rise_time),
-                "a time >= 0 (s)",
+                TIME_ALLOWED,
             ));
         }
         Ok(())

@@ -149,6 +149,27 @@ impl Default for ShapeSection {
     }
 }
 
+/// The longest run name (bytes): a file name's limit on common file systems.
+const NAME_MAX: usize = 255;
+
+/// Invisible format characters (Unicode category Cf: soft hyphen, zero-width and joiner characters,
+/// bidirectional marks, embeddings, overrides and isolates, the byte-order mark) that make a directory
+/// name display as something else.
+fn invisible(ch: char) -> bool {
+    matches!(ch, '\u{ad}' | '\u{61c}' | '\u{180e}' | '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}'
+        | '\u{2060}'..='\u{206f}' | '\u{feff}' | '\u{fff9}'..='\u{fffb}')
+}
+
+/// A run name for an error message: quoted with escapes, cut after 60 characters.
+fn shown_name(name: &str) -> String {
+    if name.chars().count() <= 60 {
+        format!("{name:?}")
+    } else {
+        let head: String = name.chars().take(60).collect();
+        format!("{head:?}... ({} bytes)", name.len())
+    }
+}
+
 impl RunSection {
     /// Checks `[run]`.
     pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
@@ -157,12 +178,14 @@ impl RunSection {
             || name.contains(['/', '\\'])
             || name == "."
             || name == ".."
-            || name.chars().any(char::is_control)
+            || name.len() > NAME_MAX
+            || name.chars().any(|ch| ch.is_control() || invisible(ch))
         {
             return Err(c.bad(
                 "run.name",
-                format!("{name:?}"),
-                "a non-empty name without / or \\ (it names the output directory runs/<name>)",
+                shown_name(name),
+                "a non-empty name of at most 255 bytes without / or \\, control or invisible format \
+                 characters (it names the output directory runs/<name>)",
             ));
         }
         if self.steps == 0 {

@@ -1,7 +1,9 @@
 //! `[ct]`: the compact tension specimen generator's section, its keyword values and its checks.
 
 use super::choice::Choice;
-use super::{Check, ConfigError, DENSITY_ALLOWED, SPEED_MAX, density_ok, shown, time_ok};
+use super::{
+    Check, ConfigError, DENSITY_ALLOWED, SPEED_MAX, TIME_ALLOWED, density_ok, shown, time_ok,
+};
 use crate::material::{ElasticConfig, Material, MaterialConfig};
 use serde::Deserialize;
 
@@ -214,12 +216,12 @@ impl CtSection {
             ));
         }
         if !time_ok(self.rise_time) {
-            return Err(c.bad("ct.rise_time", shown(self.rise_time), "a time >= 0 (s)"));
+            return Err(c.bad("ct.rise_time", shown(self.rise_time), TIME_ALLOWED));
         }
         let concrete = self
             .material
             .build()
-            .map_err(|e| c.bad("ct.material", String::new(), &e.to_string()))?;
+            .map_err(|e| c.material("ct.material", &e))?;
         Ok((concrete, insert))
     }
 
@@ -384,13 +386,10 @@ impl CtSection {
                 DENSITY_ALLOWED,
             ));
         }
-        let steel = self.insert_material.build().map_err(|e| {
-            c.bad(
-                "ct.insert_material",
-                format!("{:?}", self.insert_material),
-                &e.to_string(),
-            )
-        })?;
+        let steel = self
+            .insert_material
+            .build()
+            .map_err(|e| c.material("ct.insert_material", &e))?;
         Ok(Some(steel))
     }
 }

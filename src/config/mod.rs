@@ -33,7 +33,7 @@ pub use choice::Choice;
 pub use control::{ExtrusionSection, GridSection, RunSection, ShapeSection, TimeSection};
 pub use ct::{CtSection, LoadIntroduction, NotchTip};
 
-use crate::material::Material;
+use crate::material::{Material, MaterialError};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -85,6 +85,19 @@ impl Check<'_> {
             field: field.to_owned(),
             value,
             allowed: allowed.to_owned(),
+        }
+    }
+
+    /// The error of the material of the table `section` (e.g. `ct.material`): a parameter out of its
+    /// range is named by its full key and value, other errors by the table.
+    fn material(self, section: &str, e: &MaterialError) -> ConfigError {
+        match e {
+            MaterialError::InvalidParameter {
+                field,
+                value,
+                allowed,
+            } => self.bad(&format!("{section}.{field}"), shown(*value), allowed),
+            other => self.bad(section, String::new(), &other.to_string()),
         }
     }
 }
@@ -233,10 +246,16 @@ fn finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
-/// A time (s) >= 0.
+/// The longest rise or ramp time (s): 1000 s, the longest time step allowed ([`DT_RANGE`]).
+pub const RISE_TIME_MAX: f64 = 1e3;
+
+/// A rise or ramp time (s) in [0, [`RISE_TIME_MAX`]].
 fn time_ok(t: f64) -> bool {
-    t.is_finite() && t >= 0.0
+    (0.0..=RISE_TIME_MAX).contains(&t)
 }
+
+/// What a rise or ramp time may be, for the errors.
+const TIME_ALLOWED: &str = "a time in [0, 1000] s";
 
 /// The densities a real solid can have (t/mm^3): from aerogels (1e-12) with room to spare down to 1e-15, up
 /// to 1e-6 (forty times osmium's 2.26e-8); outside, the points' masses overflow or vanish.
@@ -268,6 +287,10 @@ pub const DT_RANGE: (f64, f64) = (1e-12, 1e3);
 
 /// The largest body force per unit mass (mm/s^2): 1e9, about 1e5 g (gravity is 9810).
 pub const BODY_FORCE_MAX: f64 = 1e9;
+
+/// The largest resultant of a `[[load]]` (N per mm thickness): 1e9, a gigatonne-force on a millimetre;
+/// beyond it the nodal forces of a real body's stiffness cannot balance it in floating point.
+pub const LOAD_FORCE_MAX: f64 = 1e9;
 
 /// The whole run configuration.
 #[derive(Debug, Clone, Deserialize)]
@@ -515,11 +538,7 @@ impl RunConfig {
             ));
         }
         if !time_ok(self.body_force_ramp) {
-            return Err(c.bad(
-                "body_force_ramp",
-                shown(self.body_force_ramp),
-                "a time >= 0 (s)",
-            ));
+            return Err(c.bad("body_force_ramp", shown(self.body_force_ramp), TIME_ALLOWED));
         }
         let bodies = bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
         bodies::check_overlaps(&self.body, self.grid.cell_size, c)?;

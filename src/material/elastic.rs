@@ -69,15 +69,6 @@ pub(crate) fn modulus(field: &'static str, v: f64) -> Result<f64, MaterialError>
     }
 }
 
-/// A finite value `v` > 0.
-pub(crate) fn positive(field: &'static str, v: f64) -> Result<f64, MaterialError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        invalid(field, v, "a finite value > 0")
-    }
-}
-
 impl ElasticConfig {
     /// Validated moduli.
     pub fn moduli(&self) -> Result<ElasticModuli, MaterialError> {

@@ -34,10 +34,10 @@ use nalgebra::{Matrix3, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
 use super::activity::GradientActivity;
-use super::elastic::{modulus, positive};
+use super::elastic::modulus;
 use super::{
     Constitutive, ElasticModuli, MaterialError, PAIR_INDEX, PAIRS, PointUpdate, Response, Sym6,
-    check_softening, first_piola_from_pk2, green_lagrange, invalid, sym_to_matrix,
+    check_softening, check_threshold, first_piola_from_pk2, green_lagrange, invalid, sym_to_matrix,
 };
 
 /// Definition of the local equivalent strain `eta`.
@@ -120,7 +120,7 @@ impl IsotropicDamageConfig {
         if !(nu.is_finite() && nu > -1.0 && nu < 0.5) {
             return invalid("poisson_ratio", nu, "-1 < nu < 0.5");
         }
-        positive("gamma_0", self.gamma_0)?;
+        check_threshold(self.gamma_0)?;
         check_softening(self.alpha, self.beta, self.c)?;
         self.gradient_activity.validate()?;
         Ok(IsotropicDamage {

@@ -170,18 +170,40 @@ pub(crate) fn invalid<T>(
     })
 }
 
+/// The largest softening parameter `beta` (-): 1e7, four decades above Table 1's 650; beyond it
+/// `exp(beta (gamma_0 - gamma))` drops from 1 to 0 within a strain increment of 1e-6 or less, below what
+/// a step resolves.
+pub const BETA_MAX: f64 = 1e7;
+
+/// The largest gradient parameter `c` (mm^2): 1e6, an interaction length `sqrt(c)` of one metre, larger
+/// than any specimen this code is meant for.
+pub const C_MAX: f64 = 1e6;
+
+/// The largest damage threshold `gamma_0` (a strain): 0.1, eighty times Table 1's 1.25e-3; a threshold
+/// beyond it is not that of a quasi-brittle material.
+pub const GAMMA_0_MAX: f64 = 0.1;
+
+/// Checks the damage threshold `0 < gamma_0 <=` [`GAMMA_0_MAX`] of the damage models.
+pub(crate) fn check_threshold(gamma_0: f64) -> Result<(), MaterialError> {
+    if gamma_0 > 0.0 && gamma_0 <= GAMMA_0_MAX {
+        Ok(())
+    } else {
+        invalid("gamma_0", gamma_0, "0 < gamma_0 <= 0.1 (a strain)")
+    }
+}
+
 /// Checks the parameters of the damage law (eq. 11) and of the Helmholtz equation shared by the damage
-/// models: maximum degradation `0 <= alpha <= 1`, softening `beta >= 0` (-) and the gradient parameter
-/// `c >= 0` (mm^2; 0 = local).
+/// models: maximum degradation `0 <= alpha <= 1`, softening `0 <= beta <=` [`BETA_MAX`] (-) and the
+/// gradient parameter `0 <= c <=` [`C_MAX`] (mm^2; 0 = local).
 pub(crate) fn check_softening(alpha: f64, beta: f64, c: f64) -> Result<(), MaterialError> {
     if !(0.0..=1.0).contains(&alpha) {
         return invalid("alpha", alpha, "0 <= alpha <= 1");
     }
-    if !(beta.is_finite() && beta >= 0.0) {
-        return invalid("beta", beta, "a finite value >= 0");
+    if !(0.0..=BETA_MAX).contains(&beta) {
+        return invalid("beta", beta, "0 <= beta <= 1e7");
     }
-    if !(c.is_finite() && c >= 0.0) {
-        return invalid("c", c, "a finite value >= 0 (mm^2; 0 = local)");
+    if !(0.0..=C_MAX).contains(&c) {
+        return invalid("c", c, "0 <= c <= 1e6 (mm^2; 0 = local)");
     }
     Ok(())
 }
@@ -696,15 +718,19 @@ mod tests {
         );
         let msg = err.to_string();
         assert!(
-            msg.contains("k_r") && msg.contains("0.5") && msg.contains("> 1"),
+            msg.contains("k_r") && msg.contains("0.5") && msg.contains("1 < k_r <= 1000"),
             "{msg}"
         );
 
         for (toml_src, field) in [
             ("alpha = 1.5", "alpha"),
             ("beta = -1.0", "beta"),
+            ("beta = 2e7", "beta"),
             ("gamma_0 = 0.0", "gamma_0"),
+            ("gamma_0 = 0.2", "gamma_0"),
             ("c = -1.0", "c"),
+            ("c = 2e6", "c"),
+            ("k_r = 1001.0", "k_r"),
             ("poisson_ratio = 0.5", "poisson_ratio"),
             ("bulk_modulus = -3.0", "bulk_modulus"),
             ("shear_modulus = 0.0", "shear_modulus"),

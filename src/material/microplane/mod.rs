@@ -45,10 +45,11 @@
 use serde::{Deserialize, Serialize};
 
 use super::activity::GradientActivity;
-use super::elastic::{modulus, positive};
+use super::elastic::modulus;
 use super::quadrature::Quadrature;
 use super::{
-    Constitutive, MaterialError, PAIRS, PointUpdate, Response, Sym6, check_softening, invalid,
+    Constitutive, MaterialError, PAIRS, PointUpdate, Response, Sym6, check_softening,
+    check_threshold, invalid,
 };
 
 /// How the macroscopic local equivalent strain `eta` is formed from the microplane values.
@@ -259,13 +260,13 @@ impl MicroplaneParams {
     pub fn validate(&self) -> Result<(), MaterialError> {
         modulus("bulk_modulus", self.bulk_modulus)?;
         modulus("shear_modulus", self.shear_modulus)?;
-        positive("gamma_0", self.gamma_0)?;
+        check_threshold(self.gamma_0)?;
         let nu = self.poisson_ratio;
         if !(nu.is_finite() && (0.0..0.5).contains(&nu)) {
             return invalid("poisson_ratio", nu, "0 <= nu < 0.5");
         }
-        if !(self.k_r.is_finite() && self.k_r > 1.0) {
-            return invalid("k_r", self.k_r, "a finite value > 1");
+        if !(self.k_r > 1.0 && self.k_r <= K_R_MAX) {
+            return invalid("k_r", self.k_r, "1 < k_r <= 1000");
         }
         check_softening(self.alpha, self.beta, self.c)?;
         if let Some(de) = self.erosion_damage
@@ -282,6 +283,9 @@ mod kernel;
 mod tests;
 
 use kernel::PlaneSet;
+
+/// The largest compressive-to-tensile strength ratio `k_r`: 1000 (concrete: 10-20).
+pub const K_R_MAX: f64 = 1e3;
 
 /// The microplane damage material (spec Sec. 3). History: one `gamma_I` per direction.
 #[derive(Clone, Debug)]
