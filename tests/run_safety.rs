@@ -131,7 +131,7 @@ fn bad_input_is_refused_before_anything_is_written() {
         (
             vec!["--set", "ct.rise_time=nan"],
             vec![],
-            vec!["tiny.toml", "ct.rise_time", "NaN", ">= 0"],
+            vec!["tiny.toml", "ct.rise_time", "NaN", "[0, 1000] s"],
         ),
         (
             vec!["--set", "ct.load_zone=[-100.0,-50.0]"],
