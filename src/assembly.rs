@@ -154,6 +154,8 @@ struct PointEval<const D: usize> {
     det: f64,
     /// Dissipation density of the step under tensile / compressive plane strain (MPa).
     dissipation: [f64; 2],
+    /// Dissipation density of the step by the trapezoidal rule in `psi_0` (MPa).
+    dissipation_trapezoidal: f64,
     /// Gradient activity `c_p` (mm^2) and its derivatives `dc/d eta`, `dc/d eta_bar` at the iterate.
     c: f64,
     dc_deta: f64,
@@ -176,12 +178,26 @@ impl<const D: usize> Default for PointEval<D> {
             damage: 0.0,
             det: 1.0,
             dissipation: [0.0; 2],
+            dissipation_trapezoidal: 0.0,
             c: 0.0,
             dc_deta: 0.0,
             dc_deb: 0.0,
             eroded: false,
         }
     }
+}
+
+/// Energies of a committed step over a process's own points (N mm; in 2D per mm thickness).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Committed {
+    /// Stored energy `sum_p V^0 Psi_p` at the end of the step.
+    pub stored: f64,
+    /// Energy released by damage in the step, `sum_p V^0` times the trapezoidal dissipation density
+    /// ([`crate::material::Response::dissipation_trapezoidal`]).
+    pub dissipated: f64,
+    /// Stored energy of the points that reached their material's `erosion_damage` in this step: they
+    /// carry no stress from the next step on, so the next step's stored energy lacks it.
+    pub eroding: f64,
 }
 
 /// Per-step workspace of the assembly: incidence, pattern, cached particle evaluations, trial history.
@@ -636,21 +652,21 @@ impl<const D: usize> Assembler<D> {
 
     /// Commits the converged step's constitutive state into the particles: trial history, Cauchy stress
     /// `sigma = P F^T / det F`, `eta_bar_p`, damage, the dissipation split and the damage gained while
-    /// the local `eta < gamma_0` of the point's material. Returns the stored energy `sum_p V^0 Psi_p`
-    /// (N mm) of the first `counted` points (a process's own; the rest are copies of other processes'
-    /// points). `particles.f` must already hold the converged deformation gradients (after G2P).
+    /// the local `eta < gamma_0` of the point's material. Returns the energies of the first `counted`
+    /// points (a process's own; the rest are copies of other processes' points). `particles.f` must
+    /// already hold the converged deformation gradients (after G2P).
     pub fn commit(
         &self,
         particles: &mut Particles<D>,
         materials: &[Material],
         counted: usize,
-    ) -> f64 {
+    ) -> Committed {
         let hs = particles.history_stride();
         if hs > 0 {
             let n = particles.len() * hs;
             particles.history.copy_from_slice(&self.trial_history[..n]);
         }
-        let mut energy = 0.0;
+        let mut sums = Committed::default();
         for (p, ev) in self.evals.iter().enumerate() {
             let f3 = lift3(&particles.f[p]);
             particles.stress[p] = ev.p * f3.transpose() / ev.det;
@@ -658,8 +674,9 @@ impl<const D: usize> Assembler<D> {
                 // An eroded point keeps its anchor value.
                 particles.eta_bar[p] = ev.eta_bar;
             }
+            let material = &materials[particles.body[p] as usize];
             let gained = ev.damage - particles.damage[p];
-            if gained > 0.0 && ev.eta < materials[particles.body[p] as usize].gamma_0() {
+            if gained > 0.0 && ev.eta < material.gamma_0() {
                 particles.nonlocal_damage[p] += gained;
             }
             particles.damage[p] = ev.damage;
@@ -667,10 +684,15 @@ impl<const D: usize> Assembler<D> {
                 *acc += particles.vol0[p] * d;
             }
             if p < counted {
-                energy += particles.vol0[p] * ev.energy;
+                let v0 = particles.vol0[p];
+                sums.stored += v0 * ev.energy;
+                sums.dissipated += v0 * ev.dissipation_trapezoidal;
+                if !ev.eroded && material.is_eroded(ev.damage) {
+                    sums.eroding += v0 * ev.energy;
+                }
             }
         }
-        energy
+        sums
     }
 
     /// Nodal displacement increment of the last evaluated iterate, per grid node (mm).
@@ -743,7 +765,7 @@ fn evaluate_point<const D: usize>(
     if det.is_nan() || det <= 0.0 {
         return Err(AssemblyError::Inverted { particle: p, det });
     }
-    let f3 = lift3(&f);
+    let (f3, f3_n) = (lift3(&f), lift3(&f_n));
     // The point's own law's history: the stride is the longest of all bodies' laws.
     let hl = material.history_len();
     let h_n = &particles.history(p)[..hl];
@@ -755,10 +777,13 @@ fn evaluate_point<const D: usize>(
     };
     if nonlocal {
         material
-            .update(PointUpdate::new(&f3, ebp, h_n, h_trial), &mut r)
+            .update(
+                PointUpdate::new(&f3, ebp, h_n, h_trial).with_start(&f3_n),
+                &mut r,
+            )
             .map_err(err)?;
     } else {
-        local_update(material, &f3, h_n, h_trial, &mut r).map_err(err)?;
+        local_update(material, (&f3, &f3_n), h_n, h_trial, &mut r).map_err(err)?;
         ebp = r.eta;
     }
     Ok(PointEval {
@@ -773,6 +798,7 @@ fn evaluate_point<const D: usize>(
         damage: r.damage,
         det,
         dissipation: r.dissipation,
+        dissipation_trapezoidal: r.dissipation_trapezoidal,
         c: r.activity.c,
         dc_deta: r.activity.dc_deta,
         dc_deb: r.activity.dc_deta_bar,
@@ -901,10 +927,11 @@ fn tangent_blocks<const D: usize>(r: &Response) -> [[SMatrix<f64, D, D>; D]; D] 
 
 /// The local model (`eta_bar = eta`, no Helmholtz field): evaluates the law with `eta_bar` set to its
 /// own `eta` and completes the tangent with the chain rule `A + dP/d eta_bar (x) d eta/dF` (eta does not
-/// depend on eta_bar). Elastic laws return zero for both, so this is exact for them too.
+/// depend on eta_bar). Elastic laws return zero for both, so this is exact for them too. `(F, F_n)`: the
+/// deformation gradient and its value at the start of the step (for the trapezoidal dissipation).
 pub fn local_update(
     material: &Material,
-    f: &Matrix3<f64>,
+    (f, f_n): (&Matrix3<f64>, &Matrix3<f64>),
     h_n: &[f64],
     h_trial: &mut [f64],
     out: &mut Response,
@@ -914,7 +941,7 @@ pub fn local_update(
         return Ok(());
     }
     let eta = out.eta;
-    material.update(PointUpdate::new(f, eta, h_n, h_trial), out)?;
+    material.update(PointUpdate::new(f, eta, h_n, h_trial).with_start(f_n), out)?;
     for ij in 0..9 {
         for kl in 0..9 {
             out.a[(ij, kl)] += out.dp_deta_bar[(ij / 3, ij % 3)] * out.deta_df[(kl / 3, kl % 3)];

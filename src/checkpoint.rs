@@ -13,7 +13,7 @@
 
 use crate::contact::NodeStatus;
 use crate::io::{OutputError, RunOutput};
-use crate::model::{Counters, Method, Model, State};
+use crate::model::{Counters, EnergyBooks, Method, Model, State};
 use crate::rundir::RunIdentity;
 use nalgebra::SVector;
 use std::collections::HashMap;
@@ -433,6 +433,9 @@ pub struct CounterRecord {
     /// The closed pairs of contact between bodies at the end of the last step.
     #[serde(default)]
     pub closed_pairs: Vec<usize>,
+    /// The energy books (zero in checkpoints that predate them).
+    #[serde(default)]
+    pub books: EnergyBooks,
 }
 
 impl CounterRecord {
@@ -451,6 +454,7 @@ impl CounterRecord {
             rotation_rates: c.rotation_rates.clone(),
             contact_statuses: c.contact_statuses.clone(),
             closed_pairs: c.closed_pairs.clone(),
+            books: c.books,
         }
     }
 
@@ -494,6 +498,7 @@ impl CounterRecord {
             rotation_rates: padded(self.rotation_rates),
             contact_statuses,
             closed_pairs: self.closed_pairs,
+            books: self.books,
         })
     }
 }

@@ -173,6 +173,94 @@ pub fn measure(
     }
 }
 
+/// Time window of the crack-tip speed (s): the least-squares slope of the crack length over the steps
+/// of the last 10 us ([`tip_speed`]), and over at least [`SPEED_MIN_SAMPLES`] steps.
+pub const SPEED_WINDOW: f64 = 1e-5;
+
+/// Fewest steps (samples) the crack-tip speed is fitted over ([`SPEED_WINDOW`]).
+pub const SPEED_MIN_SAMPLES: usize = 5;
+
+/// The crack front at one step: the tip of the crack, its length, the bands on the measuring ring and
+/// the tip speed (the history's crack columns).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Front {
+    /// Tip position, the crack point farthest from the notch tip (mm; the notch tip while there is no
+    /// crack).
+    pub tip: [f64; 2],
+    /// Crack length, the tip's distance from the notch tip (mm).
+    pub length: f64,
+    /// Bands on the measuring ring (2 or more: branching).
+    pub bands: usize,
+    /// Tip speed (mm/s): the least-squares slope of `length` over time in the window of
+    /// [`tip_speed`].
+    pub speed: f64,
+}
+
+/// The crack front (speed 0, filled in by [`tip_speed`]) of the damage field of points at `x` (mm):
+/// the crack, length, tip and bands as [`measure`] defines them, without the band widths.
+pub fn front(
+    x: &[Vector2<f64>],
+    damage: &[f64],
+    notch_tip: Vector2<f64>,
+    h: f64,
+    c: &CrackCriteria,
+) -> Front {
+    let crack = crack_points(x, damage, notch_tip, h, c);
+    let (mut length, mut tip) = (0.0, notch_tip);
+    for &i in &crack {
+        let d = (x[i] - notch_tip).norm();
+        if d > length {
+            length = d;
+            tip = x[i];
+        }
+    }
+    let (bands, _) = classify(x, &crack, notch_tip, length, h, c);
+    Front {
+        tip: [tip.x, tip.y],
+        length,
+        bands: bands.len(),
+        speed: 0.0,
+    }
+}
+
+/// Crack-tip speed (mm/s) at the last of the samples `(time s, length mm)` (in time order): the
+/// least-squares slope of the length over the samples within [`SPEED_WINDOW`] of the last one, and over
+/// at least the last [`SPEED_MIN_SAMPLES`] (fewer at the start of a run); 0 from a single sample.
+pub fn tip_speed(samples: &[(f64, f64)]) -> f64 {
+    let Some(&(t_end, _)) = samples.last() else {
+        return 0.0;
+    };
+    let within = samples
+        .iter()
+        .rev()
+        .take_while(|(t, _)| t_end - t <= SPEED_WINDOW * (1.0 + 1e-9))
+        .count();
+    let n = within.max(SPEED_MIN_SAMPLES).min(samples.len());
+    let window = &samples[samples.len() - n..];
+    if n < 2 {
+        return 0.0;
+    }
+    let (tm, lm) = window
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (t, l)| (a + t, b + l));
+    let (tm, lm) = (tm / n as f64, lm / n as f64);
+    let (mut stl, mut stt) = (0.0, 0.0);
+    for (t, l) in window {
+        stl += (t - tm) * (l - lm);
+        stt += (t - tm) * (t - tm);
+    }
+    if stt > 0.0 { stl / stt } else { 0.0 }
+}
+
+/// Rayleigh wave speed (mm/s) of an isotropic elastic material with bulk modulus `bulk` and shear modulus
+/// `shear` (MPa) and density `density` (t/mm^3), by Viktorov's approximation
+/// `c_R = c_S (0.862 + 1.14 nu)/(1 + nu)`, `c_S = sqrt(G/rho)` (within 0.5 % of the exact root for
+/// `0 <= nu <= 0.5`).
+pub fn rayleigh_speed(bulk: f64, shear: f64, density: f64) -> f64 {
+    let nu = (3.0 * bulk - 2.0 * shear) / (2.0 * (3.0 * bulk + shear));
+    (shear / density).sqrt() * (0.862 + 1.14 * nu) / (1.0 + nu)
+}
+
 /// The crack: the points with damage `>= damage_threshold` in the cells (size `h`, mm) connected to the
 /// cracked cells within the seed radius of `notch_tip`, by a flood fill over the 8 neighbours of a cell.
 fn crack_points(
@@ -335,6 +423,41 @@ mod tests {
     }
 
     const TIP: Vector2<f64> = Vector2::new(30.0, 50.0);
+
+    #[test]
+    fn tip_speed_is_the_slope_over_the_window() {
+        // Constant speed 2e5 mm/s (200 m/s) in 1 us steps: exact whatever the window.
+        let v = 2e5;
+        let line: Vec<(f64, f64)> = (0..40)
+            .map(|k| (k as f64 * 1e-6, 3.0 + v * k as f64 * 1e-6))
+            .collect();
+        assert!((tip_speed(&line) / v - 1.0).abs() < 1e-9);
+        // A jump older than the window (and its 5 steps) does not count: only the last 10 us.
+        let mut jump = line.clone();
+        for s in &mut jump[..20] {
+            s.1 -= 50.0;
+        }
+        assert!((tip_speed(&jump) / v - 1.0).abs() < 1e-9);
+        // Steps of 10 us: the window still holds the last 5 samples.
+        let coarse: Vec<(f64, f64)> = (0..8).map(|k| (k as f64 * 1e-5, (k * k) as f64)).collect();
+        let slope = tip_speed(&coarse);
+        assert!((slope - 1.0e6).abs() < 1e-3, "{slope}");
+        assert_eq!(tip_speed(&line[..1]), 0.0);
+        assert_eq!(tip_speed(&[]), 0.0);
+    }
+
+    #[test]
+    fn rayleigh_speed_of_concrete_and_a_known_solid() {
+        // nu = 0.25: the exact Rayleigh root is 0.9194 c_S; Viktorov gives 0.9176 c_S.
+        let (g, rho) = (1.0, 1.0);
+        let k = 2.0 * g * (1.0 + 0.25) / (3.0 * (1.0 - 2.0 * 0.25));
+        assert!((rayleigh_speed(k, g, rho) / 0.9194 - 1.0).abs() < 0.005);
+        // E = 30000 MPa, nu = 0.2, rho = 2.4e-9 t/mm^3: c_S = 2282 m/s, c_R = 2073 m/s.
+        let (e, nu) = (30000.0, 0.2);
+        let (k, g) = (e / (3.0 * (1.0 - 2.0 * nu)), e / (2.0 * (1.0 + nu)));
+        let c_r = rayleigh_speed(k, g, 2.4e-9);
+        assert!((c_r / 2.073e6 - 1.0).abs() < 1e-3, "{c_r}");
+    }
 
     #[test]
     fn straight_inclined_and_branching_cracks_are_told_apart() {

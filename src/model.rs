@@ -458,6 +458,36 @@ pub struct Counters<const D: usize = 2> {
     /// The closed pairs of contact between bodies at the end of the last step (the other body's node
     /// copies, sorted): with the predicted overlap, the first guess of the next step's active set.
     pub closed_pairs: Vec<usize>,
+    /// Where the energy went so far ([`EnergyBooks`]).
+    pub books: EnergyBooks,
+}
+
+/// The energy books of a run (N mm; in 2D per mm thickness), sums over the steps so far: with the
+/// external work `W`, the initial kinetic energy `E_0`, the kinetic energy `K` and the stored energy `Psi`,
+/// the remainder `W + E_0 - K - Psi - damage - erosion - contact` is what the grid transfer and the time
+/// integration took out ([`EnergyBooks::remainder`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EnergyBooks {
+    /// Energy released by damage: per step `sum_p V^0 sum_I 6 w_I (psi_0,I^n + psi_0,I)/2 (d_I - d_I^n)`,
+    /// the trapezoidal rule in the undamaged plane energy `psi_0`.
+    pub damage: f64,
+    /// Stored energy of eroded points, taken out of `Psi` in the step after their damage reached
+    /// `erosion_damage` (they keep their mass and kinetic energy).
+    pub erosion: f64,
+    /// Stored energy of the points eroded in the last step, which the next step takes out of `Psi`.
+    pub eroding: f64,
+    /// Kinetic energy lost at the inelastic impacts of closed contact constraints: per node and step
+    /// `m/2 |v_Newmark - v_device|^2 - m/2 |v - v_device|^2` against a device, `m_a m_b/(2 (m_a + m_b))
+    /// (v_a - v_b)^2` in the normal direction between bodies.
+    pub contact: f64,
+}
+
+impl EnergyBooks {
+    /// `W + E_0 - K - Psi - damage - erosion - contact` for the external work `work`, the initial
+    /// kinetic energy `initial`, the kinetic energy `kinetic` and the stored energy `stored` (N mm).
+    pub fn remainder(&self, work: f64, initial: f64, kinetic: f64, stored: f64) -> f64 {
+        work + initial - kinetic - stored - self.damage - self.erosion - self.contact
+    }
 }
 
 impl<const D: usize> State<D> {
@@ -481,6 +511,7 @@ impl<const D: usize> State<D> {
             rotation_rates: vec![0.0; nrigid],
             contact_statuses: vec![Vec::new(); nrigid],
             closed_pairs: Vec::new(),
+            books: EnergyBooks::default(),
         };
         Self {
             particles,

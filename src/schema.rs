@@ -27,6 +27,8 @@ pub mod file {
     pub const CRACK_LENGTH: &str = "crack_length.png";
     /// Width of the damage bands over time (CT runs).
     pub const BAND_WIDTH: &str = "band_width.png";
+    /// Crack-tip speed and crack length at every step (CT runs).
+    pub const CRACK_SPEED: &str = "crack_speed.png";
     /// Prefix and suffix of the point fields of one output step, `fields_NNNNNN.h5`.
     pub const FIELDS: (&str, &str) = ("fields_", ".h5");
     /// Prefix and suffix of the damage map of one output step, `damage_NNNNNN.png`.
@@ -40,7 +42,8 @@ pub mod file {
 
 /// Columns of `history.csv`: [`history::LEADING`], then per constraint set, rigid body and load the
 /// columns of [`history::reaction_columns`], per pinned device [`history::rotation_column`], then
-/// [`history::CONTACT_SOLVES`] (if there is any set) and [`history::TRAILING`].
+/// [`history::CONTACT_SOLVES`] (if there is any set), [`history::TRAILING`] and, in CT runs,
+/// [`history::CRACK`].
 pub mod history {
     /// Step number.
     pub const STEP: &str = "step";
@@ -73,6 +76,20 @@ pub mod history {
     /// The energy balance `W + E_0 - K - Psi` (external work, kinetic energy at t = 0, kinetic and stored
     /// energy): what damage, erosion and the time integration took out (N mm per mm thickness).
     pub const DISSIPATED_ENERGY: &str = "dissipated_energy";
+    /// Energy released by damage so far, the trapezoidal rule in the undamaged plane energy `psi_0`
+    /// (N mm per mm thickness; `model::EnergyBooks::damage`).
+    pub const DAMAGE_DISSIPATION: &str = "damage_dissipation";
+    /// Stored energy of eroded points, taken out when they stopped carrying stress (N mm per mm
+    /// thickness).
+    pub const EROSION_ENERGY: &str = "erosion_energy";
+    /// Kinetic energy lost at the inelastic impacts of closed contact constraints (N mm per mm
+    /// thickness).
+    pub const CONTACT_LOSS: &str = "contact_loss";
+    /// `dissipated_energy - damage_dissipation - erosion_energy - contact_loss`: what the grid transfer and
+    /// the time integration took out (N mm per mm thickness).
+    pub const ENERGY_REMAINDER: &str = "energy_remainder";
+    /// [`ENERGY_REMAINDER`] as a fraction of [`EXTERNAL_WORK`] (0 while there is no work).
+    pub const REMAINDER_FRACTION: &str = "remainder_fraction";
     /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve of the converged
     /// attempt, and the total of the step with its failed attempts.
     pub const WALL_SETUP: &str = "wall_setup";
@@ -84,6 +101,27 @@ pub mod history {
     pub const WALL_TOTAL: &str = "wall_total";
     /// 1 if the PETSc objects were built anew for the step.
     pub const NEW_PATTERN: &str = "new_pattern";
+
+    /// Crack tip after the step (CT runs; mm): the crack point farthest from the notch tip.
+    pub const CRACK_TIP_X: &str = "crack_tip_x";
+    /// See [`CRACK_TIP_X`].
+    pub const CRACK_TIP_Y: &str = "crack_tip_y";
+    /// Crack length, the tip's distance from the notch tip (mm).
+    pub const CRACK_LENGTH: &str = "crack_length";
+    /// Crack-tip speed (mm/s): least-squares slope of the crack length over the last 10 us, at least 5
+    /// steps (`crack::tip_speed`).
+    pub const CRACK_SPEED: &str = "crack_speed";
+    /// Bands of the crack on the measuring ring (2 or more: branching).
+    pub const CRACK_BANDS: &str = "crack_bands";
+
+    /// The crack columns after [`TRAILING`] (CT runs).
+    pub const CRACK: [&str; 5] = [
+        CRACK_TIP_X,
+        CRACK_TIP_Y,
+        CRACK_LENGTH,
+        CRACK_SPEED,
+        CRACK_BANDS,
+    ];
 
     /// The columns before the reactions.
     pub const LEADING: [&str; 10] = [
@@ -100,11 +138,16 @@ pub mod history {
     ];
 
     /// The columns after the reactions.
-    pub const TRAILING: [&str; 9] = [
+    pub const TRAILING: [&str; 14] = [
         KINETIC_ENERGY,
         STORED_ENERGY,
         EXTERNAL_WORK,
         DISSIPATED_ENERGY,
+        DAMAGE_DISSIPATION,
+        EROSION_ENERGY,
+        CONTACT_LOSS,
+        ENERGY_REMAINDER,
+        REMAINDER_FRACTION,
         WALL_SETUP,
         WALL_ASSEMBLY,
         WALL_SOLVE,

@@ -494,9 +494,11 @@ fn open_output<'a, const D: usize>(
     }
     out.set_frame(crate::space::Frame::from_degrees(cfg.grid.rotation));
     if let Some(ct) = &cfg.ct {
+        let concrete = ct.material.build().context("ct.material")?.elastic_moduli();
         out.track_crack(
             nalgebra::Vector2::new(ct.notch_length, 0.5 * ct.height),
             crate::crack::CrackCriteria::for_notch(ct.notch_width, cfg.grid.cell_size),
+            crate::crack::rayleigh_speed(concrete.bulk, concrete.shear, ct.density),
         );
     }
     let record = new_record(invocation, prepared);

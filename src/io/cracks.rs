@@ -2,11 +2,99 @@
 //! the crack is measured on, and the re-measurement of a finished run from its snapshots.
 
 use super::{OutputError, file, io_err, write_atomic};
-use crate::crack::{self, CrackCriteria, CrackState};
+use crate::crack::{self, CrackCriteria, CrackState, Front};
 use crate::plot::LinePlot;
+use crate::solver::StepReport;
 use crate::space::Frame;
 use nalgebra::Vector2;
+use std::fmt::Write as _;
 use std::path::Path;
+
+/// The crack-tip speed (mm/s) of a step reaching `length` (mm) at `time` (s) after the recorded steps
+/// `rows` ([`crack::tip_speed`] over the steps within its window).
+pub(super) fn speed_after(rows: &[StepReport], time: f64, length: f64) -> f64 {
+    let earlier = rows
+        .iter()
+        .rev()
+        .take_while(|r| r.crack.is_some())
+        .enumerate()
+        .take_while(|(k, r)| {
+            *k + 1 < crack::SPEED_MIN_SAMPLES || time - r.time <= crack::SPEED_WINDOW * (1.0 + 1e-9)
+        })
+        .count();
+    let mut samples: Vec<(f64, f64)> = rows[rows.len() - earlier..]
+        .iter()
+        .filter_map(|r| r.crack.map(|c| (r.time, c.length)))
+        .collect();
+    samples.push((time, length));
+    crack::tip_speed(&samples)
+}
+
+/// Appends the crack columns of a step's `front` (empty fields without one) to a history row.
+pub(super) fn write_front(s: &mut String, front: Option<&Front>) {
+    match front {
+        Some(f) => {
+            let _ = write!(
+                s,
+                ",{:.6e},{:.6e},{:.6e},{:.6e},{}",
+                f.tip[0], f.tip[1], f.length, f.speed, f.bands
+            );
+        }
+        None => s.push_str(",,,,,"),
+    }
+}
+
+/// The tip speed's summary in `crack.json` from the fronts of the recorded steps `rows`: the peak speed,
+/// the speed at the first step with two or more bands, both also as fractions of the Rayleigh speed
+/// `rayleigh` (mm/s) of the specimen's material.
+fn speed_summary(rows: &[StepReport], rayleigh: Option<f64>) -> serde_json::Value {
+    let fronts: Vec<(f64, Front)> = rows
+        .iter()
+        .filter_map(|r| r.crack.map(|c| (r.time, c)))
+        .collect();
+    let peak = fronts.iter().max_by(|a, b| a.1.speed.total_cmp(&b.1.speed));
+    let branch = fronts.iter().find(|(_, f)| f.bands >= 2);
+    let fraction = |v: f64| rayleigh.map(|c| v / c);
+    serde_json::json!({
+        "definition": format!(
+            "tip: the crack point farthest from the notch tip, every step; speed: least-squares slope \
+             of the crack length over the steps of the last {} us (at least {} steps); Rayleigh speed: \
+             Viktorov's c_R = c_S (0.862 + 1.14 nu)/(1 + nu) of the concrete's K, G and density",
+            crack::SPEED_WINDOW * 1e6,
+            crack::SPEED_MIN_SAMPLES
+        ),
+        "rayleigh_speed": rayleigh,
+        "peak_speed": peak.map(|p| p.1.speed),
+        "peak_time": peak.map(|p| p.0),
+        "peak_fraction_of_rayleigh": peak.and_then(|p| fraction(p.1.speed)),
+        "branch_time": branch.map(|b| b.0),
+        "branch_speed": branch.map(|b| b.1.speed),
+        "branch_fraction_of_rayleigh": branch.and_then(|b| fraction(b.1.speed)),
+    })
+}
+
+/// `crack_speed.png`: the tip speed (m/s) and the crack length at every step of `rows` with a front.
+fn speed_plot(dir: &Path, rows: &[StepReport]) -> Result<(), OutputError> {
+    let points = |value: fn(&Front) -> f64| -> Vec<(f64, f64)> {
+        rows.iter()
+            .filter_map(|r| r.crack.map(|c| (r.time * 1e6, value(&c))))
+            .collect()
+    };
+    let speed = points(|f| f.speed * 1e-3);
+    if speed.is_empty() {
+        return Ok(());
+    }
+    save_line_plot(
+        &LinePlot::new(
+            "crack tip speed (slope of the length over 10 us) and crack length",
+            "time [us]",
+            "speed [m/s]; length [mm]",
+        )
+        .with_series("tip speed [m/s]", speed)
+        .with_series("crack length [mm]", points(|f| f.length)),
+        &dir.join(file::CRACK_SPEED),
+    )
+}
 
 /// Writes `crack.json` of the crack states `cracks` into `dir` (write, then rename).
 pub(super) fn write_crack_json(
@@ -15,6 +103,7 @@ pub(super) fn write_crack_json(
     tip: Vector2<f64>,
     criteria: &CrackCriteria,
     cracks: &[CrackState],
+    steps: (&[StepReport], Option<f64>),
 ) -> Result<(), OutputError> {
     let speeds: Vec<f64> = cracks
         .windows(2)
@@ -37,6 +126,7 @@ pub(super) fn write_crack_json(
         "criteria": criteria,
         "states": cracks,
         "tip_speed_between_states": speeds,
+        "tip_speed_every_step": speed_summary(steps.0, steps.1),
         "final_classification": cracks.last().map(|c| c.classification.clone()),
     });
     let path = dir.join(file::CRACK);
@@ -45,7 +135,8 @@ pub(super) fn write_crack_json(
         message: e.to_string(),
     })?;
     write_atomic(&path, text.as_bytes())?;
-    crack_plots(dir, cracks)
+    crack_plots(dir, cracks)?;
+    speed_plot(dir, steps.0)
 }
 
 /// Draws `plot` into the PNG `path`, naming the file in an error.
@@ -144,6 +235,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         how.tip,
         &how.criteria,
         &states,
+        (&[], None),
     )?;
     Ok(states)
 }

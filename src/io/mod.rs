@@ -322,6 +322,8 @@ pub struct RunOutput {
     /// Notch tip (mm) and criteria of the crack metrics, if tracked.
     crack: Option<(Vector2<f64>, CrackCriteria)>,
     cracks: Vec<CrackState>,
+    /// Rayleigh wave speed of the specimen's material (mm/s), the scale of the crack-tip speeds.
+    rayleigh: Option<f64>,
     /// 2 or 3: a 3D run's forces are N and its energies N mm (of the whole plate), a 2D run's per mm of
     /// thickness.
     dimension: usize,
@@ -367,6 +369,7 @@ impl RunOutput {
             writes: false,
             crack: None,
             cracks: Vec::new(),
+            rayleigh: None,
             dimension: 2,
             section_z: None,
             frame: Frame::IDENTITY,
@@ -397,9 +400,17 @@ impl RunOutput {
         (points, Some(layer))
     }
 
-    /// Measures the crack grown from `notch_tip` (mm) at every snapshot and writes `crack.json`.
-    pub fn track_crack(&mut self, notch_tip: Vector2<f64>, criteria: CrackCriteria) {
+    /// Measures the crack grown from `notch_tip` (mm) at every snapshot and writes `crack.json`; the
+    /// tip speeds of the steps are compared with `rayleigh`, the Rayleigh speed of the specimen (mm/s).
+    pub fn track_crack(&mut self, notch_tip: Vector2<f64>, criteria: CrackCriteria, rayleigh: f64) {
         self.crack = Some((notch_tip, criteria));
+        self.rayleigh = Some(rayleigh);
+    }
+
+    /// The notch tip (mm), the criteria, the cell size (mm) and the specimen's frame on the grid (the
+    /// crack is measured on the points' positions turned into it) of the crack metrics, if tracked.
+    pub fn crack_tracking(&self) -> Option<(Vector2<f64>, CrackCriteria, f64, Frame)> {
+        self.crack.map(|(tip, c)| (tip, c, self.cell_size, self.frame))
     }
 
     /// What the output has recorded (steps, snapshots, crack states), for a checkpoint.
@@ -424,7 +435,14 @@ impl RunOutput {
         let Some((tip, criteria)) = &self.crack else {
             return Ok(());
         };
-        write_crack_json(&self.dir, self.dimension == 3, *tip, criteria, &self.cracks)
+        write_crack_json(
+            &self.dir,
+            self.dimension == 3,
+            *tip,
+            criteria,
+            &self.cracks,
+            (&self.rows, self.rayleigh),
+        )
     }
 
     /// True if this process writes the run's files (false for a [`RunOutput::mirror`]).
@@ -437,11 +455,15 @@ impl RunOutput {
         &self.dir
     }
 
-    /// Records a step (its reactions and displacements turned into the specimen's frame) and rewrites
+    /// Records a step (its reactions and displacements turned into the specimen's frame, its crack
+    /// front's tip speed completed from the steps before, [`crack::tip_speed`]) and rewrites
     /// `history.csv`.
     pub fn record(&mut self, mut report: StepReport) -> Result<(), OutputError> {
         let vectors = report.reactions.iter_mut().chain(&mut report.displacements);
         vectors.for_each(|(_, v)| self.frame.components_to_specimen(v));
+        if let Some(front) = &mut report.crack {
+            front.speed = cracks::speed_after(&self.rows, report.time, front.length);
+        }
         self.rows.push(report);
         if !self.writes {
             return Ok(());
@@ -457,8 +479,8 @@ impl RunOutput {
     fn write_history(&self) -> Result<(), OutputError> {
         let mut s = String::new();
         s.push_str(match self.dimension {
-            3 => "# units: time s, dt s, displacement mm, force N (3D: of the whole plate), rotation rad, energy N mm, wall s\n",
-            _ => "# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s\n",
+            3 => "# units: time s, dt s, displacement mm, force N (3D: of the whole plate), rotation rad, energy N mm, wall s, crack tip and length mm, crack speed mm/s\n",
+            _ => "# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s, crack tip and length mm, crack speed mm/s\n",
         });
         if let Some(degrees) = self.frame.degrees() {
             let _ = writeln!(
@@ -478,6 +500,10 @@ impl RunOutput {
             columns.push(history::CONTACT_SOLVES.into());
         }
         columns.extend(history::TRAILING.map(String::from));
+        let tip = self.rows.first().is_some_and(|r| r.crack.is_some());
+        if tip {
+            columns.extend(history::CRACK.map(String::from));
+        }
         s.push_str(&columns.join(","));
         s.push('\n');
         for r in &self.rows {
@@ -507,19 +533,44 @@ impl RunOutput {
             let _ = write!(s, ",{}", r.contact_solves);
             let dissipated =
                 r.external_work + r.initial_energy - r.kinetic_energy - r.stored_energy;
-            let _ = writeln!(
+            let b = &r.books;
+            let remainder = b.remainder(
+                r.external_work,
+                r.initial_energy,
+                r.kinetic_energy,
+                r.stored_energy,
+            );
+            let fraction = if r.external_work > 0.0 {
+                remainder / r.external_work
+            } else {
+                0.0
+            };
+            let _ = write!(
                 s,
-                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{:.4e},{}",
+                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.6e}",
                 r.kinetic_energy,
                 r.stored_energy,
                 r.external_work,
                 dissipated,
+                b.damage,
+                b.erosion,
+                b.contact,
+                remainder,
+                fraction
+            );
+            let _ = write!(
+                s,
+                ",{:.4e},{:.4e},{:.4e},{:.4e},{}",
                 r.wall_setup,
                 r.wall_assembly,
                 r.wall_solve,
                 r.wall_total,
                 u8::from(r.new_pattern)
             );
+            if tip {
+                cracks::write_front(&mut s, r.crack.as_ref());
+            }
+            s.push('\n');
         }
         write_atomic(&self.dir.join(file::HISTORY), s.as_bytes())
     }

@@ -57,6 +57,12 @@ pub struct Response {
     /// microplanes under tensile `[0]` and compressive `[1]` normal strain `n . E . n` (microplane model;
     /// zero for the other laws): `sum_I 6 w_I psi_0,I (d_I - d_I^n)`.
     pub dissipation: [f64; 2],
+    /// The same released energy by the trapezoidal rule in the undamaged plane energy,
+    /// `sum_I 6 w_I (psi_0,I^n + psi_0,I)/2 (d_I - d_I^n)` (MPa), with `psi_0,I^n` at the step's start
+    /// `F_n` ([`PointUpdate::with_start`]); without `F_n`, the sum of [`Response::dissipation`]. It
+    /// converges to the path integral of `psi_0 dd` at second order in the strain increment, where the
+    /// end-point rule converges at first order and overestimates it.
+    pub dissipation_trapezoidal: f64,
     /// Gradient activity `c` of the Helmholtz equation at this state (mm^2) and its derivatives
     /// `dc/d eta`, `dc/d eta_bar` (see [`activity`]); 0 for local and elastic materials.
     pub activity: Activity,
@@ -74,6 +80,7 @@ impl Response {
             damage: 0.0,
             energy: 0.0,
             dissipation: [0.0; 2],
+            dissipation_trapezoidal: 0.0,
             activity: Activity::default(),
         }
     }
@@ -232,6 +239,9 @@ pub struct PointUpdate<'a> {
     pub h_n: &'a [f64],
     /// Trial history `h_trial` (written; committed by the caller only after the step converged).
     pub h_trial: &'a mut [f64],
+    /// Deformation gradient `F_n` at the start of the step, for the trapezoidal dissipation
+    /// ([`Response::dissipation_trapezoidal`]); `None` takes the end-point rule.
+    pub f_n: Option<&'a Matrix3<f64>>,
 }
 
 impl<'a> PointUpdate<'a> {
@@ -242,6 +252,16 @@ impl<'a> PointUpdate<'a> {
             eta_bar,
             h_n,
             h_trial,
+            f_n: None,
+        }
+    }
+
+    /// The same arguments with the step's starting deformation gradient `F_n` (3x3), from which the
+    /// trapezoidal dissipation takes `psi_0,I^n`.
+    pub fn with_start(self, f_n: &'a Matrix3<f64>) -> Self {
+        Self {
+            f_n: Some(f_n),
+            ..self
         }
     }
 
@@ -397,7 +417,10 @@ impl Constitutive for Material {
         let (law_n, act_n) = p.h_n.split_at(n);
         let (law_trial, act_trial) = p.h_trial.split_at_mut(n);
         let (f, eta_bar) = (p.f, p.eta_bar);
-        let law = PointUpdate::new(f, eta_bar, law_n, law_trial);
+        let law = PointUpdate {
+            f_n: p.f_n,
+            ..PointUpdate::new(f, eta_bar, law_n, law_trial)
+        };
         match self {
             Material::LinearElastic(m) => m.update(law, out)?,
             Material::StVenantKirchhoff(m) => m.update(law, out)?,

@@ -11,6 +11,9 @@ struct Outcome<const D: usize> {
     displacements: Vec<[f64; D]>,
     du_nodes: Vec<SVector<f64, D>>,
     acc_nodes: Vec<SVector<f64, D>>,
+    /// Kinetic energy lost at the inelastic impacts of the closed contact constraints on this process's
+    /// nodes (N mm; in 2D per mm thickness).
+    contact_loss: f64,
 }
 
 impl<const D: usize> Step<'_, D> {
@@ -26,7 +29,7 @@ impl<const D: usize> Step<'_, D> {
         let out = self.outcome(&plan, &solved.phys);
         let work = self.work(&plan, &out);
         let counted = self.own_point_count();
-        let stored = self.move_points(session, &plan, &out, counted)?;
+        let committed = self.move_points(session, &plan, &out, counted)?;
         self.move_rigid_bodies(&plan, &out);
         let st = &mut *self.state;
         for (acc, du) in st.counters.accumulated.iter_mut().zip(&out.displacements) {
@@ -38,10 +41,18 @@ impl<const D: usize> Step<'_, D> {
         st.counters.external_work += work;
         st.counters.time = plan.t_new;
         st.counters.step += 1;
-        let mut energies = [self.kinetic_energy(counted), stored];
+        let mut energies = [self.kinetic_energy(counted), committed.stored];
+        let mut books = [committed.dissipated, committed.eroding, out.contact_loss];
         if self.state.distributed {
             session.sum(&mut energies)?;
+            session.sum(&mut books)?;
         }
+        let b = &mut self.state.counters.books;
+        b.damage += books[0];
+        // The points eroded in the last step carry no stress from this step on.
+        b.erosion += b.eroding;
+        b.eroding = books[1];
+        b.contact += books[2];
         Ok(self.report(&plan, solved, &out, energies, t0))
     }
 
@@ -71,6 +82,7 @@ impl<const D: usize> Step<'_, D> {
         }
         let du_nodes = self.work.assembler.nodal_du().to_vec();
         let mut acc_nodes = vec![SVector::<f64, D>::zeros(); model.field_nodes()];
+        let mut contact_loss = 0.0;
         if let Some(nm) = plan.loading.newmark {
             let gs = &self.work.grid_state;
             for &node in self.work.dofs.active_nodes() {
@@ -78,8 +90,14 @@ impl<const D: usize> Step<'_, D> {
                 acc_nodes[node] =
                     nm.acceleration(du_nodes[node], gs.velocity[node], gs.acceleration[node]);
             }
+            let owned = self.owned_nodes();
             for c in &plan.contacts {
-                c.impact(model, &nm, gs, &mut acc_nodes, &mut reactions);
+                let impact = contacts::Impact {
+                    nm: &nm,
+                    gs,
+                    owned: owned.clone(),
+                };
+                contact_loss += c.impact(model, &impact, &mut acc_nodes, &mut reactions);
             }
         }
         let mut displacements: Vec<[f64; D]> = plan
@@ -99,6 +117,7 @@ impl<const D: usize> Step<'_, D> {
             displacements,
             du_nodes,
             acc_nodes,
+            contact_loss,
         }
     }
 
@@ -121,15 +140,16 @@ impl<const D: usize> Step<'_, D> {
     }
 
     /// G2P of the solution onto the points (eroded points keep their deformation), the FEM mode's nodal
-    /// state, and the commit of the material state; returns the stored energy of the `counted` own
-    /// points (N mm; in 2D per mm thickness).
+    /// state, and the commit of the material state; returns the energies of the `counted` own points
+    /// (stored, dissipated by damage in the step, stored in the points eroding; N mm; in 2D per mm
+    /// thickness).
     fn move_points(
         &mut self,
         session: &SessionGuard,
         plan: &StepPlan<D>,
         out: &Outcome<D>,
         counted: usize,
-    ) -> Result<f64, StepError> {
+    ) -> Result<Committed, StepError> {
         let model = self.model;
         let newmark = plan.loading.newmark;
         let sol = StepSolution {
@@ -295,6 +315,8 @@ impl<const D: usize> Step<'_, D> {
             stored_energy: stored,
             external_work: st.counters.external_work,
             initial_energy: st.counters.initial_energy,
+            books: st.counters.books,
+            crack: None,
             wall_setup: plan.setup_time,
             wall_solve: solved.solve_time,
             wall_assembly: solved.assembly_time,

@@ -5,7 +5,7 @@
 //! Committed state (particles, time) is only modified after SNES converges: a failed attempt leaves the
 //! simulation exactly as it was, so it can be retried with a smaller time step.
 
-use crate::assembly::{Assembler, AssemblyError, Newmark, StepInput};
+use crate::assembly::{Assembler, AssemblyError, Committed, Newmark, StepInput};
 use crate::boundary::{Motion, prescribed_acceleration, prescribed_increment};
 use crate::contact::{
     self, BlockRows, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus,
@@ -14,7 +14,7 @@ use crate::contact::{
 use crate::dofs::{DofMap, INACTIVE};
 use crate::grid::Grid;
 use crate::material::Material;
-use crate::model::{InitialAcceleration, Model, ModelError, Setup, State};
+use crate::model::{EnergyBooks, InitialAcceleration, Model, ModelError, Setup, State};
 use crate::particles::Particles;
 use crate::partition::{self, Partition};
 use crate::petsc::{

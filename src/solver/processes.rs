@@ -100,6 +100,15 @@ impl<const D: usize> Step<'_, D> {
         }
     }
 
+    /// The grid nodes whose energy this process counts: those of its node rows with the points shared
+    /// out, every node otherwise.
+    pub(super) fn owned_nodes(&self) -> Range<usize> {
+        match (&self.work.partition, self.state.distributed) {
+            (Some(part), true) => part.owned_nodes(),
+            _ => 0..usize::MAX,
+        }
+    }
+
     /// Drops the ghosts of the step (the state keeps this process's own points only).
     pub(super) fn drop_ghosts(&mut self) {
         if self.state.distributed {

@@ -119,4 +119,11 @@ pub struct StepReport {
     /// `dissipated = W + E_0 - K - Psi`.
     #[serde(default)]
     pub initial_energy: f64,
+    /// The energy books after the step: damage, erosion, contact losses (N mm; in 2D per mm thickness).
+    #[serde(default)]
+    pub books: EnergyBooks,
+    /// The crack front after the step (CT runs; filled in by the run, not the step: the solver leaves
+    /// it `None`).
+    #[serde(default)]
+    pub crack: Option<crate::crack::Front>,
 }

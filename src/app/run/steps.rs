@@ -8,6 +8,7 @@
 use crate::app::{FailedElsewhere, error_line};
 use crate::checkpoint;
 use crate::config::RunConfig;
+use crate::crack;
 use crate::io::RunOutput;
 use crate::model::State;
 use crate::petsc::SessionGuard;
@@ -15,6 +16,7 @@ use crate::rundir::{DirLock, RunIdentity, RunRecord};
 use crate::solver::{Simulation, StepError, StepReport};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
+use nalgebra::Vector2;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -185,10 +187,12 @@ impl Steps<'_> {
     ) -> Result<()> {
         let steps = records.cfg.run.steps;
         loop {
-            let report = match step {
+            let mut report = match step {
                 Ok(r) => r,
                 Err(e) => return Err(self.failed(records, sim, &e)),
             };
+            let front = crack_front(self.session, &records.out, &sim.state);
+            report.crack = agreed(self.session, front)?;
             self.show(&report, records.root);
             let recorded = records.out.record(report).map_err(anyhow::Error::from);
             if let Err(e) = agreed(self.session, recorded) {
@@ -284,6 +288,44 @@ impl Steps<'_> {
             self.hint
         )
     }
+}
+
+/// The crack front of `state` in a run that tracks the crack (`None` otherwise): with the points shared
+/// out, every process sends the positions of its points with damage at the threshold to process 0, which
+/// measures the front ([`crack::front`]; the others return `None`, they write nothing) on the positions
+/// turned into the specimen's frame, as the snapshots' crack metrics. In 3D the points of every layer
+/// count, projected onto the plane. Collective.
+fn crack_front<const D: usize>(
+    session: &SessionGuard,
+    out: &RunOutput,
+    state: &State<D>,
+) -> Result<Option<crack::Front>> {
+    let Some((notch_tip, criteria, h, frame)) = out.crack_tracking() else {
+        return Ok(None);
+    };
+    let p = &state.particles;
+    let mut cracked: Vec<f64> = Vec::new();
+    for (x, &d) in p.x.iter().zip(&p.damage) {
+        if d >= criteria.damage_threshold {
+            cracked.extend([x[0], x[1]]);
+        }
+    }
+    if state.distributed && session.size() > 1 {
+        let mut counts = vec![0; session.size()];
+        counts[0] = cracked.len() / 2;
+        cracked = session
+            .exchange(2, &counts, &cracked)
+            .context("gathering the cracked points on process 0")?;
+        if session.rank() != 0 {
+            return Ok(None);
+        }
+    }
+    let x: Vec<Vector2<f64>> = cracked
+        .chunks_exact(2)
+        .map(|c| frame.to_specimen(Vector2::new(c[0], c[1])))
+        .collect();
+    let damage = vec![criteria.damage_threshold; x.len()];
+    Ok(Some(crack::front(&x, &damage, notch_tip, h, &criteria)))
 }
 
 /// Steps (their time steps `taken`) that took less than the nominal time step `dt`.

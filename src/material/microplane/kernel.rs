@@ -239,6 +239,34 @@ impl Microplane {
         }
     }
 
+    /// The trapezoidal dissipation `(end_point + sum_I released_I psi_0,I(E_n))/2` of a point whose
+    /// planes released `released_I = 6 w_I (d_I - d_I^n)` and dissipated `end_point` by the end-point
+    /// rule, with `E_n` the Green-Lagrange strain of the step's starting `f_n`; `end_point` itself without
+    /// `f_n` (or when no plane is loading).
+    #[inline(always)]
+    fn trapezoidal<const N: usize>(
+        &self,
+        p: &Planes<N>,
+        f_n: Option<&nalgebra::Matrix3<f64>>,
+        released: &[f64; N],
+        end_point: f64,
+    ) -> f64 {
+        let Some(f_n) = f_n else {
+            return end_point;
+        };
+        let e = green_lagrange(f_n);
+        let ev = (e[0] + e[1] + e[2]) / 3.0;
+        let (ed, _) = project_all(p, &e, ev);
+        let vol_energy = 0.5 * self.k_mic * ev * ev;
+        let mut p0 = [0.0; N];
+        for i in 0..N {
+            p0[i] = vol_energy
+                + self.g_mic * (ed[0][i] * ed[0][i] + ed[1][i] * ed[1][i] + ed[2][i] * ed[2][i]);
+        }
+        let [start] = lane_dots(released, [&p0]);
+        0.5 * end_point + 0.5 * start
+    }
+
     /// Stress, tangents, equivalent strain and history for `N` (padded) planes.
     ///
     /// Every per-plane quantity is a row of `N` numbers; the sums over the planes are lane sums
@@ -258,6 +286,7 @@ impl Microplane {
             eta_bar,
             h_n,
             h_trial,
+            f_n,
         } = point;
         let nd = p.count;
         let (k1, k2, k_mic, g_mic) = (self.k1, self.k2, self.k_mic, self.g_mic);
@@ -356,6 +385,7 @@ impl Microplane {
         let mut rel = [0.0; N]; // eta_mic,I/eta (1 outside the ratio mode) on loading planes
         let mut any_loading = false;
         let (mut dis_tension, mut dis_compression) = (0.0, 0.0);
+        let mut released = [0.0; N]; // 6 w_I (d_I - d_I^n) on loading planes, else 0
         for i in 0..nd {
             let eb_mic = if ratio_mode { q * eta_mic[i] } else { eta_bar };
             let g_n = h_n[i];
@@ -376,11 +406,12 @@ impl Microplane {
                 } else {
                     0.0
                 };
-                let released = p.w6[i] * p0[i] * ((1.0 - o) - d_n);
+                released[i] = p.w6[i] * ((1.0 - o) - d_n);
+                let energy = p.w6[i] * p0[i] * ((1.0 - o) - d_n);
                 if ev + ned[i] < 0.0 {
-                    dis_compression += released;
+                    dis_compression += energy;
                 } else {
-                    dis_tension += released;
+                    dis_tension += energy;
                 }
                 c[i] = p.w6[i] * dd;
                 rel[i] = if ratio_mode { eta_mic[i] / eta } else { 1.0 };
@@ -470,6 +501,9 @@ impl Microplane {
         out.deta_df = f * crate::material::sym_to_matrix(&g_eta);
         out.energy = psi;
         out.dissipation = [dis_tension, dis_compression];
+        let end_point = dis_tension + dis_compression;
+        out.dissipation_trapezoidal =
+            self.trapezoidal(p, f_n.filter(|_| any_loading), &released, end_point);
         out.damage = if psi0 > 0.0 { 1.0 - psi / psi0 } else { d_mean };
     }
 }
