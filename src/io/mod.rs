@@ -500,7 +500,8 @@ impl RunOutput {
             columns.push(history::CONTACT_SOLVES.into());
         }
         columns.extend(history::TRAILING.map(String::from));
-        let tip = self.rows.first().is_some_and(|r| r.crack.is_some());
+        // Rows of a run resumed from an older checkpoint have no front: their crack fields stay empty.
+        let tip = self.rows.iter().any(|r| r.crack.is_some());
         if tip {
             columns.extend(history::CRACK.map(String::from));
         }
