@@ -38,6 +38,7 @@ fn is_result_file(name: &str) -> bool {
         file::CRACK,
         file::CRACK_LENGTH,
         file::BAND_WIDTH,
+        file::CRACK_SPEED,
         file::CHECKPOINT,
     ]
     .contains(&name)

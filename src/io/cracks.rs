@@ -47,7 +47,7 @@ pub(super) fn write_front(s: &mut String, front: Option<&Front>) {
 /// The tip speed's summary in `crack.json` from the fronts of the recorded steps `rows`: the peak speed,
 /// the speed at the first step with two or more bands, both also as fractions of the Rayleigh speed
 /// `rayleigh` (mm/s) of the specimen's material.
-fn speed_summary(rows: &[StepReport], rayleigh: Option<f64>) -> serde_json::Value {
+pub(super) fn speed_summary(rows: &[StepReport], rayleigh: Option<f64>) -> serde_json::Value {
     let fronts: Vec<(f64, Front)> = rows
         .iter()
         .filter_map(|r| r.crack.map(|c| (r.time, c)))
@@ -96,14 +96,15 @@ fn speed_plot(dir: &Path, rows: &[StepReport]) -> Result<(), OutputError> {
     )
 }
 
-/// Writes `crack.json` of the crack states `cracks` into `dir` (write, then rename).
+/// Writes `crack.json` of the crack states `cracks` into `dir` (write, then rename), with the tip-speed
+/// summary `every_step` ([`speed_summary`]) and `crack_speed.png` of the steps `rows` (none: not drawn).
 pub(super) fn write_crack_json(
     dir: &Path,
     plate: bool,
     tip: Vector2<f64>,
     criteria: &CrackCriteria,
     cracks: &[CrackState],
-    steps: (&[StepReport], Option<f64>),
+    (rows, every_step): (&[StepReport], serde_json::Value),
 ) -> Result<(), OutputError> {
     let speeds: Vec<f64> = cracks
         .windows(2)
@@ -126,7 +127,7 @@ pub(super) fn write_crack_json(
         "criteria": criteria,
         "states": cracks,
         "tip_speed_between_states": speeds,
-        "tip_speed_every_step": speed_summary(steps.0, steps.1),
+        "tip_speed_every_step": every_step,
         "final_classification": cracks.last().map(|c| c.classification.clone()),
     });
     let path = dir.join(file::CRACK);
@@ -136,7 +137,7 @@ pub(super) fn write_crack_json(
     })?;
     write_atomic(&path, text.as_bytes())?;
     crack_plots(dir, cracks)?;
-    speed_plot(dir, steps.0)
+    speed_plot(dir, rows)
 }
 
 /// Draws `plot` into the PNG `path`, naming the file in an error.
@@ -203,11 +204,17 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         section_z: cfg.extrusion.as_ref().map(|e| e.section_z),
         frame: Frame::from_degrees(cfg.grid.rotation),
     };
-    let old: Vec<CrackState> = std::fs::read_to_string(dir.join(file::CRACK))
+    let old_json = std::fs::read_to_string(dir.join(file::CRACK))
         .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+    let old: Vec<CrackState> = old_json
+        .as_ref()
         .and_then(|v| serde_json::from_value(v["states"].clone()).ok())
         .unwrap_or_default();
+    // The tip speeds of the steps are not in the snapshots: kept from the old crack.json.
+    let speeds = old_json.map_or(serde_json::Value::Null, |v| {
+        v["tip_speed_every_step"].clone()
+    });
     let mut states = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io_err(dir))? {
         let path = entry.map_err(io_err(dir))?.path();
@@ -235,7 +242,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         how.tip,
         &how.criteria,
         &states,
-        (&[], None),
+        (&[], speeds),
     )?;
     Ok(states)
 }

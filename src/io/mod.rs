@@ -19,7 +19,7 @@ use crate::schema::{file, history};
 use crate::solver::StepReport;
 use crate::space::{Frame, xy};
 pub use cracks::remeasure_cracks;
-use cracks::{mid_z, save_line_plot, section_layer, write_crack_json};
+use cracks::{mid_z, save_line_plot, section_layer, speed_summary, write_crack_json};
 use hdf5_metno::types::VarLenUnicode;
 use nalgebra::{SVector, Vector2};
 use std::fmt::Write as _;
@@ -441,7 +441,7 @@ impl RunOutput {
             *tip,
             criteria,
             &self.cracks,
-            (&self.rows, self.rayleigh),
+            (&self.rows, speed_summary(&self.rows, self.rayleigh)),
         )
     }
 
