@@ -177,6 +177,7 @@ fn run_on_two_and_three_processes_matches_serial() {
             "stored_energy",
             "external_work",
             "dissipated_energy",
+            "contact_loss",
         ] {
             let (a, b) = (&serial[name], &parallel[name]);
             assert!(a.iter().any(|v| *v != 0.0), "{name} must not vanish");
@@ -185,6 +186,10 @@ fn run_on_two_and_three_processes_matches_serial() {
                 d <= 1e-6,
                 "{ranks} processes: {name} relative L2 distance {d:e}"
             );
+        }
+        // The crack front of every step (process 0 measures the cracked points of all processes).
+        for name in ["crack_length", "crack_tip_x", "crack_tip_y", "crack_bands"] {
+            assert_eq!(serial[name], parallel[name], "{ranks} processes: {name}");
         }
         let newton = |h: &std::collections::HashMap<String, Vec<f64>>| -> f64 {
             h["newton_its"].iter().sum()
