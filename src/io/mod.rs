@@ -410,7 +410,8 @@ impl RunOutput {
     /// The notch tip (mm), the criteria, the cell size (mm) and the specimen's frame on the grid (the
     /// crack is measured on the points' positions turned into it) of the crack metrics, if tracked.
     pub fn crack_tracking(&self) -> Option<(Vector2<f64>, CrackCriteria, f64, Frame)> {
-        self.crack.map(|(tip, c)| (tip, c, self.cell_size, self.frame))
+        self.crack
+            .map(|(tip, c)| (tip, c, self.cell_size, self.frame))
     }
 
     /// What the output has recorded (steps, snapshots, crack states), for a checkpoint.
