@@ -10,22 +10,18 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use nalgebra::{SMatrix, SVector};
 use std::hint::black_box;
 
-use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
-use mpm_concrete::dofs::{DofMap, FieldLayout};
+use mpm_concrete::assembly::Assembler;
 use mpm_concrete::geometry::{BoxBody, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Constitutive, Material, MaterialConfig};
+use mpm_concrete::model::{Model, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
-use mpm_concrete::petsc::BlockLayout;
-use mpm_concrete::shape::{ShapeKind, ShapeTable};
-use mpm_concrete::transfer::{GridState, particles_to_grid};
+use mpm_concrete::petsc::{BlockLayout, Session};
+use mpm_concrete::shape::ShapeKind;
+use mpm_concrete::solver::StepData;
 
-fn material(text: &str) -> Material {
-    toml::from_str::<MaterialConfig>(text)
-        .expect("material config")
-        .build()
-        .expect("valid material")
-}
+#[path = "../tests/common/mod.rs"]
+mod common;
+use common::material;
 
 /// Times evaluate, residual and Jacobian for the block `size` in `D` dimensions.
 fn bench_block<const D: usize>(c: &mut Criterion, size: SVector<f64, D>) {
@@ -36,58 +32,38 @@ fn bench_block<const D: usize>(c: &mut Criterion, size: SVector<f64, D>) {
         density: 2.4e-9,
         body: 0,
     };
-    let mut particles = Particles::<D>::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
+    let particles = Particles::<D>::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
     let grid = Grid::covering(SVector::zeros(), size, h, 2).expect("grid");
     let f = SMatrix::<f64, D, D>::from_fn(|i, j| if i == j { 1.0 + 1e-5 } else { 2e-6 });
-    for p in 0..particles.len() {
-        particles.set_deformation(p, f);
-    }
-    let mut table = ShapeTable::new();
-    table
-        .compute(ShapeKind::Cpdi1, &grid, &particles)
-        .expect("shape functions");
-    let mut gs = GridState::new();
-    particles_to_grid(&table, &particles, &grid, 1e-10, &mut gs).expect("p2g");
     let n = particles.len();
     let mut group = c.benchmark_group(format!("assembly_{D}d_{n}"));
-    for (name, text, eta_bar) in [
+    for (name, text) in [
         (
             "microplane",
             "model = \"microplane\"\npreset = \"paper_gamma0_1.25e-4\"",
-            true,
         ),
         (
             "neo_hookean",
             "model = \"neo_hookean\"\nyoungs_modulus = 36000.0\npoisson_ratio = 0.18",
-            false,
         ),
     ] {
-        let mat = material(text);
-        particles.resize_history(mat.history_len(), 0.0);
+        // Newmark steps of 1 us.
+        let time = TimeIntegration::default();
+        let setup = Setup::new(
+            grid.clone(),
+            particles.clone(),
+            vec![material(text)],
+            ShapeKind::Cpdi1,
+            time,
+        );
+        let (model, mut state) = Model::new(setup).expect("model");
         for p in 0..n {
-            mat.init_history(&mut particles.history_mut(p)[..mat.history_len()]);
+            state.particles.set_deformation(p, f);
         }
-        let mut dofs = DofMap::default();
-        dofs.rebuild(&gs.active, FieldLayout::new(D, eta_bar));
-        let materials = [mat];
-        let input = StepInput {
-            table: &table,
-            particles: &particles,
-            materials: &materials,
-            dofs: &dofs,
-            mass: &gs.mass,
-            velocity: &gs.velocity,
-            acceleration: &gs.acceleration,
-            newmark: Some(Newmark {
-                beta: 0.25,
-                gamma: 0.5,
-                dt: 1e-6,
-            }),
-            body_force: SVector::zeros(),
-            nodal_force: &[],
-            row_scale: 3e4,
-            partners: &[],
-        };
+        let session = Session::get().expect("PETSc");
+        let data = StepData::new(&session, &model, &state, time.dt).expect("step");
+        drop(session);
+        let (input, dofs) = (data.input(&model), data.dofs());
         let mut asm = Assembler::new();
         asm.begin_step(&input);
         let x: Vec<f64> = (0..dofs.len())

@@ -4,11 +4,10 @@
 //!
 //! Units: mm, s, N, MPa, t (density t/mm^3, velocity mm/s).
 
-use mpm_concrete::config::RunConfig;
-use mpm_concrete::petsc::{self, Session};
-use mpm_concrete::scenario;
+use mpm_concrete::petsc::SessionGuard;
 use mpm_concrete::solver::Simulation;
 
+mod common;
 mod contact_rows;
 
 /// Two 20 x 10 mm elastic bars (E = 1000 MPa, rho = 1e-9 t/mm^3, nu = 0: wave speed 1e6 mm/s) touching
@@ -42,21 +41,14 @@ material = {{ model = "neo_hookean", youngs_modulus = 1000.0, poisson_ratio = 0.
     )
 }
 
-fn session() -> mpm_concrete::petsc::SessionGuard {
-    let s = Session::get().expect("PETSc");
-    petsc::apply_default_options(
-        &s,
+fn session() -> SessionGuard {
+    common::session(
         "-bodies_ksp_type preonly -bodies_pc_type lu -bodies_snes_rtol 1e-10 -bodies_snes_atol 1e-9",
     )
-    .expect("options");
-    s
 }
 
 fn setup(toml: &str) -> mpm_concrete::model::Setup {
-    let cfg = RunConfig::from_str_named(toml, "bars.toml").expect("config");
-    let mut setup = scenario::build(&cfg).expect("model");
-    setup.params.options_prefix = Some("bodies_".into());
-    setup
+    common::config_setup(toml, "bars.toml", "bodies_")
 }
 
 fn simulation(toml: &str) -> Simulation {
@@ -301,72 +293,15 @@ fn pair_rows_match_finite_differences() {
 #[test]
 fn paired_rows_share_the_union_of_their_columns() {
     use mpm_concrete::assembly::{Assembler, StepInput};
-    use mpm_concrete::dofs::{DofMap, FieldLayout, INACTIVE};
-    use mpm_concrete::geometry::{Geometry, Region, Seeding};
-    use mpm_concrete::grid::Grid;
-    use mpm_concrete::material::{Material, MaterialConfig};
-    use mpm_concrete::particles::Particles;
-    use mpm_concrete::shape::{ShapeKind, ShapeTable};
-    use mpm_concrete::transfer::{self, GridState};
-    use nalgebra::Vector2;
-    let block = |min: [f64; 2], max: [f64; 2], body: u16| {
-        let geometry = Geometry {
-            include: vec![Region::Rect { min, max }],
-            exclude: vec![],
-        };
-        let seeding = Seeding {
-            h: 1.0,
-            points_per_cell: 2,
-            density: 1e-9,
-            body,
-        };
-        Particles::seed(&geometry, &seeding).expect("seed")
-    };
-    let mut particles = block([0.0, 0.0], [3.0, 2.0], 0);
-    particles
-        .append(&block([3.0, 0.0], [5.0, 2.0], 1))
-        .expect("append");
-    let grid =
-        Grid::covering(Vector2::new(0.0, 0.0), Vector2::new(5.0, 2.0), 1.0, 2).expect("grid");
-    let nodes = grid.num_nodes();
-    let mut table = ShapeTable::new();
-    table
-        .compute(ShapeKind::Cpdi1, &grid, &particles)
-        .expect("shape");
-    let body = particles.body.clone();
-    table.offset_fields(nodes, 2, |p| body[p] as usize);
-    let mut gs = GridState::new();
-    transfer::particles_to_grid(&table, &particles, &grid, 1e-10, &mut gs).expect("p2g");
-    let mut dofs = DofMap::default();
-    dofs.rebuild(&gs.active, FieldLayout::new(2, false));
-    // Pair every lattice node whose two copies are active (the interface column x = 3).
-    let mut partners = vec![INACTIVE; 2 * nodes];
-    for i in 0..nodes {
-        if gs.active[i] && gs.active[i + nodes] {
-            partners[i] = (i + nodes) as u32;
-            partners[i + nodes] = i as u32;
-        }
-    }
+    use mpm_concrete::dofs::INACTIVE;
+    use mpm_concrete::model::Model;
+    use mpm_concrete::solver::StepData;
+    // The bars touching on the column x = 20 mm, the striker on its own field.
+    let (model, state) = Model::new(setup(&bars(true))).expect("model");
+    let data = StepData::new(&session(), &model, &state, 2e-6).expect("step");
+    let (input, dofs, partners) = (data.input(&model), data.dofs(), data.partners());
     let paired = partners.iter().filter(|&&q| q != INACTIVE).count();
     assert!(paired >= 6, "{paired} paired copies");
-    let cfg: MaterialConfig =
-        toml::from_str("model = \"neo_hookean\"\nyoungs_modulus = 1000.0\npoisson_ratio = 0.0")
-            .expect("material");
-    let materials: Vec<Material> = vec![cfg.build().expect("m"), cfg.build().expect("m")];
-    let input = StepInput {
-        table: &table,
-        particles: &particles,
-        materials: &materials,
-        dofs: &dofs,
-        mass: &gs.mass,
-        velocity: &gs.velocity,
-        acceleration: &gs.acceleration,
-        newmark: None,
-        body_force: Vector2::zeros(),
-        nodal_force: &[],
-        row_scale: 1e3,
-        partners: &partners,
-    };
     let mut asm = Assembler::new();
     asm.begin_step(&input);
     let pattern = asm.block_pattern();

@@ -4,11 +4,10 @@
 //!
 //! Units: mm, s, N, MPa, t (density t/mm^3, velocity mm/s, force N per mm thickness).
 
-use mpm_concrete::config::RunConfig;
-use mpm_concrete::petsc::{self, Session};
-use mpm_concrete::scenario;
+use mpm_concrete::petsc::SessionGuard;
 use mpm_concrete::solver::Simulation;
 
+mod common;
 mod contact_rows;
 
 /// A 20 x 10 mm elastic block (E = 1000 MPa, rho = 1e-9 t/mm^3, nu = 0) moving at 1000 mm/s towards a
@@ -38,21 +37,14 @@ y = "fixed"
 contact = { normal = [-1.0, 0.0] }
 "#;
 
-fn session() -> mpm_concrete::petsc::SessionGuard {
-    let s = Session::get().expect("PETSc");
-    petsc::apply_default_options(
-        &s,
+fn session() -> SessionGuard {
+    common::session(
         "-contact_ksp_type preonly -contact_pc_type lu -contact_snes_rtol 1e-10 -contact_snes_atol 1e-9",
     )
-    .expect("options");
-    s
 }
 
 fn simulation(toml: &str) -> Simulation {
-    let cfg = RunConfig::from_str_named(toml, "contact.toml").expect("config");
-    let mut setup = scenario::build(&cfg).expect("model");
-    setup.params.options_prefix = Some("contact_".into());
-    Simulation::new(setup).expect("simulation")
+    Simulation::new(common::config_setup(toml, "contact.toml", "contact_")).expect("simulation")
 }
 
 fn momentum(sim: &Simulation) -> nalgebra::Vector2<f64> {

@@ -18,13 +18,14 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::crack::band_width_1d;
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::MaterialConfig;
 use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
-use mpm_concrete::petsc::{self, Session, SessionGuard};
+use mpm_concrete::petsc::SessionGuard;
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
+
+mod common;
 
 const E: f64 = 20000.0;
 const GAMMA_0: f64 = 1e-4;
@@ -56,14 +57,10 @@ struct Run {
 }
 
 fn session() -> SessionGuard {
-    let s = Session::get().expect("PETSc");
-    petsc::apply_default_options(
-        &s,
+    common::session(
         "-evg_ksp_type preonly -evg_pc_type lu -evg_pc_factor_mat_solver_type mumps \
          -evg_snes_rtol 1e-10 -evg_snes_atol 1e-10 -evg_snes_stol 0 -evg_snes_max_it 40",
     )
-    .expect("options");
-    s
 }
 
 /// Speed of the pulled end (mm/s; 0.1 m/s), its rise time (s) and the time step (s). The bar's first
@@ -118,12 +115,11 @@ fn run_bar_with(
         }
     }
     let x0: Vec<f64> = particles.x.iter().map(|x| x.x - 0.5 * L).collect();
-    let cfg: MaterialConfig = toml::from_str(&format!(
+    let material = common::material(&format!(
         "model = \"isotropic_damage\"\nyoungs_modulus = {E}\npoisson_ratio = 0.0\ngamma_0 = {gamma_0}\n\
          alpha = {ALPHA}\nbeta = {beta}\nc = {C0}\nequivalent_strain = \"axial\"\nkinematics = \"small\"\n\
          gradient_activity = {activity}\n"
-    ))
-    .expect("material");
+    ));
     let far = 1e3;
     let bx = |name: &str, min: [f64; 2], max: [f64; 2], motion| NodeBox {
         name: name.into(),
@@ -146,7 +142,6 @@ fn run_bar_with(
         quasi_static: false,
         ..TimeIntegration::default()
     };
-    let material = cfg.build().expect("valid material");
     let setup = Setup::of(
         Parameters {
             boxes: vec![

@@ -6,15 +6,16 @@ mod common;
 
 use common::material;
 
-use mpm_concrete::assembly::{Assembler, Newmark, StepInput};
-use mpm_concrete::dofs::{DofMap, FieldLayout};
+use mpm_concrete::assembly::Assembler;
+use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::geometry::{BoxBody, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Constitutive, Material};
+use mpm_concrete::material::Material;
+use mpm_concrete::model::{Model, Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
-use mpm_concrete::petsc::BlockLayout;
-use mpm_concrete::shape::{ShapeKind, ShapeTable};
-use mpm_concrete::transfer::{self, GridState};
+use mpm_concrete::petsc::{BlockLayout, Session};
+use mpm_concrete::shape::ShapeKind;
+use mpm_concrete::solver::StepData;
 use nalgebra::{SMatrix, SVector};
 
 /// Deterministic pseudo-random numbers in [-1, 1].
@@ -52,8 +53,35 @@ fn fd_check<const D: usize>(
         density: 2.4e-9,
         body: 0,
     };
-    let mut particles = Particles::<D>::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
+    let particles = Particles::<D>::seed(&BoxBody::from_origin(size), &seeding).expect("seed");
     let grid = Grid::covering(SVector::zeros(), size, h, 2).expect("grid");
+    let dt = 1e-6;
+    // Newmark with beta = 1/4, gamma = 1/2.
+    let time = TimeIntegration {
+        dt,
+        ..TimeIntegration::default()
+    };
+    let far = 1e6;
+    // The x component of the active nodes on the left edge of the body moves by 1e-4 mm in the step.
+    let left_edge = NodeBox {
+        name: "left edge".into(),
+        min: SVector::from_fn(|d, _| if d == 0 { 0.0 } else { -far }),
+        max: SVector::from_fn(|d, _| if d == 0 { 0.0 } else { far }),
+        motion: std::array::from_fn(|d| match d {
+            0 => Motion::Velocity(1e-4 / dt),
+            _ => Motion::Free,
+        }),
+        rise_time: 0.0,
+    };
+    let setup = Setup::of(
+        Parameters {
+            body_force: SVector::from_fn(|d, _| if d == 1 { -9810.0 } else { 0.0 }),
+            boxes: vec![left_edge],
+            ..Parameters::new(grid, vec![mat], kind, time)
+        },
+        particles,
+    );
+    let (model, mut state) = Model::new(setup).expect("model");
     // Pre-deformed start-of-step state: F_n != I (sheared and stretched domains).
     let table3 = [
         [1.02, 0.03, 0.01],
@@ -61,57 +89,19 @@ fn fd_check<const D: usize>(
         [0.015, -0.02, 1.01],
     ];
     let fn_ = SMatrix::<f64, D, D>::from_fn(|i, j| table3[i][j]);
+    let particles = &mut state.particles;
     for p in 0..particles.len() {
         particles.set_deformation(p, fn_);
         particles.v[p] =
             SVector::from_fn(|d, _| [100.0, 50.0, -70.0][d] * noise(p + [0, 7, 13][d]));
         particles.a[p] = SVector::from_fn(|d, _| [1e6, -1e6, 5e5][d] * noise(p + [3, 5, 17][d]));
-    }
-    particles.resize_history(mat.history_len(), 0.0);
-    for p in 0..particles.len() {
-        mat.init_history(&mut particles.history_mut(p)[..mat.history_len()]);
         particles.damage[p] = damage(p);
         particles.eta_bar[p] = 2e-3 * (1.0 + 0.2 * noise(p + 11));
     }
-    let mut table = ShapeTable::new();
-    table
-        .compute(kind, &grid, &particles)
-        .expect("shape functions");
-    let mut gs = GridState::new();
-    transfer::particles_to_grid(&table, &particles, &grid, 1e-10, &mut gs).expect("p2g");
-    let mut dofs = DofMap::default();
-    assert!(
-        fields == D || fields == D + 1,
-        "displacement, with eta_bar or not"
-    );
-    dofs.rebuild(&gs.active, FieldLayout::new(D, fields == D + 1));
-    // Constrain the x component of the active nodes on the left edge of the body.
-    for node in 0..grid.num_nodes() {
-        let x = grid.node_position(node);
-        if x[0].abs() < 1e-9 {
-            dofs.constrain(node, 0, 1e-4);
-        }
-    }
+    let data = StepData::new(&Session::get().expect("PETSc"), &model, &state, dt).expect("step");
+    let (input, dofs) = (data.input(&model), data.dofs());
+    assert_eq!(dofs.unknowns_per_node(), fields, "unknowns per node");
     assert!(dofs.num_constrained() > 0);
-    let materials = [mat];
-    let input = StepInput {
-        table: &table,
-        particles: &particles,
-        materials: &materials,
-        dofs: &dofs,
-        mass: &gs.mass,
-        velocity: &gs.velocity,
-        acceleration: &gs.acceleration,
-        newmark: Some(Newmark {
-            beta: 0.25,
-            gamma: 0.5,
-            dt: 1e-6,
-        }),
-        body_force: SVector::from_fn(|d, _| if d == 1 { -9810.0 } else { 0.0 }),
-        nodal_force: &[],
-        row_scale: 3e4,
-        partners: &[],
-    };
     let mut asm = Assembler::new();
     asm.begin_step(&input);
     let n = dofs.len();

@@ -22,13 +22,15 @@ use mpm_concrete::boundary::{Motion, NodeBox};
 use mpm_concrete::crack::band_width_1d;
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
-use mpm_concrete::material::{Material, MaterialConfig};
+use mpm_concrete::material::Material;
 use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
-use mpm_concrete::petsc::{self, Session, SessionGuard};
+use mpm_concrete::petsc::SessionGuard;
 use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::Simulation;
 use nalgebra::Vector2;
+
+mod common;
 
 const L: f64 = 100.0;
 const W: f64 = 10.0;
@@ -49,23 +51,17 @@ struct Outcome {
 }
 
 fn session() -> SessionGuard {
-    let s = Session::get().expect("PETSc");
-    petsc::apply_default_options(
-        &s,
+    common::session(
         "-rbt_ksp_type preonly -rbt_pc_type lu -rbt_pc_factor_mat_solver_type mumps \
          -rbt_snes_rtol 1e-10 -rbt_snes_atol 1e-10 -rbt_snes_stol 0 -rbt_snes_max_it 40",
     )
-    .expect("options");
-    s
 }
 
 fn material(c0: f64, activity: &str, gamma_0: f64) -> Material {
-    let cfg: MaterialConfig = toml::from_str(&format!(
+    common::material(&format!(
         "model = \"microplane\"\npreset = \"paper\"\nc = {c0}\ngradient_activity = {activity}\n\
          gamma_0 = {gamma_0:e}\n"
     ))
-    .expect("material");
-    cfg.build().expect("valid material")
 }
 
 fn bar_setup(h: f64, (c0, activity): (f64, &str)) -> Setup {

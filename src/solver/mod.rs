@@ -30,6 +30,7 @@ use std::time::Instant;
 
 mod contacts;
 mod finish;
+mod input;
 mod prepare;
 mod processes;
 mod report;
@@ -38,6 +39,7 @@ mod start;
 mod system;
 
 use contacts::ContactSet;
+pub use input::StepData;
 use prepare::{Loading, StepPlan};
 use processes::{agree, agreed, complete_rows};
 use report::Failure;
@@ -63,7 +65,6 @@ fn row_scale(materials: &[Material]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Failure of a step or a run.
 /// The per-step scratch of the time step, reused from step to step: shape-function tables, grid fields,
 /// the unknowns and their constraints, the assembler's buffers and the PETSc objects. Nothing in it
 /// outlives a step's meaning: a workspace may be dropped and rebuilt between steps (a resumed run
@@ -269,32 +270,5 @@ impl<const D: usize> Step<'_, D> {
             Err(failure) => return Ok(Err(failure)),
         };
         Ok(Ok(self.finish(session, plan, solved, t0)?))
-    }
-
-    /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
-    /// assembler and the PETSc objects stay free to be borrowed mutably beside it).
-    fn step_input<'a>(
-        model: &'a Model<D>,
-        particles: &'a Particles<D>,
-        table: &'a ShapeTable<D>,
-        dofs: &'a DofMap,
-        grid_state: &'a GridState<D>,
-        loading: &'a Loading<D>,
-        partners: &'a [u32],
-    ) -> StepInput<'a, D> {
-        StepInput {
-            table,
-            particles,
-            materials: &model.params.materials,
-            dofs,
-            mass: &grid_state.mass,
-            velocity: &grid_state.velocity,
-            acceleration: &grid_state.acceleration,
-            newmark: loading.newmark,
-            body_force: model.params.body_force * loading.load_factor,
-            nodal_force: &loading.nodal_force,
-            row_scale: row_scale(&model.params.materials),
-            partners,
-        }
     }
 }

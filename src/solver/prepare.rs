@@ -37,6 +37,35 @@ pub(super) struct Loading<const D: usize> {
     pub(super) nodal_force: Vec<SVector<f64, D>>,
 }
 
+impl<const D: usize> Loading<D> {
+    /// The inertia and forces of a step of `dt` (s) reaching `t_new` (s) on `model` with the applied
+    /// `nodal_force`: Newmark unless quasi-static, the body force ramped over `body_force_ramp` in a
+    /// quasi-static run.
+    pub(super) fn new(
+        model: &Model<D>,
+        t_new: f64,
+        dt: f64,
+        nodal_force: Vec<SVector<f64, D>>,
+    ) -> Self {
+        let time = &model.params.time;
+        let newmark = (!time.quasi_static).then_some(Newmark {
+            beta: time.beta,
+            gamma: time.gamma,
+            dt,
+        });
+        let load_factor = if time.quasi_static && model.params.body_force_ramp > 0.0 {
+            (t_new / model.params.body_force_ramp).min(1.0)
+        } else {
+            1.0
+        };
+        Self {
+            newmark,
+            load_factor,
+            nodal_force,
+        }
+    }
+}
+
 /// The grid at the start of an attempt besides the grid state ([`Step::grid_phase`]).
 pub(super) struct OnGrid<const D: usize> {
     /// Prescribed value per constraint set and component (boxes first, then rigid bodies).
@@ -51,15 +80,44 @@ pub(super) struct OnGrid<const D: usize> {
 }
 
 impl<const D: usize> Step<'_, D> {
-    /// First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the
-    /// loads at `t_n+1`, the contact sets, the PETSc objects (kept if the pattern is unchanged) and the
-    /// first guess of the solution.
+    /// First phase of a step attempt: the step's data on the grid ([`Step::plan`]), the PETSc objects
+    /// (kept if the pattern is unchanged) and the first guess of the solution.
     pub(super) fn prepare(
         &mut self,
         session: &SessionGuard,
         dt: f64,
         prefix: Option<&str>,
     ) -> Result<StepPlan<D>, StepError> {
+        let (plan, eta_bar) = self.plan(session, dt)?;
+        let input = Self::step_input(
+            self.model,
+            &self.state.particles,
+            &self.work.table,
+            &self.work.dofs,
+            &self.work.grid_state,
+            &plan.loading,
+            &self.work.partners,
+        );
+        self.work.assembler.begin_step(&input);
+        let new_pattern = self.linear_system(session, prefix)?;
+        let xs = self.first_guess(&plan, &eta_bar);
+        let sys = self.work.system.as_mut().expect("linear system just built");
+        sys.owned.scatter(&xs, &mut sys.x)?;
+        Ok(StepPlan {
+            new_pattern,
+            ..plan
+        })
+    }
+
+    /// The step's data on the grid at `t_n+1 = t_n + dt`: shape functions and P2G, the unknowns and
+    /// their constraints, the loads, the contact sets and the inertia of the step; with the points'
+    /// `eta_bar` on the nodes (the first guess of the Helmholtz unknowns). Everything the assembler
+    /// reads ([`Step::step_input`]) is then in the workspace and the plan.
+    pub(super) fn plan(
+        &mut self,
+        session: &SessionGuard,
+        dt: f64,
+    ) -> Result<(StepPlan<D>, Vec<f64>), StepError> {
         if session.size() > 1 && self.model.num_fields() > 1 {
             return Err(StepError::Setup(
                 "contact between bodies (a body with its own velocity field) runs on one process: \
@@ -72,50 +130,18 @@ impl<const D: usize> Step<'_, D> {
             prescribed_increment(v, rise, t, dt)
         })?;
         let contacts = self.contact_sets(session, &g.set_values, dt)?;
-        let model = self.model;
-        let newmark = (!model.params.time.quasi_static).then_some(Newmark {
-            beta: model.params.time.beta,
-            gamma: model.params.time.gamma,
-            dt,
-        });
-        let load_factor = if model.params.time.quasi_static && model.params.body_force_ramp > 0.0 {
-            (t_new / model.params.body_force_ramp).min(1.0)
-        } else {
-            1.0
-        };
         let plan = StepPlan {
             dt,
             t_new,
             set_du: g.set_values,
             sets: g.sets,
             contacts,
-            loading: Loading {
-                newmark,
-                load_factor,
-                nodal_force: g.nodal_force,
-            },
+            loading: Loading::new(self.model, t_new, dt, g.nodal_force),
             load_nodes: g.load_nodes,
             new_pattern: false,
             setup_time: 0.0,
         };
-        let input = Self::step_input(
-            model,
-            &self.state.particles,
-            &self.work.table,
-            &self.work.dofs,
-            &self.work.grid_state,
-            &plan.loading,
-            &self.work.partners,
-        );
-        self.work.assembler.begin_step(&input);
-        let new_pattern = self.linear_system(session, prefix)?;
-        let xs = self.first_guess(&plan, &g.eta_bar);
-        let sys = self.work.system.as_mut().expect("linear system just built");
-        sys.owned.scatter(&xs, &mut sys.x)?;
-        Ok(StepPlan {
-            new_pattern,
-            ..plan
-        })
+        Ok((plan, g.eta_bar))
     }
 
     /// Shape functions, P2G and the unknowns ([`Step::project_to_grid`]); the constraint sets with the

@@ -1,5 +1,6 @@
-//! Set-ups shared by the integration tests: the material helper and the one-cell-wide elastic column of
-//! V2 (quasi-static self-weight, `verification_static.rs`) and of the suddenly loaded column
+//! Set-ups shared by the integration tests: a material from its TOML section, the PETSc session with a
+//! test's solver options, a set-up from a configuration text, and the one-cell-wide elastic column of V2
+//! (quasi-static self-weight, `verification_static.rs`) and of the suddenly loaded column
 //! (`verification_dynamics.rs`).
 //!
 //! Units: mm, s, N, MPa, t (density t/mm^3, gravity mm/s^2).
@@ -8,11 +9,14 @@
 #![allow(dead_code)]
 
 use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::config::RunConfig;
 use mpm_concrete::geometry::{Geometry, Region, Seeding};
 use mpm_concrete::grid::Grid;
 use mpm_concrete::material::{Material, MaterialConfig};
 use mpm_concrete::model::{Method, Parameters, Setup, TimeIntegration};
 use mpm_concrete::particles::Particles;
+use mpm_concrete::petsc::{self, Session, SessionGuard};
+use mpm_concrete::scenario;
 use mpm_concrete::shape::ShapeKind;
 use nalgebra::Vector2;
 
@@ -20,6 +24,23 @@ use nalgebra::Vector2;
 pub fn material(toml_text: &str) -> Material {
     let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
     cfg.build().expect("valid material")
+}
+
+/// The PETSc session with the solver `options` (a PETSc options string, usually under the test's own
+/// prefix) added to the options database; options already set win.
+pub fn session(options: &str) -> SessionGuard {
+    let s = Session::get().expect("PETSc");
+    petsc::apply_default_options(&s, options).expect("options");
+    s
+}
+
+/// The plane set-up of the configuration `toml` (named `file` in errors), its solver options under
+/// `prefix`.
+pub fn config_setup(toml: &str, file: &str, prefix: &str) -> Setup {
+    let cfg = RunConfig::from_str_named(toml, file).expect("config");
+    let mut setup = scenario::build(&cfg).expect("model");
+    setup.params.options_prefix = Some(prefix.into());
+    setup
 }
 
 /// Height, Young's modulus, density and gravity of a column (nu = 0).
