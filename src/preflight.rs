@@ -2,8 +2,8 @@
 //! instead of after its first step or with an allocation failure: the values of common PETSc options and
 //! the memory the run will need.
 
-use crate::config::{LoadIntroduction, NotchTip, RunConfig};
-use crate::geometry::{Geometry, Region};
+use crate::scenario::{Plan, ScenarioError};
+use nalgebra::Vector2;
 
 /// What the value of a checked PETSc option must be.
 #[derive(Debug, Clone, Copy)]
@@ -111,10 +111,10 @@ pub const BYTES_PER_POINT_3D: f64 = 20e3;
 /// peak with the grid margin (120,000 extra nodes: +17 MB).
 pub const BYTES_PER_NODE: f64 = 150.0;
 
-/// Estimated size of a run, from its configuration alone (before any point is seeded).
+/// Estimated size of a run, from its plan (before any point is seeded).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MemoryNeed {
-    /// Material points (deformable and rigid), from the areas of the geometries.
+    /// Material points (deformable and rigid), counted on the seeding lattice.
     pub points: f64,
     /// Background-grid nodes.
     pub nodes: f64,
@@ -122,57 +122,20 @@ pub struct MemoryNeed {
     pub bytes: f64,
 }
 
-/// The memory a run of `cfg` will need at its peak (an upper estimate: overlapping include regions and
-/// exclude regions are not subtracted, except the CT notch).
-pub fn memory_need(cfg: &RunConfig) -> MemoryNeed {
+/// The memory the run of `plan` will need at its peak: its points as seeding will place them, the nodes
+/// of the grid over the bodies' bounding box (one copy per velocity field) and, with `[extrusion]`, the
+/// plate's layers of points and nodes.
+pub fn memory_need(plan: &Plan) -> Result<MemoryNeed, ScenarioError> {
+    let cfg = plan.config();
     let h = cfg.grid.cell_size;
-    let per_area = (cfg.shape.points_per_cell * cfg.shape.points_per_cell) as f64 / (h * h);
-    let mut area = 0.0;
-    let mut boxes: Vec<([f64; 2], [f64; 2])> = Vec::new();
-    if let Some(ct) = &cfg.ct {
-        let half = 0.5 * ct.notch_width;
-        let notch = match ct.notch_tip {
-            NotchTip::Flat => ct.notch_length * ct.notch_width,
-            NotchTip::Round => {
-                (ct.notch_length - half) * ct.notch_width + 0.5 * std::f64::consts::PI * half * half
-            }
-        };
-        area += ct.width * ct.height - notch;
-        area += 2.0 * (ct.load_zone[1] - ct.load_zone[0]) * ct.plate_thickness;
-        boxes.push(([0.0, 0.0], [ct.width, ct.height]));
-    }
-    let geometries = cfg
-        .body
-        .iter()
-        .map(|b| &b.geometry)
-        .chain(cfg.rigid_body.iter().map(|r| &r.geometry));
-    for g in geometries {
-        area += geometry_area(g);
-        boxes.extend(g.include.iter().map(|r| {
-            let (lo, hi) = r.bounding_box();
-            ([lo.x, lo.y], [hi.x, hi.y])
-        }));
-    }
-    let (lo, hi) = boxes.iter().fold(
-        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
-        |(lo, hi), (l, u)| {
-            (
-                [lo[0].min(l[0]), lo[1].min(l[1])],
-                [hi[0].max(u[0]), hi[1].max(u[1])],
-            )
-        },
-    );
+    let (lo, hi) = plan
+        .extent()
+        .unwrap_or((Vector2::zeros(), Vector2::zeros()));
     let margin = 2.0 * cfg.grid.margin_cells.max(1) as f64 + 1.0;
-    // One copy of the grid per velocity field (bodies with their own field, the CT's two inserts).
-    let inserts = cfg
-        .ct
-        .as_ref()
-        .is_some_and(|ct| ct.load_introduction == LoadIntroduction::Inserts);
-    let fields = 1 + cfg.body.iter().filter(|b| b.own_field).count() + 2 * usize::from(inserts);
-    let nodes = fields as f64
-        * ((hi[0] - lo[0]) / h + margin).max(1.0)
-        * ((hi[1] - lo[1]) / h + margin).max(1.0);
-    let plane_points = area * per_area;
+    let nodes = plan.num_fields() as f64
+        * ((hi.x - lo.x) / h + margin).max(1.0)
+        * ((hi.y - lo.y) / h + margin).max(1.0);
+    let plane_points = plan.points()?;
     // A plate: a layer of points per point spacing through the thickness, the plate's node layers plus
     // the extrusion's margin of 2 cells on both faces.
     let (points, nodes, per_point) = match &cfg.extrusion {
@@ -183,32 +146,11 @@ pub fn memory_need(cfg: &RunConfig) -> MemoryNeed {
         ),
         None => (plane_points, nodes, BYTES_PER_POINT),
     };
-    MemoryNeed {
+    Ok(MemoryNeed {
         points,
         nodes,
         bytes: BASE_BYTES + per_point * points + BYTES_PER_NODE * nodes,
-    }
-}
-
-/// Area of the include regions (mm^2).
-fn geometry_area(g: &Geometry) -> f64 {
-    g.include
-        .iter()
-        .map(|r| match r {
-            Region::Rect { min, max } => (max[0] - min[0]) * (max[1] - min[1]),
-            Region::Polygon { vertices } => {
-                let n = vertices.len();
-                let twice: f64 = (0..n)
-                    .map(|k| {
-                        let (a, b) = (vertices[k], vertices[(k + 1) % n]);
-                        a[0] * b[1] - b[0] * a[1]
-                    })
-                    .sum();
-                0.5 * twice.abs()
-            }
-            Region::Disk { radius, .. } => std::f64::consts::PI * radius * radius,
-        })
-        .sum()
+    })
 }
 
 /// The memory a new process can use: the smaller of `MemAvailable` in /proc/meminfo and the free part
@@ -262,6 +204,7 @@ pub fn human_bytes(b: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::RunConfig;
 
     #[test]
     fn common_option_values_are_checked_with_prefixes() {
@@ -307,11 +250,14 @@ mod tests {
             )
             .expect("config")
         };
-        let full = memory_need(&ct(1.0));
+        let need = |cfg: &RunConfig| {
+            memory_need(&crate::scenario::plan(cfg).expect("plan")).expect("need")
+        };
+        let full = need(&ct(1.0));
         // 155,600 points of concrete and 480 of the two rigid plates.
         assert_eq!(full.points, 156_080.0, "{full:?}");
         assert!((0.85e9..1.0e9).contains(&full.bytes), "{full:?}");
-        let tiny_cells = memory_need(&ct(0.05));
+        let tiny_cells = need(&ct(0.05));
         assert!(tiny_cells.bytes > 3e11, "{tiny_cells:?}");
         assert_eq!(human_bytes(tiny_cells.bytes).split(' ').nth(1), Some("GB"));
         // The 3D demo (8 mm plate of 4 mm cells: 4 layers of points) peaked at 758-831 MB; the paper's
@@ -322,10 +268,10 @@ mod tests {
                 thickness,
                 section_z: None,
             });
-            memory_need(&cfg)
+            need(&cfg)
         };
         let demo = plate(4.0, 8.0);
-        assert_eq!(demo.points, 4.0 * memory_need(&ct(4.0)).points, "{demo:?}");
+        assert_eq!(demo.points, 4.0 * need(&ct(4.0)).points, "{demo:?}");
         assert!((0.7e9..1.0e9).contains(&demo.bytes), "{demo:?}");
         assert!(plate(1.0, 50.0).bytes > 2e11);
     }

@@ -1,6 +1,8 @@
-//! Builds a run ([`Setup`]) from a checked configuration: seeds the bodies (with the materials the checks
-//! built), the rigid bodies and the background grid, and the compact tension (CT) specimen of the source
-//! paper; with `[extrusion]` the plane set-up is extruded to a plate ([`build_run`]).
+//! Builds a run ([`Setup`]) from a checked configuration in two stages: the [`Plan`] (the bodies with
+//! their regions, materials and velocity fields, the compact tension (CT) specimen of the source paper
+//! and its plates, no points: what preflight's memory estimate reads), then the seeded bodies, rigid
+//! bodies and background grid ([`Plan::build`]); with `[extrusion]` the plane set-up is extruded to a
+//! plate ([`build_run`]).
 
 use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
 use crate::config::{
@@ -123,11 +125,12 @@ pub enum RunSetup {
     Plate(Setup<3>),
 }
 
-/// The run described by `cfg` in the dimensions it runs in: [`build`], then with `[extrusion]` the
+/// The run of `plan` in the dimensions it runs in: [`Plan::build`], then with `[extrusion]` the
 /// extrusion to the plate.
-pub fn build_run(cfg: &RunConfig) -> Result<RunSetup, ScenarioError> {
-    let plane = build(cfg)?;
-    match &cfg.extrusion {
+pub fn build_run(plan: Plan<'_>) -> Result<RunSetup, ScenarioError> {
+    let extrusion = plan.config().extrusion.clone();
+    let plane = plan.build()?;
+    match &extrusion {
         None => Ok(RunSetup::Plane(plane)),
         Some(e) => plane
             .extrude(e.thickness)
@@ -136,15 +139,33 @@ pub fn build_run(cfg: &RunConfig) -> Result<RunSetup, ScenarioError> {
     }
 }
 
-/// The plane set-up described by `cfg` (options prefix: none, so plain `-snes_*` options apply).
+/// The plane set-up described by `cfg` (options prefix: none, so plain `-snes_*` options apply):
+/// [`plan`], then [`Plan::build`].
 pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
+    plan(cfg)?.build()
+}
+
+/// A configuration's run before seeding: its deformable bodies (regions, density, the material the
+/// checks built, initial velocity, velocity field) and its rigid bodies (the configuration's, then the
+/// CT's plates), without points. Preflight's memory estimate and [`Plan::build`] read the same plan.
+pub struct Plan<'c> {
+    /// The checked configuration.
+    cfg: &'c RunConfig,
+    /// The deformable bodies in tag order (the CT's concrete and inserts first).
+    bodies: Vec<BodyDef>,
+    /// The rigid bodies: the configuration's, then the CT's two plates.
+    rigid: Vec<RigidBodySection>,
+}
+
+/// The plan of the run described by `cfg`.
+pub fn plan(cfg: &RunConfig) -> Result<Plan<'_>, ScenarioError> {
     let mut bodies = Vec::new();
-    let mut rigid_defs: Vec<RigidBodySection> = cfg.rigid_body.clone();
+    let mut rigid: Vec<RigidBodySection> = cfg.rigid_body.clone();
     let built = cfg.materials();
     if let Some(ct) = &cfg.ct {
         let (ct_bodies, plates) = ct_specimen(ct, built)?;
         bodies.extend(ct_bodies);
-        rigid_defs.extend(plates);
+        rigid.extend(plates);
     }
     for (i, b) in cfg.body.iter().enumerate() {
         bodies.push(BodyDef {
@@ -156,46 +177,101 @@ pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
             own_field: b.own_field,
         });
     }
-    let (fields, field_of) = velocity_fields(&bodies);
-    let seeder = Seeder::new(cfg);
-    let (mut particles, materials) = seeder.bodies(bodies)?;
-    let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid_defs, &field_of)?;
-    let frame = Frame::from_degrees(cfg.grid.rotation);
-    if !frame.is_identity() {
-        turn_points(&frame, &mut particles);
-        rigid_points.iter_mut().for_each(|p| turn_points(&frame, p));
-        rigid.iter_mut().for_each(|r| turn_rigid_body(&frame, r));
+    Ok(Plan { cfg, bodies, rigid })
+}
+
+impl Plan<'_> {
+    /// The configuration the plan was made from.
+    pub fn config(&self) -> &RunConfig {
+        self.cfg
     }
-    let grid = covering_grid(cfg, &particles, &rigid_points)?;
-    let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
-    let t = &cfg.time;
-    Ok(Setup {
-        params: Parameters {
-            grid,
-            materials,
-            fields,
-            shape: cfg.shape.kind,
-            time: TimeIntegration {
-                dt: t.dt,
-                dt_min: t.dt_min.unwrap_or(t.dt / 64.0),
-                beta: t.beta,
-                gamma: t.gamma,
-                quasi_static: t.quasi_static,
-                initial_acceleration: t.initial_acceleration,
+
+    /// The material points of the plane set-up, deformable and rigid, as seeding will place them
+    /// (counted, none stored; [`Seeding::count`]: an estimate for a lattice too large to count).
+    pub fn points(&self) -> Result<f64, ScenarioError> {
+        let seeder = Seeder::new(self.cfg);
+        let gauss = self.cfg.shape.method == Method::Fem;
+        let bodies = self
+            .bodies
+            .iter()
+            .map(|b| ("body", &b.name, &b.geometry, b.density));
+        let rigid = self
+            .rigid
+            .iter()
+            .map(|r| ("rigid body", &r.name, &r.geometry, 1.0));
+        bodies
+            .chain(rigid)
+            .try_fold(0.0, |n, (kind, name, geometry, density)| {
+                let seeding = seeder.seeding(density, 0);
+                seeding
+                    .count(geometry, gauss)
+                    .map(|c| n + c)
+                    .map_err(|source| ScenarioError::Seeding {
+                        what: format!("{kind} `{name}`"),
+                        source,
+                    })
+            })
+    }
+
+    /// The bounding box of the include regions of every body and rigid body (mm).
+    pub fn extent(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        let bodies = self.bodies.iter().map(|b| &b.geometry);
+        bodies
+            .chain(self.rigid.iter().map(|r| &r.geometry))
+            .filter_map(Geometry::bounding_box)
+            .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
+    }
+
+    /// The velocity fields of the bodies: field 0 and one per body with its own.
+    pub fn num_fields(&self) -> usize {
+        1 + velocity_fields(&self.bodies).1.len()
+    }
+
+    /// The plane set-up: the bodies and rigid bodies seeded, the grid that covers them, the node boxes,
+    /// the loads and the time integration of the configuration.
+    pub fn build(self) -> Result<Setup, ScenarioError> {
+        let Plan { cfg, bodies, rigid } = self;
+        let (fields, field_of) = velocity_fields(&bodies);
+        let seeder = Seeder::new(cfg);
+        let (mut particles, materials) = seeder.bodies(bodies)?;
+        let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid, &field_of)?;
+        let frame = Frame::from_degrees(cfg.grid.rotation);
+        if !frame.is_identity() {
+            turn_points(&frame, &mut particles);
+            rigid_points.iter_mut().for_each(|p| turn_points(&frame, p));
+            rigid.iter_mut().for_each(|r| turn_rigid_body(&frame, r));
+        }
+        let grid = covering_grid(cfg, &particles, &rigid_points)?;
+        let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
+        let t = &cfg.time;
+        Ok(Setup {
+            params: Parameters {
+                grid,
+                materials,
+                fields,
+                shape: cfg.shape.kind,
+                time: TimeIntegration {
+                    dt: t.dt,
+                    dt_min: t.dt_min.unwrap_or(t.dt / 64.0),
+                    beta: t.beta,
+                    gamma: t.gamma,
+                    quasi_static: t.quasi_static,
+                    initial_acceleration: t.initial_acceleration,
+                },
+                body_force: frame.to_grid(Vector2::new(cfg.body_force[0], cfg.body_force[1])),
+                body_force_ramp: cfg.body_force_ramp,
+                boxes,
+                rigid,
+                loads: cfg.load.iter().map(nodal_load).collect(),
+                method: cfg.shape.method,
+                options_prefix: None,
+                mass_tolerance: cfg.grid.mass_tolerance,
+                fallback_prefix: None,
             },
-            body_force: frame.to_grid(Vector2::new(cfg.body_force[0], cfg.body_force[1])),
-            body_force_ramp: cfg.body_force_ramp,
-            boxes,
-            rigid,
-            loads: cfg.load.iter().map(nodal_load).collect(),
-            method: cfg.shape.method,
-            options_prefix: None,
-            mass_tolerance: cfg.grid.mass_tolerance,
-            fallback_prefix: None,
-        },
-        particles,
-        rigid_points,
-    })
+            particles,
+            rigid_points,
+        })
+    }
 }
 
 /// The points of a set-up turned by `frame` inside the grid: positions, velocities, accelerations, CPDI
@@ -420,6 +496,16 @@ impl Seeder {
         }
     }
 
+    /// The seeding of a body of `density` (t/mm^3) tagged `body`.
+    fn seeding(&self, density: f64, body: u16) -> Seeding {
+        Seeding {
+            h: self.h,
+            points_per_cell: self.ppc,
+            density,
+            body,
+        }
+    }
+
     /// The points of `geometry` (`what` names it in errors) with `density`, tagged `body`.
     fn points(
         &self,
@@ -428,15 +514,11 @@ impl Seeder {
         density: f64,
         body: u16,
     ) -> Result<Particles, ScenarioError> {
-        let seeding = Seeding {
-            h: self.h,
-            points_per_cell: self.ppc,
-            density,
-            body,
-        };
-        let p = (self.seed)(geometry, &seeding).map_err(|source| ScenarioError::Seeding {
-            what: what.to_owned(),
-            source,
+        let p = (self.seed)(geometry, &self.seeding(density, body)).map_err(|source| {
+            ScenarioError::Seeding {
+                what: what.to_owned(),
+                source,
+            }
         })?;
         if p.is_empty() {
             return Err(ScenarioError::NoMaterial {

@@ -142,11 +142,11 @@ pub fn classify<const D: usize>(setup: &Setup<D>) -> StepClass {
     }
 }
 
-/// The default options of the main solver for a class; `gradient` tells whether the model solves for
-/// eta_bar too, `dimension` is 2 or 3.
-pub fn main_options(class: StepClass, gradient: bool, dimension: usize) -> String {
+/// The default options of the main solver for a class of steps in `D` dimensions (2 or 3: a plate);
+/// `gradient` tells whether the model solves for eta_bar too.
+pub fn main_options<const D: usize>(class: StepClass, gradient: bool) -> String {
     let solver = match class {
-        StepClass::InertiaDominated { .. } if dimension == 3 => INERTIA_3D,
+        StepClass::InertiaDominated { .. } if D == 3 => INERTIA_3D,
         StepClass::InertiaDominated { .. } => INERTIA,
         StepClass::StiffnessDominated { .. } if gradient => STIFFNESS_FIELD_SPLIT,
         StepClass::StiffnessDominated { .. } => STIFFNESS_AMG,
@@ -166,11 +166,10 @@ pub fn apply<const D: usize>(
     session: &SessionGuard,
     setup: &mut Setup<D>,
 ) -> Result<(StepClass, Vec<String>), petsc::PetscError> {
-    let dimension = D;
     setup.params.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
     let gradient = setup.params.materials.iter().any(|m| m.is_nonlocal());
-    let options = main_options(class, gradient, dimension);
+    let options = main_options::<D>(class, gradient);
     let mut applied: Vec<String> = petsc::apply_default_options(session, &options)?
         .into_iter()
         .chain(petsc::apply_default_options(session, FALLBACK)?)
@@ -193,21 +192,18 @@ pub fn apply<const D: usize>(
         Some(pc) if !applied.iter().any(|o| o == "-pc_type") && Some(&pc) != own_pc.as_ref() => {
             tracing::info!(
                 "solver for {}: replaced by the given -pc_type {pc}",
-                describe(class, gradient, dimension)
+                describe::<D>(class, gradient)
             )
         }
-        _ => tracing::info!(
-            "default solver for {}",
-            describe(class, gradient, dimension)
-        ),
+        _ => tracing::info!("default solver for {}", describe::<D>(class, gradient)),
     }
     Ok((class, applied))
 }
 
-/// A one-line description for the run's log.
-pub fn describe(class: StepClass, gradient: bool, dimension: usize) -> String {
+/// A one-line description for the run's log of the default solver of `class` in `D` dimensions.
+pub fn describe<const D: usize>(class: StepClass, gradient: bool) -> String {
     let solver = match class {
-        StepClass::InertiaDominated { .. } if dimension == 3 => {
+        StepClass::InertiaDominated { .. } if D == 3 => {
             "GMRES + ILU(0) on overlapping subdomains, factored every second Newton iteration"
         }
         StepClass::InertiaDominated { .. } => "GMRES + ILU(0)",
@@ -260,20 +256,20 @@ mod tests {
             class_of("configs/crosscheck-cantilever.toml"),
             StepClass::QuasiStatic
         );
-        assert!(main_options(StepClass::QuasiStatic, true, 2).contains("mumps"));
+        assert!(main_options::<2>(StepClass::QuasiStatic, true).contains("mumps"));
         // A plate: overlapping subdomains and a factorisation kept for two Newton iterations.
         let inertia = StepClass::InertiaDominated { ratio: 1.0 };
-        assert!(main_options(inertia, true, 2).contains("-pc_type bjacobi"));
-        let plate = main_options(inertia, true, 3);
+        assert!(main_options::<2>(inertia, true).contains("-pc_type bjacobi"));
+        let plate = main_options::<3>(inertia, true);
         assert!(
             plate.contains("-pc_type asm -pc_asm_overlap 1")
                 && plate.contains("-snes_lag_preconditioner 2"),
             "{plate}"
         );
-        let amg = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, false, 2);
+        let amg = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, false);
         assert!(amg.contains("-pc_type hypre"), "{amg}");
         // The coupled system: the solver's named splits, displacements by AMG, eta_bar by ILU.
-        let split = main_options(StepClass::StiffnessDominated { ratio: 1e-4 }, true, 2);
+        let split = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, true);
         for o in [
             "-pc_type fieldsplit",
             "-fieldsplit_u_pc_type hypre",

@@ -21,7 +21,7 @@ use crate::model::{Setup, State};
 use crate::petsc::{self, Session, SessionGuard};
 use crate::preflight;
 use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
-use crate::scenario::{self, RunSetup};
+use crate::scenario::{self, Plan, RunSetup};
 use crate::schema::file;
 use crate::solver::{Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
@@ -103,16 +103,24 @@ struct Prepared {
 }
 
 /// `run CONFIG`: checks the input (`own_args` the program's arguments, `petsc_args` PETSc's, starting with
-/// the program name), starts PETSc and runs the simulation in 2D, or in 3D with `[extrusion]`.
+/// the program name) and the memory the run's plan needs, starts PETSc and runs the simulation in 2D, or
+/// in 3D with `[extrusion]`.
 pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Result<()> {
     let path = flags.config.as_path();
     let prepared = prepare(path, &flags, petsc_args)?;
+    let file = path.display().to_string();
+    let plan = scenario::plan(&prepared.cfg).map_err(|e| bad(format!("{file}: {e}")))?;
+    check_memory(
+        &plan,
+        &config::source_label(&file, &prepared.overrides),
+        flags.allow_large,
+    )?;
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
     share_cores(&session);
     let invocation = Invocation {
         own: own_args,
         petsc: petsc_args,
-        file: path.display().to_string(),
+        file: file.clone(),
         quiet: flags.quiet,
         overwrite: flags.overwrite,
     };
@@ -120,7 +128,7 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     petsc::apply_default_options(&session, &prepared.cfg.run.petsc_options)
         .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
     // A plane set-up, or the plate it is extruded to ([extrusion]): the same run in 2D or 3D.
-    match scenario::build_run(&prepared.cfg).map_err(|e| bad(format!("{file}: {e}")))? {
+    match scenario::build_run(plan).map_err(|e| bad(format!("{file}: {e}")))? {
         RunSetup::Plane(setup) => simulate(&session, &invocation, prepared, setup)?,
         RunSetup::Plate(setup) => simulate(&session, &invocation, prepared, setup)?,
     }
@@ -128,8 +136,8 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     Ok(())
 }
 
-/// The checks before PETSc starts: the configuration with its overrides (--steps is run.steps), the
-/// PETSc option values, the output directory or the checkpoint to resume, the memory.
+/// The checks of the input before the run's plan: the configuration with its overrides (--steps is
+/// run.steps), the PETSc option values, the output directory or the checkpoint to resume.
 fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepared> {
     let file = path.display().to_string();
     if flags.steps == Some(0) {
@@ -177,11 +185,6 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         }
         None
     };
-    check_memory(
-        &cfg,
-        &config::source_label(&file, &overrides),
-        flags.allow_large,
-    )?;
     Ok(Prepared {
         cfg,
         overrides,
@@ -195,11 +198,11 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
 
 /// Refuses a run whose estimated memory need exceeds the memory available, unless `allow_large`; `label`
 /// names the configuration.
-fn check_memory(cfg: &RunConfig, label: &str, allow_large: bool) -> Result<()> {
+fn check_memory(plan: &Plan, label: &str, allow_large: bool) -> Result<()> {
     // Every process builds the whole model before it keeps its share of the points, and process 0
     // gathers all points for the output: each process on this node may peak near a serial run's memory
     // (paper-size CT: 731 MB per process on 2 against 649 MB on one).
-    let mut need = preflight::memory_need(cfg);
+    let mut need = preflight::memory_need(plan).map_err(|e| bad(format!("{label}: {e}")))?;
     // Points are numbered with 32 bits: more cannot be seeded, however much memory there is.
     if need.points > u32::MAX as f64 {
         return Err(bad(format!(
