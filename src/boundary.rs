@@ -36,7 +36,7 @@ impl<const D: usize> NodalLoad<D> {
 
     /// Share of the resultant carried by each grid node on the segment: the integral of the node's hat
     /// function along the segment divided by the segment length. Grid nodes only (the shares of nodes
-    /// without unknowns are redistributed by the caller).
+    /// without unknowns are redistributed by the caller). The error says what segment is allowed.
     pub fn shares(&self, grid: &Grid<D>) -> Result<Vec<(usize, f64)>, String> {
         let h = grid.cell_size();
         let o = grid.origin();
@@ -49,11 +49,8 @@ impl<const D: usize> NodalLoad<D> {
         });
         if off_line {
             return Err(format!(
-                "load `{}`: the segment from {:?} to {:?} must lie on a grid line (parallel to an axis, \
-                 the other coordinates multiples of h = {h} mm from the grid origin)",
-                self.name,
-                self.from.as_slice(),
-                self.to.as_slice()
+                "a segment on a grid line (parallel to an axis, the other coordinates multiples of h = \
+                 {h} mm from the grid origin)"
             ));
         }
         let (a, b) = (
@@ -65,10 +62,7 @@ impl<const D: usize> NodalLoad<D> {
         for k in (0..D).filter(|&k| k != along) {
             let line = ((self.from[k] - o[k]) / h).round() as i64;
             if line < 0 || line > count[k] as i64 {
-                return Err(format!(
-                    "load `{}`: the segment lies outside the grid",
-                    self.name
-                ));
+                return Err("a segment inside the grid".into());
             }
             node[k] = line as usize;
         }

@@ -10,11 +10,14 @@
 //! The kinematic core and the step are generic over the space dimension (`D` = 2, plane strain, by
 //! default; `D` = 3 for specimens of finite thickness, e.g. `Setup::extrude`).
 //!
-//! Dependencies point one way:
-//! `cli (main.rs) -> app -> io -> scenario -> solver -> model -> {boundary, assembly, transfer, material,
-//! shape} -> {grid, particles, solids} -> space`,
-//! and only `assembly`, `solver`, `solver_defaults` (and the PETSc smoke problem, `app::smoke`) talk to
-//! [`petsc`], the one module with `unsafe` FFI.
+//! Dependencies point one way, from the application (`main.rs`, [`app`]) through the run's files
+//! ([`checkpoint`], [`rundir`], [`io`]), its construction ([`config`], [`scenario`], [`preflight`],
+//! [`solver_defaults`]) and the step ([`solver`], [`partition`]) to the model ([`model`]) and the physics
+//! ([`assembly`], [`transfer`], [`boundary`], [`contact`], [`material`], [`shape`]) on the geometry and
+//! the points; `docs/architecture.md` draws the layers. [`petsc`] holds the bindings and their safe
+//! wrappers: `unsafe` code lives only there and in the microplane model's SIMD kernel; [`assembly`]
+//! (block layouts), [`partition`] (star forests), [`solver`], [`solver_defaults`] and [`app`] (the run,
+//! the PETSc smoke problem) use its safe types.
 
 #![warn(missing_docs)]
 #![deny(unsafe_op_in_unsafe_fn)]
@@ -29,6 +32,7 @@ pub mod crack;
 pub mod dofs;
 pub mod geometry;
 pub mod grid;
+pub mod input;
 pub mod io;
 pub mod material;
 pub mod model;

@@ -13,6 +13,7 @@ use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
 use crate::contact::NodeStatus;
 use crate::dofs::FieldLayout;
 use crate::grid::Grid;
+use crate::input::BadValue;
 use crate::material::{Constitutive, Material};
 use crate::particles::Particles;
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
@@ -264,9 +265,9 @@ pub enum ModelError {
     #[error("the model has no material points")]
     Empty,
     /// The set-up is inconsistent (a device in contact without prescribed motion, a load off the grid
-    /// lines, FEM with a non-linear interpolator, ...); the message says what and what is allowed.
-    #[error("{0}")]
-    Invalid(String),
+    /// lines, FEM with a non-linear interpolator, ...): the key, the value and what is allowed.
+    #[error(transparent)]
+    Invalid(#[from] BadValue),
     /// The FEM mode's reference shape functions could not be evaluated (a point outside the grid).
     #[error(transparent)]
     Shape(#[from] ShapeError),
@@ -285,9 +286,18 @@ impl<const D: usize> Model<D> {
         let load_shares = params
             .loads
             .iter()
-            .map(|l| l.shares(&params.grid))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(ModelError::Invalid)?;
+            .enumerate()
+            .map(|(i, l)| {
+                l.shares(&params.grid).map_err(|allowed| {
+                    let (from, to) = (l.from.as_slice(), l.to.as_slice());
+                    BadValue::new(
+                        format!("load[{i}]"),
+                        format!("`{}` from {from:?} to {to:?}", l.name),
+                        allowed,
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let fem = setup.fem_reference()?;
         let Setup {
             params,
@@ -327,38 +337,47 @@ impl<const D: usize> Setup<D> {
         }
         let (rigid, materials) = (&self.params.rigid, &self.params.materials);
         if self.rigid_points.len() != rigid.len() {
-            return Err(ModelError::Invalid(format!(
-                "{} rigid bodies but {} sets of rigid-body points",
-                rigid.len(),
-                self.rigid_points.len()
-            )));
+            return Err(BadValue::new(
+                "rigid_points",
+                format!("{} sets of points", self.rigid_points.len()),
+                format!("one set of points per rigid body ({})", rigid.len()),
+            )
+            .into());
         }
         let fields = match self.params.fields.is_empty() {
             true => vec![0; materials.len()],
             false => self.params.fields.clone(),
         };
         if fields.len() != materials.len() {
-            return Err(ModelError::Invalid(format!(
-                "{} velocity fields for {} materials (one per body tag)",
-                fields.len(),
-                materials.len()
-            )));
+            return Err(BadValue::new(
+                "fields",
+                format!("{} velocity fields", fields.len()),
+                format!("one per material, i.e. per body tag ({})", materials.len()),
+            )
+            .into());
         }
         let nfields = fields.iter().map(|&f| f as usize + 1).max().unwrap_or(1);
-        if nfields > 1
-            && (self.params.shape == ShapeKind::Cpdi2 || self.params.method == Method::Fem)
-        {
-            return Err(ModelError::Invalid(
-                "contact between bodies (a body with its own velocity field) needs MPM with the linear, \
-                 GIMP, CPDI1 or B-spline interpolator (CPDI2 moves its corners on one field)"
-                    .into(),
-            ));
+        let (method, shape) = (self.params.method, self.params.shape);
+        if nfields > 1 && (shape == ShapeKind::Cpdi2 || method == Method::Fem) {
+            let (key, value) = match method {
+                Method::Fem => ("shape.method", "\"fem\"".to_owned()),
+                Method::Mpm => ("shape.kind", format!("\"{}\"", shape.name())),
+            };
+            return Err(BadValue::new(
+                key,
+                value,
+                "MPM with the linear, GIMP, CPDI1 or B-spline interpolator where a body has its own \
+                 velocity field (contact between bodies; CPDI2 moves its corners on one field)",
+            )
+            .into());
         }
         if let Some(rb) = rigid.iter().find(|r| r.field as usize >= nfields) {
-            return Err(ModelError::Invalid(format!(
-                "rigid body `{}` acts on velocity field {}, but the bodies use {nfields}",
-                rb.name, rb.field
-            )));
+            return Err(BadValue::new(
+                format!("rigid_body.{}.acts_on", rb.name),
+                format!("velocity field {}", rb.field),
+                format!("a velocity field of the bodies (they use {nfields})"),
+            )
+            .into());
         }
         Ok(fields)
     }
@@ -371,11 +390,18 @@ impl<const D: usize> Setup<D> {
                 let prescribed = rb.motion.iter().all(|m| matches!(m, Motion::Velocity(_)));
                 let unit = (c.normal.norm() - 1.0).abs() < 1e-12;
                 if !(prescribed && unit && c.friction.is_finite() && c.friction >= 0.0) {
-                    return Err(ModelError::Invalid(format!(
-                        "rigid body `{}`: a device in contact needs both motion components prescribed \
-                         (\"fixed\" or a velocity), a unit normal and a friction coefficient >= 0",
-                        rb.name
-                    )));
+                    return Err(BadValue::new(
+                        format!("rigid_body.{}.contact", rb.name),
+                        format!(
+                            "normal {:?}, friction {}, motion {:?}",
+                            c.normal.as_slice(),
+                            c.friction,
+                            rb.motion
+                        ),
+                        "a device in contact needs both motion components prescribed (\"fixed\" or a \
+                         velocity), a unit normal and a friction coefficient >= 0",
+                    )
+                    .into());
                 }
             }
         }
@@ -389,10 +415,12 @@ impl<const D: usize> Setup<D> {
             return Ok(None);
         }
         if self.params.shape != ShapeKind::Linear {
-            return Err(ModelError::Invalid(format!(
-                "the FEM mode needs the linear (bilinear) interpolator, not `{}`",
-                self.params.shape.name()
-            )));
+            return Err(BadValue::new(
+                "shape.kind",
+                format!("\"{}\"", self.params.shape.name()),
+                "\"linear\" (bilinear) in the FEM mode (shape.method = \"fem\")",
+            )
+            .into());
         }
         let table = |points: &Particles<D>| {
             let mut t = ShapeTable::new();
@@ -537,6 +565,49 @@ impl<const D: usize> State<D> {
 /// Nodal velocity (mm/s) and acceleration (mm/s^2), one per grid node.
 pub type NodalState<const D: usize = 2> = (Vec<SVector<f64, D>>, Vec<SVector<f64, D>>);
 
+/// The cell layers of the plate of `thickness` (mm) that `plane` is extruded to, after checking what an
+/// extrusion needs: a thickness that is a positive multiple of the cell size, MPM, no nodal loads and,
+/// quasi-statically, a glued rigid body that holds the plate in z.
+fn extrusion_layers(plane: &Parameters<2>, thickness: f64) -> Result<f64, BadValue> {
+    let h = plane.grid.cell_size();
+    let layers = (thickness / h).round();
+    if !(thickness.is_finite() && thickness > 0.0 && layers >= 1.0)
+        || (layers * h - thickness).abs() > 1e-9 * thickness
+    {
+        return Err(BadValue::new(
+            "extrusion.thickness",
+            thickness.to_string(),
+            format!("a positive multiple of the cell size h = {h} mm"),
+        ));
+    }
+    if plane.method == Method::Fem {
+        return Err(BadValue::new(
+            "shape.method",
+            "\"fem\"",
+            "\"mpm\" with [extrusion] (the FEM mode is plane only)",
+        ));
+    }
+    if !plane.loads.is_empty() {
+        return Err(BadValue::new(
+            "load",
+            format!("{} [[load]]", plane.loads.len()),
+            "none with [extrusion] (nodal loads along grid lines are plane; load a plate with boxes \
+             or rigid bodies)",
+        ));
+    }
+    // The faces are free and devices in contact push in the plane: only a glued rigid body holds the
+    // plate in z. Inertia does that in a dynamic run; a quasi-static one would be singular.
+    if plane.time.quasi_static && plane.rigid.iter().all(|r| r.contact.is_some()) {
+        return Err(BadValue::new(
+            "time.quasi_static",
+            "true",
+            "false with [extrusion] unless a rigid body is glued (no contact): a quasi-static plate \
+             needs its motion in z held",
+        ));
+    }
+    Ok(layers)
+}
+
 /// Cells of empty grid beyond the plate's faces in z of an extruded set-up (the B-spline support reaches
 /// 1.5 cells beyond a point).
 const EXTRUSION_MARGIN: usize = 2;
@@ -551,39 +622,14 @@ impl Setup<2> {
     /// contact pushes in the x-y plane, its pin along z). The thickness must be a multiple of the cell
     /// size; FEM mode, nodal loads along grid lines (2D segments) and a quasi-static plate that nothing
     /// holds in z (no glued rigid body) are refused.
-    pub fn extrude(self, thickness: f64) -> Result<Setup<3>, String> {
+    pub fn extrude(self, thickness: f64) -> Result<Setup<3>, BadValue> {
         let Setup {
             params: plane,
             particles,
             rigid_points,
         } = self;
         let h = plane.grid.cell_size();
-        let layers = (thickness / h).round();
-        if !(thickness.is_finite() && thickness > 0.0 && layers >= 1.0)
-            || (layers * h - thickness).abs() > 1e-9 * thickness
-        {
-            return Err(format!(
-                "thickness {thickness} mm: a positive multiple of the cell size h = {h} mm"
-            ));
-        }
-        if plane.method == Method::Fem {
-            return Err("the FEM mode is plane only; extrude an MPM set-up".into());
-        }
-        if !plane.loads.is_empty() {
-            return Err(
-                "nodal loads along grid lines are plane; load a plate with boxes or rigid bodies"
-                    .into(),
-            );
-        }
-        // The faces are free and devices in contact push in the plane: only a glued rigid body holds the
-        // plate in z. Inertia does that in a dynamic run; a quasi-static one would be singular.
-        if plane.time.quasi_static && plane.rigid.iter().all(|r| r.contact.is_some()) {
-            return Err(
-                "a quasi-static plate needs its motion in z held: glue a loading plate (no contact) or \
-                 run dynamically"
-                    .into(),
-            );
-        }
+        let layers = extrusion_layers(&plane, thickness)?;
         let g = &plane.grid;
         let origin = g.origin();
         let margin = EXTRUSION_MARGIN as f64 * h;
@@ -592,7 +638,13 @@ impl Setup<2> {
             h,
             [g.nx(), g.ny(), layers as usize + 2 * EXTRUSION_MARGIN],
         )
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| {
+            BadValue::new(
+                "extrusion.thickness",
+                thickness.to_string(),
+                format!("a plate whose grid can be built ({e})"),
+            )
+        })?;
         let rigid_points = rigid_points
             .iter()
             .map(|p| extrude_points(p, thickness))
@@ -647,7 +699,7 @@ impl Setup<2> {
 
 /// The points of `plane` repeated through `0 <= z <= thickness` (mm) at the spacing `2 r^0_xx` of each
 /// point's undeformed domain, at rest and undeformed as [`Particles::push`] makes them.
-fn extrude_points(plane: &Particles, thickness: f64) -> Result<Particles<3>, String> {
+fn extrude_points(plane: &Particles, thickness: f64) -> Result<Particles<3>, BadValue> {
     let mut out = Particles::<3>::new();
     for p in 0..plane.len() {
         let (r0, x, v) = (plane.r0[p], plane.x[p], plane.v[p]);
@@ -656,8 +708,10 @@ fn extrude_points(plane: &Particles, thickness: f64) -> Result<Particles<3>, Str
         if !(spacing > 0.0 && count >= 1.0)
             || (count * spacing - thickness).abs() > 1e-9 * thickness
         {
-            return Err(format!(
-                "a point of spacing {spacing} mm does not tile the thickness {thickness} mm"
+            return Err(BadValue::new(
+                "extrusion.thickness",
+                thickness.to_string(),
+                format!("a multiple of the spacing {spacing} mm of every point"),
             ));
         }
         let r = Matrix3::new(

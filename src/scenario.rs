@@ -6,12 +6,13 @@
 
 use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
 use crate::config::{
-    ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction, LoadSection,
-    Materials, MotionSpec, NotchTip, RigidBodySection, RunConfig,
+    ConfigError, ConstraintSection, ContactSection, CtSection, Keyword, LoadIntroduction,
+    LoadSection, Materials, MotionSpec, NotchTip, RigidBodySection, RunConfig,
 };
 use crate::contact::Contact;
 use crate::geometry::{Geometry, Region, Seeding};
 use crate::grid::{Grid, GridError};
+use crate::input::BadValue;
 use crate::material::Material;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles};
@@ -30,18 +31,10 @@ pub enum ScenarioError {
         /// Cause.
         source: ParticleError,
     },
-    /// A body's geometry holds no grid cell centre: no material point.
-    #[error(
-        "{what}: the geometry contains no material point at cell size {h} mm with {ppc}x{ppc} points per cell"
-    )]
-    NoMaterial {
-        /// Which body.
-        what: String,
-        /// Cell size (mm).
-        h: f64,
-        /// Points per cell and direction.
-        ppc: usize,
-    },
+    /// A value of the configuration that cannot be built: a body's geometry that holds no material
+    /// point, a constraint box that holds no grid node, a plate that cannot be extruded.
+    #[error(transparent)]
+    Input(#[from] BadValue),
     /// A body whose material the configuration's checks did not build (a configuration changed after
     /// it was read).
     #[error("{what}: no material was built for it (a configuration changed after it was checked)")]
@@ -49,30 +42,23 @@ pub enum ScenarioError {
         /// Which material (`ct.material`, `body[0]`, ...).
         what: String,
     },
-    /// The plane set-up cannot be extruded to the plate of `[extrusion]`.
-    #[error("[extrusion]: {0}")]
-    Extrusion(String),
     /// Grid construction failed.
     #[error(transparent)]
     Grid(#[from] GridError),
-    /// A constraint box contains no grid node, so it would constrain nothing.
-    #[error(
-        "constraint `{name}`: the box {min:?}..{max:?} mm holds no grid node (the grid spans {lo:?}..{hi:?} mm with nodes every {h} mm)"
-    )]
-    EmptyBox {
-        /// Constraint name.
-        name: String,
-        /// Box corners (mm).
-        min: [f64; 2],
-        /// Box corners (mm).
-        max: [f64; 2],
-        /// Grid extent (mm).
-        lo: [f64; 2],
-        /// Grid extent (mm).
-        hi: [f64; 2],
-        /// Cell size (mm).
-        h: f64,
-    },
+}
+
+impl ScenarioError {
+    /// This error as bad input in the configuration `file` (with its overrides): a refused value with
+    /// its key, anything else as a failed build.
+    pub fn in_file(self, file: &str) -> ConfigError {
+        match self {
+            ScenarioError::Input(bad) => ConfigError::in_file(file, bad),
+            e => ConfigError::Build {
+                file: file.to_owned(),
+                message: e.to_string(),
+            },
+        }
+    }
 }
 
 /// Whether the box `[min, max]` (mm, with the solver's 1e-9 mm tolerance) contains a node of `grid`.
@@ -108,6 +94,8 @@ fn notch(ct: &CtSection) -> Vec<Region> {
 
 /// A deformable body before seeding.
 struct BodyDef {
+    /// The configuration key its geometry comes from (`body[1].geometry`, `ct`), for errors.
+    key: String,
     name: String,
     geometry: Geometry,
     density: f64,
@@ -135,7 +123,7 @@ pub fn build_run(plan: Plan<'_>) -> Result<RunSetup, ScenarioError> {
         Some(e) => plane
             .extrude(e.thickness)
             .map(RunSetup::Plate)
-            .map_err(ScenarioError::Extrusion),
+            .map_err(ScenarioError::Input),
     }
 }
 
@@ -155,6 +143,8 @@ pub struct Plan<'c> {
     bodies: Vec<BodyDef>,
     /// The rigid bodies: the configuration's, then the CT's two plates.
     rigid: Vec<RigidBodySection>,
+    /// The configuration key of each rigid body's geometry, for errors.
+    rigid_keys: Vec<String>,
 }
 
 /// The plan of the run described by `cfg`.
@@ -169,6 +159,7 @@ pub fn plan(cfg: &RunConfig) -> Result<Plan<'_>, ScenarioError> {
     }
     for (i, b) in cfg.body.iter().enumerate() {
         bodies.push(BodyDef {
+            key: format!("body[{i}].geometry"),
             name: b.name.clone(),
             geometry: b.geometry.clone(),
             density: b.density,
@@ -177,7 +168,18 @@ pub fn plan(cfg: &RunConfig) -> Result<Plan<'_>, ScenarioError> {
             own_field: b.own_field,
         });
     }
-    Ok(Plan { cfg, bodies, rigid })
+    let rigid_keys = (0..rigid.len())
+        .map(|i| match i < cfg.rigid_body.len() {
+            true => format!("rigid_body[{i}].geometry"),
+            false => "ct.plate_thickness".to_owned(),
+        })
+        .collect();
+    Ok(Plan {
+        cfg,
+        bodies,
+        rigid,
+        rigid_keys,
+    })
 }
 
 impl Plan<'_> {
@@ -194,20 +196,18 @@ impl Plan<'_> {
         let bodies = self
             .bodies
             .iter()
-            .map(|b| ("body", &b.name, &b.geometry, b.density));
-        let rigid = self
-            .rigid
-            .iter()
-            .map(|r| ("rigid body", &r.name, &r.geometry, 1.0));
+            .map(|b| (&b.key, &b.name, &b.geometry, b.density));
+        let rigid =
+            (self.rigid.iter().zip(&self.rigid_keys)).map(|(r, k)| (k, &r.name, &r.geometry, 1.0));
         bodies
             .chain(rigid)
-            .try_fold(0.0, |n, (kind, name, geometry, density)| {
+            .try_fold(0.0, |n, (key, name, geometry, density)| {
                 let seeding = seeder.seeding(density, 0);
                 seeding
                     .count(geometry, gauss)
                     .map(|c| n + c)
                     .map_err(|source| ScenarioError::Seeding {
-                        what: format!("{kind} `{name}`"),
+                        what: format!("{key} (`{name}`)"),
                         source,
                     })
             })
@@ -230,11 +230,16 @@ impl Plan<'_> {
     /// The plane set-up: the bodies and rigid bodies seeded, the grid that covers them, the node boxes,
     /// the loads and the time integration of the configuration.
     pub fn build(self) -> Result<Setup, ScenarioError> {
-        let Plan { cfg, bodies, rigid } = self;
+        let Plan {
+            cfg,
+            bodies,
+            rigid,
+            rigid_keys,
+        } = self;
         let (fields, field_of) = velocity_fields(&bodies);
         let seeder = Seeder::new(cfg);
         let (mut particles, materials) = seeder.bodies(bodies)?;
-        let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid, &field_of)?;
+        let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid, &rigid_keys, &field_of)?;
         let frame = Frame::from_degrees(cfg.grid.rotation);
         if !frame.is_identity() {
             turn_points(&frame, &mut particles);
@@ -316,6 +321,7 @@ fn ct_specimen(
     built: &Materials,
 ) -> Result<(Vec<BodyDef>, [RigidBodySection; 2]), ScenarioError> {
     let mut bodies = vec![BodyDef {
+        key: "ct".into(),
         name: "concrete".into(),
         geometry: Geometry {
             include: vec![Region::Rect {
@@ -358,6 +364,7 @@ fn ct_inserts(
             ("support_insert", [sa, support_face], [sb, upper]),
         ] {
             inserts.push(BodyDef {
+                key: "ct.insert_thickness".into(),
                 name: name.into(),
                 geometry: Geometry {
                     include: vec![Region::Rect { min, max }],
@@ -506,26 +513,29 @@ impl Seeder {
         }
     }
 
-    /// The points of `geometry` (`what` names it in errors) with `density`, tagged `body`.
+    /// The points of `geometry` with `density`, tagged `body`; `key` and `name` name the body in errors.
     fn points(
         &self,
-        what: &str,
+        (key, name): (&str, &str),
         geometry: &Geometry,
         density: f64,
         body: u16,
     ) -> Result<Particles, ScenarioError> {
-        let p = (self.seed)(geometry, &self.seeding(density, body)).map_err(|source| {
-            ScenarioError::Seeding {
-                what: what.to_owned(),
-                source,
-            }
-        })?;
+        let what = format!("{key} (`{name}`)");
+        let p = (self.seed)(geometry, &self.seeding(density, body))
+            .map_err(|source| ScenarioError::Seeding { what, source })?;
         if p.is_empty() {
-            return Err(ScenarioError::NoMaterial {
-                what: what.to_owned(),
-                h: self.h,
-                ppc: self.ppc,
-            });
+            return Err(BadValue::new(
+                key,
+                format!("`{name}`"),
+                format!(
+                    "a geometry that holds a material point at cell size {} mm with {ppc}x{ppc} points \
+                     per cell (this one holds none)",
+                    self.h,
+                    ppc = self.ppc
+                ),
+            )
+            .into());
         }
         Ok(p)
     }
@@ -535,8 +545,9 @@ impl Seeder {
         let mut particles = Particles::new();
         let mut materials = Vec::new();
         for (tag, body) in bodies.into_iter().enumerate() {
-            let what = format!("body `{}`", body.name);
-            let mut p = self.points(&what, &body.geometry, body.density, tag as u16)?;
+            let id = (body.key.as_str(), body.name.as_str());
+            let mut p = self.points(id, &body.geometry, body.density, tag as u16)?;
+            let what = format!("{} (`{}`)", body.key, body.name);
             p.v.iter_mut().for_each(|v| *v = body.velocity);
             particles
                 .append(&p)
@@ -546,17 +557,18 @@ impl Seeder {
         Ok((particles, materials))
     }
 
-    /// The rigid bodies of `defs` and their points; `field_of` gives the velocity field of the bodies they
+    /// The rigid bodies of `defs` and their points (`keys`: the configuration key of each one's geometry);
+    /// `field_of` gives the velocity field of the bodies they
     /// may act on.
     fn rigid_bodies(
         &self,
         defs: &[RigidBodySection],
+        keys: &[String],
         field_of: &HashMap<String, u16>,
     ) -> Result<(Vec<RigidBody>, Vec<Particles>), ScenarioError> {
         let (mut rigid, mut rigid_points) = (Vec::new(), Vec::new());
-        for r in defs {
-            let what = format!("rigid body `{}`", r.name);
-            rigid_points.push(self.points(&what, &r.geometry, 1.0, 0)?);
+        for (r, key) in defs.iter().zip(keys) {
+            rigid_points.push(self.points((key, &r.name), &r.geometry, 1.0, 0)?);
             rigid.push(RigidBody {
                 name: r.name.clone(),
                 motion: [r.x.motion(), r.y.motion()],
@@ -622,19 +634,23 @@ fn node_boxes(
     grid: &Grid,
     h: f64,
 ) -> Result<Vec<NodeBox>, ScenarioError> {
-    if let Some(c) = constraints
+    if let Some((i, c)) = constraints
         .iter()
-        .find(|c| !box_holds_a_node(grid, c.min, c.max))
+        .enumerate()
+        .find(|(_, c)| !box_holds_a_node(grid, c.min, c.max))
     {
         let (lo, hi) = (grid.origin(), grid.upper());
-        return Err(ScenarioError::EmptyBox {
-            name: c.name.clone(),
-            min: c.min,
-            max: c.max,
-            lo: [lo.x, lo.y],
-            hi: [hi.x, hi.y],
-            h,
-        });
+        return Err(BadValue::new(
+            format!("constraint[{i}]"),
+            format!("`{}`, the box {:?}..{:?} mm", c.name, c.min, c.max),
+            format!(
+                "a box that holds a grid node (this one holds no grid node: the grid spans {:?}..{:?} mm \
+                 with nodes every {h} mm)",
+                [lo.x, lo.y],
+                [hi.x, hi.y]
+            ),
+        )
+        .into());
     }
     Ok(constraints
         .iter()

@@ -241,7 +241,7 @@ fn bad_input_is_refused_before_anything_is_written() {
     let others: Vec<(Vec<&str>, Vec<&str>)> = vec![
         (
             vec!["run", "far-box.toml", "--output", "out"],
-            vec!["constraint `base`", "holds no grid node"],
+            vec!["field `constraint[0]`", "`base`", "holds no grid node"],
         ),
         (
             vec!["run", "nan-velocity.toml", "--output", "out"],

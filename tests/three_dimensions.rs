@@ -395,7 +395,8 @@ fn an_extruded_plane_setup_is_the_plate_seeded_in_3d() {
         .extrude(2.5)
         .err()
         .expect("2.5 mm is no multiple of 1 mm");
-    assert!(e.contains("multiple of the cell size"), "{e}");
+    assert_eq!(e.key, "extrusion.thickness");
+    assert!(e.allowed.contains("multiple of the cell size"), "{e}");
     let quasi_static = Setup::of(
         Parameters {
             time: TimeIntegration {
@@ -412,7 +413,8 @@ fn an_extruded_plane_setup_is_the_plate_seeded_in_3d() {
         particles.clone(),
     );
     let e = quasi_static.extrude(3.0).err().expect("nothing holds z");
-    assert!(e.contains("held"), "{e}");
+    assert_eq!(e.key, "time.quasi_static");
+    assert!(e.allowed.contains("held"), "{e}");
     let plate = plane.extrude(3.0).expect("extrude");
     let (_, direct) = seeded(SVector::from([4.0, 8.0, 3.0]), 1.0, 2.4e-9);
     let p = &plate.particles;

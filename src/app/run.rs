@@ -15,9 +15,9 @@ mod summary;
 use super::args::launcher_rank;
 use super::{bad, processes_per_node, share_cores};
 use crate::checkpoint;
-use crate::config::{self, RunConfig};
+use crate::config::{self, ConfigError, RunConfig};
 use crate::io::RunOutput;
-use crate::model::{Setup, State};
+use crate::model::{ModelError, Setup, State};
 use crate::petsc::{self, Session, SessionGuard};
 use crate::preflight;
 use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
@@ -109,12 +109,9 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     let path = flags.config.as_path();
     let prepared = prepare(path, &flags, petsc_args)?;
     let file = path.display().to_string();
-    let plan = scenario::plan(&prepared.cfg).map_err(|e| bad(format!("{file}: {e}")))?;
-    check_memory(
-        &plan,
-        &config::source_label(&file, &prepared.overrides),
-        flags.allow_large,
-    )?;
+    let label = config::source_label(&file, &prepared.overrides);
+    let plan = scenario::plan(&prepared.cfg).map_err(|e| bad(e.in_file(&label)))?;
+    check_memory(&plan, &label, flags.allow_large)?;
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
     share_cores(&session);
     let invocation = Invocation {
@@ -128,7 +125,7 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     petsc::apply_default_options(&session, &prepared.cfg.run.petsc_options)
         .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
     // A plane set-up, or the plate it is extruded to ([extrusion]): the same run in 2D or 3D.
-    match scenario::build_run(plan).map_err(|e| bad(format!("{file}: {e}")))? {
+    match scenario::build_run(plan).map_err(|e| bad(e.in_file(&label)))? {
         RunSetup::Plane(setup) => simulate(&session, &invocation, prepared, setup)?,
         RunSetup::Plate(setup) => simulate(&session, &invocation, prepared, setup)?,
     }
@@ -353,7 +350,15 @@ fn build<const D: usize>(
 ) -> Result<(Simulation<D>, Vec<String>)> {
     // The solver defaults follow the kind of step (docs/solvers.md).
     let (_, defaults) = solver_defaults::apply(session, &mut setup)?;
-    let sim = Simulation::new(setup).map_err(|e| bad(format!("{file}: {e}")))?;
+    let sim = Simulation::new(setup).map_err(|e| {
+        bad(match e {
+            StepError::Model(ModelError::Invalid(value)) => ConfigError::in_file(file, value),
+            e => ConfigError::Build {
+                file: file.to_owned(),
+                message: e.to_string(),
+            },
+        })
+    })?;
     Ok((sim, defaults))
 }
 

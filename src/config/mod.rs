@@ -33,6 +33,7 @@ pub use choice::Choice;
 pub use control::{ExtrusionSection, GridSection, RunSection, ShapeSection, TimeSection};
 pub use ct::{CtSection, LoadIntroduction, NotchTip};
 
+use crate::input::BadValue;
 use crate::material::{Material, MaterialError};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -68,6 +69,27 @@ pub enum ConfigError {
         /// What is allowed.
         allowed: String,
     },
+    /// The checked configuration could not be built (seeding, the grid, a model the scenario made).
+    #[error("{file}: {message}")]
+    Build {
+        /// File name.
+        file: String,
+        /// What failed.
+        message: String,
+    },
+}
+
+impl ConfigError {
+    /// The error of a value the scenario or the model refused ([`BadValue`]), in the configuration
+    /// `file` (with its overrides, as [`source_label`] names it).
+    pub fn in_file(file: &str, bad: BadValue) -> Self {
+        ConfigError::Invalid {
+            file: file.to_owned(),
+            field: bad.key,
+            value: bad.value,
+            allowed: bad.allowed,
+        }
+    }
 }
 
 /// Builds the errors of one file's checks.

@@ -204,3 +204,36 @@ fn non_finite_negative_and_inconsistent_values_are_rejected() {
         );
     }
 }
+
+/// A value that the scenario or the model refuses reads like the configuration's own checks: the file,
+/// the key path, the value and what is allowed.
+#[test]
+fn scenario_and_model_refusals_name_the_key() {
+    let refused = |text: &str| {
+        let cfg = RunConfig::from_str_named(text, "t.toml").expect("valid");
+        let e = match crate::scenario::build(&cfg) {
+            Err(e) => e.in_file("t.toml"),
+            Ok(setup) => match crate::model::Model::new(setup) {
+                Err(crate::model::ModelError::Invalid(bad)) => ConfigError::in_file("t.toml", bad),
+                _ => panic!("accepted: {text}"),
+            },
+        };
+        e.to_string()
+    };
+    let far_box = MINIMAL.replace("max = [3.0, 0.1]", "max = [3.0, -50.0]");
+    let far_box = far_box.replace("min = [-1.0, -0.1]", "min = [-1.0, -60.0]");
+    let e = refused(&far_box);
+    assert!(
+        e.starts_with("t.toml: field `constraint[0]` = `base`, the box")
+            && e.contains("holds no grid node"),
+        "{e}"
+    );
+    let off_grid = format!(
+        "{MINIMAL}[[load]]\nname = \"pull\"\nfrom = [0.5, 0.0]\nto = [0.5, 2.0]\nforce = [1.0, 0.0]\n"
+    );
+    let e = refused(&off_grid);
+    assert!(
+        e.starts_with("t.toml: field `load[0]` = `pull` from [0.5, 0.0] to [0.5, 2.0]: a segment on a grid line"),
+        "{e}"
+    );
+}

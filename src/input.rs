@@ -1,0 +1,32 @@
+//! Bad input as the layers below the application report it: the configuration key, the value given and
+//! what is allowed. The configuration's own checks, the scenario and the model all report a refused
+//! value this way; the application adds the file (`ConfigError::Invalid`, `crate::config`) and exits
+//! with code 2 (`docs/bad-input.md`).
+
+/// A value that a check refused: the key path in the configuration (`body[1].geometry`,
+/// `constraint[0]`, `rigid_body.loading_plate.contact`), the value given and what is allowed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("field `{key}` = {value}: {allowed}")]
+pub struct BadValue {
+    /// Dotted key path.
+    pub key: String,
+    /// The value given.
+    pub value: String,
+    /// What is allowed.
+    pub allowed: String,
+}
+
+impl BadValue {
+    /// `key` = `value` is refused; `allowed` says what is allowed.
+    pub fn new(
+        key: impl Into<String>,
+        value: impl Into<String>,
+        allowed: impl Into<String>,
+    ) -> Self {
+        Self {
+            key: key.into(),
+            value: value.into(),
+            allowed: allowed.into(),
+        }
+    }
+}
