@@ -217,6 +217,18 @@ fn dev_t_of<const N: usize>(t: &[[f64; N]; 6], i: usize) -> Sym6 {
 }
 
 impl Microplane {
+    /// The update of a point whose inputs are checked: [`Microplane::update_avx2`] where the processor
+    /// supports AVX2, else [`Microplane::update_any`] (the same bits).
+    pub(super) fn update_checked(&self, p: PointUpdate<'_>, out: &mut Response) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor supports AVX2 (checked on the line above).
+            unsafe { self.update_avx2(p, out) };
+            return;
+        }
+        self.update_any(p, out);
+    }
+
     /// [`Microplane::update_planes`] compiled with AVX2 (four planes per instruction); the same bits
     /// as [`Microplane::update_any`].
     ///

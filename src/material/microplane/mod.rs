@@ -395,13 +395,7 @@ impl Constitutive for Microplane {
     fn update(&self, p: PointUpdate<'_>, out: &mut Response) -> Result<(), MaterialError> {
         p.check_history_len(self.planes.count())?;
         p.check_jacobian()?;
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the processor supports AVX2 (checked on the line above).
-            unsafe { self.update_avx2(p, out) };
-            return Ok(());
-        }
-        self.update_any(p, out);
+        self.update_checked(p, out);
         Ok(())
     }
 }
