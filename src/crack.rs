@@ -135,14 +135,7 @@ pub fn measure(
     time: f64,
 ) -> CrackState {
     let crack = crack_points(x, damage, notch_tip, h, c);
-    let (mut length, mut tip) = (0.0, notch_tip);
-    for &i in &crack {
-        let d = (x[i] - notch_tip).norm();
-        if d > length {
-            length = d;
-            tip = x[i];
-        }
-    }
+    let (length, tip) = farthest(x, &crack, notch_tip);
     let (bands, classification) = classify(x, &crack, notch_tip, length, h, c);
     let crossings = if length < c.min_length {
         Vec::new()
@@ -196,6 +189,20 @@ pub struct Front {
     pub speed: f64,
 }
 
+/// The crack's length (mm) and tip: the distance from the notch tip to the farthest crack point, and
+/// that point (the notch tip when the crack is empty).
+fn farthest(x: &[Vector2<f64>], crack: &[usize], notch_tip: Vector2<f64>) -> (f64, Vector2<f64>) {
+    let (mut length, mut tip) = (0.0, notch_tip);
+    for &i in crack {
+        let d = (x[i] - notch_tip).norm();
+        if d > length {
+            length = d;
+            tip = x[i];
+        }
+    }
+    (length, tip)
+}
+
 /// The crack front (speed 0, filled in by [`tip_speed`]) of the damage field of points at `x` (mm):
 /// the crack, length, tip and bands as [`measure`] defines them, without the band widths.
 pub fn front(
@@ -206,14 +213,7 @@ pub fn front(
     c: &CrackCriteria,
 ) -> Front {
     let crack = crack_points(x, damage, notch_tip, h, c);
-    let (mut length, mut tip) = (0.0, notch_tip);
-    for &i in &crack {
-        let d = (x[i] - notch_tip).norm();
-        if d > length {
-            length = d;
-            tip = x[i];
-        }
-    }
+    let (length, tip) = farthest(x, &crack, notch_tip);
     let (bands, _) = classify(x, &crack, notch_tip, length, h, c);
     Front {
         tip: [tip.x, tip.y],
