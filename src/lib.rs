@@ -24,6 +24,7 @@
 
 pub mod app;
 pub mod assembly;
+pub mod bar;
 pub mod boundary;
 pub mod checkpoint;
 pub mod config;

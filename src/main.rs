@@ -12,8 +12,8 @@ use clap::{CommandFactory, Parser, Subcommand};
 use mpm_concrete::app::args::{launcher_rank, misplaced_program_option, split_args};
 use mpm_concrete::app::run::{self, RunFlags};
 use mpm_concrete::app::{
-    BadInput, FailedElsewhere, commands, compare, error_line, material_driver, no_petsc_options,
-    smoke,
+    BadInput, FailedElsewhere, commands, compare, error_line, fit_material, material_driver,
+    no_petsc_options, smoke,
 };
 use std::path::PathBuf;
 
@@ -81,6 +81,10 @@ enum Command {
     /// Material-point driver: strain or mixed paths through one constitutive law (CSV + PNG); prints the
     /// implied uniaxial strengths. No PETSc involved.
     MaterialDriver(material_driver::DriverArgs),
+    /// Fit microplane parameters to E, nu, f_t, G_F (optionally f_c) and a gradient length: f_t by the
+    /// material driver, G_F by a quasi-static regularised bar; prints the [material] section and writes
+    /// it with plots (docs/material.md, "Parameters from engineering data").
+    FitMaterial(fit_material::FitArgs),
     /// Solve a small nonlinear lattice problem (3 unknowns per node) with SNES: checks the PETSc set-up
     /// and the solver options given on the command line.
     Smoke {
@@ -200,6 +204,7 @@ fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
             println!("{summary}");
             Ok(())
         }
+        Command::FitMaterial(args) => fit_material::run(&args, petsc_args),
         Command::Bench {
             cases,
             steps,

@@ -1,7 +1,8 @@
 //! The applications built on the library, one module per command of `mpm-concrete`: the simulation run
 //! (`run`), cross-checks against reference solutions (`compare`), solver-comparison studies (`study`), the
 //! benchmark command (`bench`), the crack re-measurement and the drivers of the other commands
-//! (`commands`), the material-point driver (`material_driver`) and the PETSc lattice smoke problem
+//! (`commands`), the material-point driver (`material_driver`), the fit of microplane parameters to engineering
+//! data (`fit_material`) and the PETSc lattice smoke problem
 //! (`smoke`). The library below them (material, solver, io, ...) imports none of them; the command-line
 //! parser (main.rs) only parses and calls them.
 
@@ -9,6 +10,7 @@ pub mod args;
 pub mod bench;
 pub mod commands;
 pub mod compare;
+pub mod fit_material;
 pub mod material_driver;
 pub mod run;
 pub mod smoke;
