@@ -38,45 +38,19 @@
 //! interpolated between neighbouring points; since the band's centre reaches d close to 1, this is the
 //! full width at half maximum of the damage profile.
 
-use mpm_concrete::boundary::{Motion, NodeBox};
+use mpm_concrete::bar::{BarSpec, bar_simulation, damage_profile, pull};
 use mpm_concrete::crack::band_width_1d;
-use mpm_concrete::geometry::{Geometry, Region, Seeding};
-use mpm_concrete::grid::Grid;
-use mpm_concrete::material::MaterialConfig;
-use mpm_concrete::model::{Parameters, Setup, TimeIntegration};
-use mpm_concrete::particles::Particles;
+use mpm_concrete::material::MicroplaneConfig;
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::plot::LinePlot;
-use mpm_concrete::shape::ShapeKind;
 use mpm_concrete::solver::{Simulation, StepError};
-use nalgebra::Vector2;
 use serde_json::{Value, json};
 use std::path::PathBuf;
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
-/// Weak-zone width (mm), density (t/mm^3).
-const W: f64 = 10.0;
-/// Points farther than this from the centre (mm) get a threshold [`STRONG_FACTOR`] times Table 1's
-/// `gamma_0` (same moduli and `c`): they stay elastic while the broken halves ring.
-const STRONG_BEYOND: f64 = 20.0;
-const STRONG_FACTOR: f64 = 2.0;
-/// Table 1's threshold `gamma_0`.
-const GAMMA_0: f64 = 1.25e-3;
-const RHO: f64 = 2.4e-9;
 /// Elongations at which the band width and the energy are recorded (mm).
 const MARKS: [f64; 3] = [0.05, 0.1, 0.15];
-
-/// The bar: length (mm) and the section factor of the weak zone.
-#[derive(Clone, Copy, Debug)]
-struct Bar {
-    length: f64,
-    section: f64,
-    /// Speed of each end (mm/s), its rise time and the time step (s).
-    speed: f64,
-    rise: f64,
-    dt: f64,
-}
 
 /// One gradient-activity setting.
 #[derive(Clone, Debug)]
@@ -116,116 +90,17 @@ impl BarRun {
     }
 }
 
-/// The bar's points (section-scaled weak zone) on cells of size `h`.
-fn bar_points(bar: Bar, h: f64) -> Result<Particles> {
-    let geometry = Geometry {
-        include: vec![Region::Rect {
-            min: [0.0, 0.0],
-            max: [bar.length, h],
-        }],
-        exclude: vec![],
-    };
-    let seeding = Seeding {
-        h,
-        points_per_cell: 2,
-        density: RHO,
-        body: 0,
-    };
-    let mut particles = Particles::seed(&geometry, &seeding)?;
-    for p in 0..particles.len() {
-        let r = (particles.x[p].x - 0.5 * bar.length).abs() / (0.5 * W);
-        if r < 1.0 {
-            let scale = bar.section * (1.0 - 1e-3 * (1.0 - r));
-            particles.vol0[p] *= scale;
-            particles.vol[p] *= scale;
-            particles.mass[p] *= scale;
-        }
-        if (particles.x[p].x - 0.5 * bar.length).abs() > STRONG_BEYOND {
-            particles.body[p] = 1;
-        }
-    }
-    Ok(particles)
-}
-
-/// The simulation of the bar with cell size `h` and the material of `case`.
-fn bar_simulation(bar: Bar, h: f64, case: &Case) -> Result<Simulation> {
-    let particles = bar_points(bar, h)?;
-    let l = bar.length;
-    let material = |gamma_0: f64| -> Result<_> {
-        let cfg: MaterialConfig = toml::from_str(&format!(
-            "model = \"microplane\"\npreset = \"paper\"\nc = {}\ngradient_activity = {}\n\
-             gamma_0 = {gamma_0:e}\n",
-            case.c0, case.activity
-        ))?;
-        Ok(cfg.build()?)
-    };
-    let far = 1e3;
-    let bx = |name: &str, min: [f64; 2], max: [f64; 2], motion| NodeBox {
-        name: name.into(),
-        min: Vector2::from(min),
-        max: Vector2::from(max),
-        motion,
-        rise_time: bar.rise,
-    };
-    let grid = Grid::covering(
-        Vector2::zeros(),
-        Vector2::new(l, h),
-        h,
-        (1.0 / h).ceil() as usize + 2,
-    )?;
-    let time = TimeIntegration {
-        dt: bar.dt,
-        dt_min: bar.dt / 64.0,
-        quasi_static: false,
-        ..TimeIntegration::default()
-    };
-    let params = Parameters {
-        boxes: vec![
-            bx(
-                "right end",
-                [l - 1e-6, -far],
-                [far, far],
-                [Motion::Velocity(bar.speed), Motion::Free],
-            ),
-            bx(
-                "left end",
-                [-far, -far],
-                [1e-6, far],
-                [Motion::Velocity(-bar.speed), Motion::Free],
-            ),
-            bx(
-                "rollers",
-                [-far, -far],
-                [far, far],
-                [Motion::Free, Motion::Velocity(0.0)],
-            ),
-        ],
-        options_prefix: Some("rb_".into()),
-        ..Parameters::new(
-            grid,
-            vec![material(GAMMA_0)?, material(STRONG_FACTOR * GAMMA_0)?],
-            ShapeKind::Cpdi1,
-            time,
-        )
-    };
-    Ok(Simulation::new(Setup::of(params, particles))?)
-}
-
-/// The damage profile of the points' row y < h/2, (x - L/2, d) sorted by x.
-fn damage_profile(sim: &Simulation, x0: &[f64], centre: f64) -> Vec<(f64, f64)> {
-    let mut pts: Vec<(f64, f64)> = x0
-        .iter()
-        .zip(&sim.state.particles.damage)
-        .map(|(x, d)| (*x - centre, *d))
-        .collect();
-    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-    pts.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
-    pts
+/// Table 1 (preset `paper`) with the case's `c_0` and activity.
+fn material(case: &Case) -> Result<MicroplaneConfig> {
+    Ok(toml::from_str(&format!(
+        "preset = \"paper\"\nc = {}\ngradient_activity = {}\n",
+        case.c0, case.activity
+    ))?)
 }
 
 /// Updates the strength: the largest axial Cauchy stress of a point of the weak zone until the first
 /// point reaches d = 0.9 (MPa).
-fn track_strength(sim: &Simulation, x0: &[f64], centre: f64, run: &mut BarRun) {
+fn track_strength(sim: &Simulation, x0: &[f64], centre: f64, w: f64, run: &mut BarRun) {
     let p = &sim.state.particles;
     if run.broken {
         return;
@@ -234,15 +109,15 @@ fn track_strength(sim: &Simulation, x0: &[f64], centre: f64, run: &mut BarRun) {
     let sigma = x0
         .iter()
         .zip(&p.stress)
-        .filter(|(x, _)| (**x - centre).abs() < 0.5 * W)
+        .filter(|(x, _)| (**x - centre).abs() < 0.5 * w)
         .map(|(_, s)| s[(0, 0)])
         .fold(f64::NEG_INFINITY, f64::max);
     run.peak = Some(run.peak.map_or(sigma, |v| v.max(sigma)));
 }
 
 /// Pulls the bar of cell size `h` to the elongation `dl` (mm).
-fn run_bar(s: &SessionGuard, bar: Bar, h: f64, dl: f64, case: &Case) -> Result<BarRun> {
-    let mut sim = bar_simulation(bar, h, case)?;
+fn run_bar(s: &SessionGuard, bar: &BarSpec, h: f64, dl: f64, case: &Case) -> Result<BarRun> {
+    let mut sim = bar_simulation(bar, h, &material(case)?)?;
     let centre = 0.5 * bar.length;
     let x0: Vec<f64> = sim.state.particles.x.iter().map(|x| x.x).collect();
     let mut run = BarRun {
@@ -254,27 +129,24 @@ fn run_bar(s: &SessionGuard, bar: Bar, h: f64, dl: f64, case: &Case) -> Result<B
         broken: false,
         failed_at: None,
     };
-    let mut d = 0.0;
-    while d < dl - 1e-9 {
-        match sim.advance(s) {
-            Ok(r) => {
-                d = r.displacements[0].1[0];
-                let diss = (r.external_work - r.stored_energy - r.kinetic_energy) / h;
-                run.curve.push((d, r.reactions[0].1[0] / h));
-                run.dissipated.push((d, diss));
-                if run.marks.len() < MARKS.len() && d >= MARKS[run.marks.len()] - 1e-12 {
-                    let w = band_width_1d(&damage_profile(&sim, &x0, centre), 0.5);
-                    run.marks.push((d, w, diss));
-                }
-                track_strength(&sim, &x0, centre, &mut run);
-            }
-            Err(StepError::Diverged { time, reason, .. }) => {
-                eprintln!("{} h = {h}: stopped at t = {time}: {reason}", case.label);
-                run.failed_at = Some(d);
-                break;
-            }
-            Err(e) => return Err(e.into()),
+    let result = pull(s, &mut sim, h, dl, |sim, step| {
+        let d = step.end_displacement;
+        run.curve.push((d, step.stress));
+        run.dissipated.push((d, step.dissipated));
+        if run.marks.len() < MARKS.len() && d >= MARKS[run.marks.len()] - 1e-12 {
+            let w = band_width_1d(&damage_profile(sim, &x0, centre), 0.5);
+            run.marks.push((d, w, step.dissipated));
         }
+        track_strength(sim, &x0, centre, bar.weak_zone, &mut run);
+        true
+    });
+    match result {
+        Ok(()) => {}
+        Err(StepError::Diverged { time, reason, .. }) => {
+            eprintln!("{} h = {h}: stopped at t = {time}: {reason}", case.label);
+            run.failed_at = Some(run.end().0);
+        }
+        Err(e) => return Err(e.into()),
     }
     run.damage = damage_profile(&sim, &x0, centre);
     Ok(run)
@@ -337,7 +209,7 @@ fn study_case(s: &SessionGuard, o: &Options, case: &Case) -> Result<Value> {
     let out = &o.out;
     let mut runs = Vec::new();
     for &h in &o.hs {
-        let r = run_bar(s, o.bar, h, o.dl, case)?;
+        let r = run_bar(s, &o.bar, h, o.dl, case)?;
         eprintln!(
             "{} h = {h}: peak {:.3} MPa, band (d >= 0.5) {:.3} mm = {:.1} cells, D = {:.5} N mm/mm^2 at dL = {:.3}, marks {:?}",
             case.label,
@@ -388,7 +260,7 @@ fn study_case(s: &SessionGuard, o: &Options, case: &Case) -> Result<Value> {
 /// Command-line options.
 struct Options {
     out: PathBuf,
-    bar: Bar,
+    bar: BarSpec,
     hs: Vec<f64>,
     dl: f64,
     cases: Vec<Case>,
@@ -440,13 +312,7 @@ fn parse_case(text: &str) -> Result<Case> {
 fn parse(args: &[String]) -> Result<Options> {
     let mut o = Options {
         out: PathBuf::from("docs/img"),
-        bar: Bar {
-            length: 100.0,
-            section: 0.9,
-            speed: 1800.0,
-            rise: 1e-5,
-            dt: 2.5e-7,
-        },
+        bar: BarSpec::regularisation(),
         hs: vec![2.0, 1.0, 0.5, 0.25],
         dl: 0.15,
         cases: Vec::new(),
@@ -512,8 +378,8 @@ fn main() -> Result<()> {
     }
     let doc = json!({
         "units": "mm, s, N, MPa, t; D per mm^2 of the full section",
-        "bar": {"length": o.bar.length, "weak_zone": W, "section_factor": o.bar.section, "speed": o.bar.speed, "rise_time": o.bar.rise,
-                "dt": o.bar.dt, "density": RHO, "material": "microplane, preset paper (Table 1)",
+        "bar": {"length": o.bar.length, "weak_zone": o.bar.weak_zone, "section_factor": o.bar.section, "speed": o.bar.speed, "rise_time": o.bar.rise,
+                "dt": o.bar.dt, "density": o.bar.density, "material": "microplane, preset paper (Table 1)",
                 "band_width": "distance between the outermost crossings of d = 0.5 by the point damage profile"},
         "final_elongation": o.dl,
         "cases": cases,

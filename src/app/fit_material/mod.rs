@@ -122,6 +122,12 @@ pub fn targets(a: &FitArgs) -> Result<(Targets, FitSettings)> {
             return Err(bad(format!("{option} {n}: allowed 20..=1000000 steps")));
         }
     }
+    if a.out.exists() && !a.out.is_dir() {
+        return Err(bad(format!(
+            "--out {}: allowed a directory (it exists and is not one)",
+            a.out.display()
+        )));
+    }
     let t = Targets {
         youngs_modulus: e,
         poisson_ratio: nu,
