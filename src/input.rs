@@ -30,3 +30,14 @@ impl BadValue {
         }
     }
 }
+
+/// A number as the errors show it: plainly (`-0.000001`, `4300`), or in scientific notation when that
+/// would take more than 16 digits (`1e300`, `5e-324`).
+pub fn shown(v: f64) -> String {
+    let a = v.abs();
+    if a.is_finite() && a != 0.0 && !(1e-6..1e16).contains(&a) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}

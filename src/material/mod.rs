@@ -111,7 +111,7 @@ impl Default for Response {
 #[derive(Clone, Debug, thiserror::Error)]
 pub enum MaterialError {
     /// A parameter is outside its admissible range.
-    #[error("material parameter `{field}` = {} is invalid: allowed is {allowed}", crate::config::shown(*.value))]
+    #[error("material parameter `{field}` = {} is invalid: allowed is {allowed}", crate::input::shown(*.value))]
     InvalidParameter {
         /// The parameter's config key.
         field: &'static str,
