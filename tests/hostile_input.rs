@@ -9,40 +9,8 @@
 
 mod binary;
 
-use binary::{EXE, record, refused, scratch, stderr, succeeds};
-use std::path::Path;
-use std::process::{Command, Output};
-
-/// A block on a held base: the `[[body]]`, `[[constraint]]` and `body_force` keys.
-const BLOCK: &str = r#"
-[run]
-name = "block"
-steps = 2
-
-[grid]
-cell_size = 2.0
-
-[[body]]
-name = "b"
-density = 2.4e-9
-geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
-material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
-
-[[constraint]]
-name = "base"
-min = [-1.0, -0.1]
-max = [11.0, 0.1]
-y = "fixed"
-"#;
-
-/// Runs the program in `cwd`.
-fn run(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(EXE)
-        .current_dir(cwd)
-        .args(args)
-        .output()
-        .expect("start mpm-concrete")
-}
+use binary::{BLOCK, record, refused, run, scratch, stderr, succeeds};
+use std::process::Command;
 
 #[test]
 fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_written() {

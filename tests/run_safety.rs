@@ -10,42 +10,10 @@
 
 mod binary;
 
-use binary::{EXE, record, refused, scratch, stderr, succeeds};
+use binary::{BLOCK, EXE, record, refused, run, scratch, stderr, succeeds};
 use mpm_concrete::checkpoint;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
-
-/// A block with a held base, for the sections the CT generator does not have.
-const BLOCK: &str = r#"
-[run]
-name = "block"
-steps = 2
-
-[grid]
-cell_size = 2.0
-
-[[body]]
-name = "b"
-density = 2.4e-9
-geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
-material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
-initial_velocity = [0.0, 0.0]
-
-[[constraint]]
-name = "base"
-min = [-1.0, -0.1]
-max = [11.0, 0.1]
-y = "fixed"
-"#;
-
-/// Runs the program in `cwd`.
-fn run(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(EXE)
-        .current_dir(cwd)
-        .args(args)
-        .output()
-        .expect("start mpm-concrete")
-}
 
 /// `mpm-concrete run tiny.toml --quiet --output d` in `cwd` with further arguments.
 fn run_tiny(cwd: &Path, extra: &[&str]) -> Output {

@@ -1,5 +1,5 @@
-//! What the tests of the real binary share (`run_safety.rs`, `run_faults.rs`): the executable, the tiny
-//! CT specimen, scratch directories and the checks of a success and of a refusal.
+//! What the tests of the real binary share (`run_safety.rs`, `run_faults.rs`, `hostile_input.rs`): the
+//! executable, the tiny CT specimen, a held block, scratch directories and the checks of a success and of a refusal.
 //!
 //! Units: mm, s, N, MPa, t.
 
@@ -8,10 +8,42 @@
 
 use mpm_concrete::rundir::RunRecord;
 use std::path::{Path, PathBuf};
-use std::process::Output;
+use std::process::{Command, Output};
 
 /// The program under test.
 pub const EXE: &str = env!("CARGO_BIN_EXE_mpm-concrete");
+
+/// A block with a held base, for the sections the CT generator does not have.
+pub const BLOCK: &str = r#"
+[run]
+name = "block"
+steps = 2
+
+[grid]
+cell_size = 2.0
+
+[[body]]
+name = "b"
+density = 2.4e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 10.0] }] }
+material = { model = "linear_elastic", youngs_modulus = 30000.0, poisson_ratio = 0.2 }
+initial_velocity = [0.0, 0.0]
+
+[[constraint]]
+name = "base"
+min = [-1.0, -0.1]
+max = [11.0, 0.1]
+y = "fixed"
+"#;
+
+/// Runs the program in `cwd`.
+pub fn run(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(EXE)
+        .current_dir(cwd)
+        .args(args)
+        .output()
+        .expect("start mpm-concrete")
+}
 
 /// A CT specimen of 360 points (10 x 10 cells of 4 mm), 1 us steps, a few ms per step.
 pub const TINY: &str = r#"
