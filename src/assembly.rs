@@ -680,8 +680,14 @@ impl<const D: usize> Assembler<D> {
                 particles.nonlocal_damage[p] += gained;
             }
             particles.damage[p] = ev.damage;
-            for (acc, d) in particles.dissipated[p].iter_mut().zip(ev.dissipation) {
-                *acc += particles.vol0[p] * d;
+            // The split follows the planes' end-point shares, its total the trapezoidal rule of the books.
+            let end_point = ev.dissipation[0] + ev.dissipation[1];
+            let shares = match end_point > 0.0 {
+                true => ev.dissipation.map(|d| d / end_point),
+                false => [1.0, 0.0],
+            };
+            for (acc, share) in particles.dissipated[p].iter_mut().zip(shares) {
+                *acc += particles.vol0[p] * share * ev.dissipation_trapezoidal;
             }
             if p < counted {
                 let v0 = particles.vol0[p];

@@ -111,7 +111,8 @@ pub struct Particles<const D: usize = 2> {
     /// Scalar damage (output) [-].
     pub damage: Vec<f64>,
     /// Energy dissipated by the point's microplanes under tensile and under compressive normal strain
-    /// since the start (N mm; in 2D per mm of thickness).
+    /// since the start (N mm; in 2D per mm of thickness): per step the trapezoidal dissipation of the
+    /// energy books, shared out as the planes' end-point dissipation is.
     pub dissipated: Vec<[f64; 2]>,
     /// Damage gained in steps where the point's local equivalent strain stayed below gamma_0: damage
     /// carried in by the nonlocal field only [-].
