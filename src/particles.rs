@@ -25,6 +25,8 @@ pub enum ParticleError {
     /// A seeding parameter is out of range.
     #[error("invalid seeding: {reason}")]
     InvalidSeeding {
+        /// The parameter at fault.
+        parameter: SeedingParameter,
         /// What is wrong.
         reason: String,
     },
@@ -38,6 +40,17 @@ pub enum ParticleError {
         /// Stride of the appended set.
         other: usize,
     },
+}
+
+/// A parameter of [`crate::geometry::Seeding`], as a seeding error names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SeedingParameter {
+    /// The cell size `h` (mm), or the lattice it makes for the geometry.
+    CellSize,
+    /// The points per cell and direction.
+    PointsPerCell,
+    /// The density (t/mm^3).
+    Density,
 }
 
 /// Sign vector `s_c` in `{-1, 1}^D` of corner `c` of a CPDI domain: corner `c` is `x_p + r s_c`

@@ -14,7 +14,7 @@
 //! geometry.
 
 use crate::geometry::{Body, GeometryError, Seeding};
-use crate::particles::{ParticleError, Particles, lattice};
+use crate::particles::{ParticleError, Particles, SeedingParameter, lattice};
 use nalgebra::{SMatrix, SVector};
 
 impl<const D: usize> Particles<D> {
@@ -61,6 +61,7 @@ impl<const D: usize> Particles<D> {
             3 => &[(-q, 5.0 / 9.0), (0.0, 8.0 / 9.0), (q, 5.0 / 9.0)],
             _ => {
                 return Err(ParticleError::InvalidSeeding {
+                    parameter: SeedingParameter::PointsPerCell,
                     reason: format!("{n} Gauss points per direction: 1, 2 or 3 are available"),
                 });
             }
@@ -165,15 +166,24 @@ fn cell_lattice<const D: usize, B: Body<D>>(
         density,
         ..
     } = *seeding;
-    let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
+    let bad = |parameter, reason: String| Err(ParticleError::InvalidSeeding { parameter, reason });
     if !(h.is_finite() && h > 0.0) {
-        return bad(format!("cell size h = {h} mm must be positive"));
+        return bad(
+            SeedingParameter::CellSize,
+            format!("cell size h = {h} mm must be positive"),
+        );
     }
     if n == 0 {
-        return bad("points_per_cell must be at least 1".into());
+        return bad(
+            SeedingParameter::PointsPerCell,
+            "points_per_cell must be at least 1".into(),
+        );
     }
     if !(density.is_finite() && density > 0.0) {
-        return bad(format!("density = {density} t/mm^3 must be positive"));
+        return bad(
+            SeedingParameter::Density,
+            format!("density = {density} t/mm^3 must be positive"),
+        );
     }
     let (lo, hi) = geometry
         .bounding_box()
@@ -194,6 +204,7 @@ fn checked_lattice<const D: usize, B: Body<D>>(
         counts.iter().product::<f64>() * (seeding.points_per_cell as f64).powi(D as i32);
     if candidates.is_nan() || candidates > u32::MAX as f64 {
         return Err(ParticleError::InvalidSeeding {
+            parameter: SeedingParameter::CellSize,
             reason: format!("{candidates} candidate points: cell size too small for the geometry"),
         });
     }

@@ -176,7 +176,7 @@ pub fn check_sets(config: &Path, sets: &[OptionSet], sets_file: &Path) -> Result
         let (cfg, _) = crate::config::RunConfig::load(config, &set.overrides)
             .map_err(|e| format!("{at}: {e}"))?;
         crate::preflight::check_petsc_options(&cfg.run.petsc_options)
-            .map_err(|e| format!("{at}: run.petsc_options: {e}"))?;
+            .map_err(|e| format!("{at}: {}", e.at_key("run.petsc_options")))?;
     }
     Ok(())
 }
