@@ -28,11 +28,6 @@ type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
 const FAR: f64 = 1e6;
 
-fn material(toml_text: &str) -> Result<Material> {
-    let cfg: MaterialConfig = toml::from_str(toml_text)?;
-    Ok(cfg.build()?)
-}
-
 fn strip(min: [f64; 2], max: [f64; 2], h: f64, rho: f64) -> Result<Particles> {
     let geometry = Geometry {
         include: vec![Region::Rect { min, max }],
@@ -126,7 +121,9 @@ fn v1(s: &SessionGuard, out: &Path) -> Result<Value> {
         let mut st = setup(
             grid,
             particles,
-            material("model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0")?,
+            MaterialConfig::build_toml(
+                "model = \"linear_elastic\"\nyoungs_modulus = 100.0\npoisson_ratio = 0.0",
+            )?,
             kind,
             TimeIntegration {
                 dt,
@@ -227,7 +224,7 @@ fn column(
     let mut st = setup(
         grid,
         particles,
-        material(&format!(
+        MaterialConfig::build_toml(&format!(
             "model = \"{law}\"\nyoungs_modulus = {}\npoisson_ratio = 0.0",
             c.e
         ))?,
@@ -449,7 +446,7 @@ fn v3(s: &SessionGuard, out: &Path) -> Result<Value> {
         let mut st = setup(
             grid,
             particles,
-            material(&format!(
+            MaterialConfig::build_toml(&format!(
                 "model = \"linear_elastic\"\nbulk_modulus = {k}\nshear_modulus = {g}"
             ))?,
             kind,
@@ -574,7 +571,7 @@ fn v6(s: &SessionGuard, out: &Path) -> Result<Value> {
             let mut st = setup(
                 grid,
                 particles,
-                material(&format!(
+                MaterialConfig::build_toml(&format!(
                     "model = \"linear_elastic\"\nyoungs_modulus = {e}\npoisson_ratio = {nu}"
                 ))?,
                 kind,

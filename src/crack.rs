@@ -123,6 +123,17 @@ pub struct CrackState {
     pub nonlocal_points: usize,
 }
 
+impl CrackState {
+    /// The angles of the bands on the measuring ring, in whole degrees, joined by `, ` (`-99, -65`);
+    /// empty without bands.
+    pub fn band_angles(&self) -> String {
+        let angles: Vec<String> = (self.bands.iter())
+            .map(|b| format!("{:.0}", b.angle_degrees))
+            .collect();
+        angles.join(", ")
+    }
+}
+
 /// Measures the crack grown from `notch_tip` (mm) in the damage field of points at `x` (mm); `h` is the
 /// cell size (mm), `spacing` the distance between neighbouring points (mm).
 pub fn measure(

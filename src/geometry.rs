@@ -409,23 +409,12 @@ mod tests {
             e.contains("edges 0 (vertices 0 to 1) and 2 (vertices 2 to 3) meet at (5.000, 5.000)"),
             "{e}"
         );
-        // A vertex on a non-adjacent edge touches it, and a spike folds back over an edge.
-        let touch = [
-            [0.0, 0.0],
-            [10.0, 0.0],
-            [10.0, 10.0],
-            [5.0, 0.0],
-            [0.0, 10.0],
-        ];
-        assert!(polygon(&touch).validate().is_err());
-        let fold = [
-            [0.0, 0.0],
-            [10.0, 0.0],
-            [10.0, 10.0],
-            [10.0, -5.0],
-            [0.0, 10.0],
-        ];
-        assert!(polygon(&fold).validate().is_err());
+        // A fourth vertex on a non-adjacent edge touches it (5, 0); one at (10, -5) makes a spike that
+        // folds back over an edge.
+        for fourth in [[5.0, 0.0], [10.0, -5.0]] {
+            let bad = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], fourth, [0.0, 10.0]];
+            assert!(polygon(&bad).validate().is_err(), "{fourth:?}");
+        }
         // Simple polygons pass, convex or not, in either orientation.
         let l_shape = [
             [0.0, 0.0],

@@ -3,6 +3,17 @@
 //! value this way; the application adds the file (`ConfigError::Invalid`, `crate::config`) and exits
 //! with code 2 (`docs/bad-input.md`).
 
+/// Serde's field defaults, one line each: `#[serde(default = "name")]` needs a function, so each
+/// `name: Type = value;` becomes `fn name() -> Type { value }`.
+macro_rules! serde_defaults {
+    ($($name:ident: $ty:ty = $value:expr;)*) => {
+        $(fn $name() -> $ty {
+            $value
+        })*
+    };
+}
+pub(crate) use serde_defaults;
+
 /// A value that a check refused: the key path in the configuration (`body[1].geometry`,
 /// `constraint[0]`, `rigid_body.loading_plate.contact`), the value given and what is allowed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -25,6 +25,8 @@ pub enum ParticleError {
     /// A seeding parameter is out of range.
     #[error("invalid seeding: {reason}")]
     InvalidSeeding {
+        /// The parameter at fault.
+        parameter: SeedingParameter,
         /// What is wrong.
         reason: String,
     },
@@ -38,6 +40,17 @@ pub enum ParticleError {
         /// Stride of the appended set.
         other: usize,
     },
+}
+
+/// A parameter of [`crate::geometry::Seeding`], as a seeding error names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SeedingParameter {
+    /// The cell size `h` (mm), or the lattice it makes for the geometry.
+    CellSize,
+    /// The points per cell and direction.
+    PointsPerCell,
+    /// The density (t/mm^3).
+    Density,
 }
 
 /// Sign vector `s_c` in `{-1, 1}^D` of corner `c` of a CPDI domain: corner `c` is `x_p + r s_c`
@@ -123,6 +136,33 @@ pub struct Particles<const D: usize = 2> {
     /// checkpoint files); kept when points move between processes.
     pub id: Vec<u64>,
     history_stride: usize,
+}
+
+/// Applies a closure to each column with one value per point (all but `corners`, `history` and `id`,
+/// whose lengths or values differ): `per_point_columns!(self, |column| ..)`, or with a second set's
+/// matching column `per_point_columns!(self, other, |column, theirs| ..)`. One list of the columns, so
+/// that a new column is not forgotten in one of the operations that change lengths.
+macro_rules! per_point_columns {
+    ($set:expr, |$c:ident| $body:expr) => {
+        per_point_columns!(@each $set, |$c| $body;
+            x vol0 vol mass v a f r r0 body eta_bar damage dissipated nonlocal_damage stress)
+    };
+    ($set:expr, $other:expr, |$c:ident, $o:ident| $body:expr) => {
+        per_point_columns!(@pairs $set, $other, |$c, $o| $body;
+            x vol0 vol mass v a f r r0 body eta_bar damage dissipated nonlocal_damage stress)
+    };
+    (@each $set:expr, |$c:ident| $body:expr; $($field:ident)*) => {
+        $({
+            let $c = &mut $set.$field;
+            $body;
+        })*
+    };
+    (@pairs $set:expr, $other:expr, |$c:ident, $o:ident| $body:expr; $($field:ident)*) => {
+        $({
+            let ($c, $o) = (&mut $set.$field, &$other.$field);
+            $body;
+        })*
+    };
 }
 
 /// Names of the half-edge state columns `r1, r2[, r3]`.
@@ -355,24 +395,10 @@ impl<const D: usize> Particles<D> {
         if self.is_empty() {
             self.history_stride = other.history_stride;
         }
-        self.x.extend_from_slice(&other.x);
-        self.vol0.extend_from_slice(&other.vol0);
-        self.vol.extend_from_slice(&other.vol);
-        self.mass.extend_from_slice(&other.mass);
-        self.v.extend_from_slice(&other.v);
-        self.a.extend_from_slice(&other.a);
-        self.f.extend_from_slice(&other.f);
-        self.r.extend_from_slice(&other.r);
-        self.r0.extend_from_slice(&other.r0);
+        per_point_columns!(self, other, |column, theirs| column
+            .extend_from_slice(theirs));
         self.corners.extend_from_slice(&other.corners);
-        self.body.extend_from_slice(&other.body);
         self.history.extend_from_slice(&other.history);
-        self.eta_bar.extend_from_slice(&other.eta_bar);
-        self.damage.extend_from_slice(&other.damage);
-        self.dissipated.extend_from_slice(&other.dissipated);
-        self.nonlocal_damage
-            .extend_from_slice(&other.nonlocal_damage);
-        self.stress.extend_from_slice(&other.stress);
         let first = self.id.len() as u64;
         self.id.extend(other.id.iter().map(|i| first + i));
         Ok(())
@@ -460,23 +486,9 @@ impl<const D: usize> Particles<D> {
                 keep[(k - 1) / stride]
             });
         }
-        filter(&mut self.x, keep, 1);
-        filter(&mut self.vol0, keep, 1);
-        filter(&mut self.vol, keep, 1);
-        filter(&mut self.mass, keep, 1);
-        filter(&mut self.v, keep, 1);
-        filter(&mut self.a, keep, 1);
-        filter(&mut self.f, keep, 1);
-        filter(&mut self.r, keep, 1);
-        filter(&mut self.r0, keep, 1);
-        filter(&mut self.corners, keep, Self::CORNERS);
-        filter(&mut self.body, keep, 1);
-        filter(&mut self.eta_bar, keep, 1);
-        filter(&mut self.damage, keep, 1);
-        filter(&mut self.dissipated, keep, 1);
-        filter(&mut self.nonlocal_damage, keep, 1);
-        filter(&mut self.stress, keep, 1);
+        per_point_columns!(self, |column| filter(column, keep, 1));
         filter(&mut self.id, keep, 1);
+        filter(&mut self.corners, keep, Self::CORNERS);
         if self.history_stride > 0 {
             filter(&mut self.history, keep, self.history_stride);
         }
@@ -484,23 +496,9 @@ impl<const D: usize> Particles<D> {
 
     /// Keeps the first `n` points.
     pub fn truncate(&mut self, n: usize) {
-        self.x.truncate(n);
-        self.vol0.truncate(n);
-        self.vol.truncate(n);
-        self.mass.truncate(n);
-        self.v.truncate(n);
-        self.a.truncate(n);
-        self.f.truncate(n);
-        self.r.truncate(n);
-        self.r0.truncate(n);
-        self.corners.truncate(n * Self::CORNERS);
-        self.body.truncate(n);
-        self.eta_bar.truncate(n);
-        self.damage.truncate(n);
-        self.dissipated.truncate(n);
-        self.nonlocal_damage.truncate(n);
-        self.stress.truncate(n);
+        per_point_columns!(self, |column| column.truncate(n));
         self.id.truncate(n);
+        self.corners.truncate(n * Self::CORNERS);
         self.history.truncate(n * self.history_stride);
     }
 
@@ -554,19 +552,26 @@ pub(crate) mod tests {
         }
     }
 
-    #[test]
-    fn every_state_column_survives_a_round_trip() {
+    /// `n` points in a row at `x = k` (mm), each with its own volume `0.25 + k` (mm^3), mass
+    /// `(k + 1) 1e-9` (t) and body tag `k`, half-edges 0.25 mm.
+    fn row(n: u16) -> Particles {
         let mut p = Particles::new();
         let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
-        for k in 0..3 {
+        for k in 0..n {
             p.push(
                 Vector2::new(k as f64, 1.0),
-                0.25,
-                1e-9,
+                0.25 + k as f64,
+                1e-9 * (k + 1) as f64,
                 Matrix2::from_columns(&[r1, r2]),
-                0,
+                k,
             );
         }
+        p
+    }
+
+    #[test]
+    fn every_state_column_survives_a_round_trip() {
+        let mut p = row(3);
         p.resize_history(3, 0.0);
         distinct_state(&mut p, 0.0);
         let mut q = p.clone();
@@ -592,17 +597,7 @@ pub(crate) mod tests {
     /// ones, the id and the history included); `retain` and `truncate` keep whole points.
     #[test]
     fn a_point_record_carries_the_whole_point() {
-        let mut p = Particles::new();
-        let (r1, r2) = (Vector2::new(0.25, 0.0), Vector2::new(0.0, 0.25));
-        for k in 0..4 {
-            p.push(
-                Vector2::new(k as f64, 1.0),
-                0.25 + k as f64,
-                1e-9 * (k + 1) as f64,
-                Matrix2::from_columns(&[r1, r2]),
-                k,
-            );
-        }
+        let mut p = row(4);
         p.resize_history(5, 0.0);
         distinct_state(&mut p, 0.5);
         p.r0[2].set_column(0, &Vector2::new(0.3, -0.1));

@@ -2,6 +2,7 @@
 //! instead of after its first step or with an allocation failure: the values of common PETSc options and
 //! the memory the run will need.
 
+use crate::input::BadValue;
 use crate::scenario::{Plan, ScenarioError};
 use nalgebra::Vector2;
 
@@ -45,9 +46,54 @@ const KEYWORDS: [&str; 6] = [
     "petsc_determine",
 ];
 
+/// A refused value of a common PETSc option ([`check_petsc_options`]): the option as written, the value
+/// that follows it (`None`: none does) and what is allowed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OptionError {
+    /// The option as written, e.g. `-fallback_snes_max_it`.
+    pub option: String,
+    /// The value given; `None` when no value follows the option.
+    pub value: Option<String>,
+    /// What the value must be, e.g. `an integer >= 1`.
+    pub allowed: &'static str,
+}
+
+impl std::fmt::Display for OptionError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Self {
+            option, allowed, ..
+        } = self;
+        match &self.value {
+            None => write!(f, "PETSc option {option} needs a value: {allowed}"),
+            Some(value) => write!(
+                f,
+                "PETSc option {option} {value}: the value must be {allowed}"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for OptionError {}
+
+impl OptionError {
+    /// This error as a refused value of the configuration key `key` (e.g. `run.petsc_options`), which
+    /// holds the options string: the option with its value, and what the option's value must be.
+    pub fn at_key(&self, key: &str) -> BadValue {
+        let (option, allowed) = (&self.option, self.allowed);
+        match &self.value {
+            None => BadValue::new(key, option, format!("a value after {option}: {allowed}")),
+            Some(value) => BadValue::new(
+                key,
+                format!("{option} {value}"),
+                format!("the value of {option} must be {allowed}"),
+            ),
+        }
+    }
+}
+
 /// Checks the values of the common numeric PETSc options in `options` (a PETSc options string, e.g.
 /// `-ksp_rtol 1e-6 -snes_max_it 25`); the error names the option, its value and what is allowed.
-pub fn check_petsc_options(options: &str) -> Result<(), String> {
+pub fn check_petsc_options(options: &str) -> Result<(), OptionError> {
     let tokens: Vec<&str> = options.split_whitespace().collect();
     let is_name = |t: &str| {
         t.strip_prefix('-')
@@ -72,8 +118,13 @@ pub fn check_petsc_options(options: &str) -> Result<(), String> {
             Allowed::Count => "an integer >= 1",
             Allowed::NonNegativeCount => "an integer >= 0",
         };
+        let refused = |value: Option<&str>| OptionError {
+            option: (*token).to_owned(),
+            value: value.map(str::to_owned),
+            allowed: what,
+        };
         let Some(value) = value else {
-            return Err(format!("PETSc option {token} needs a value: {what}"));
+            return Err(refused(None));
         };
         if KEYWORDS.contains(&value.to_ascii_lowercase().as_str()) {
             continue;
@@ -88,9 +139,7 @@ pub fn check_petsc_options(options: &str) -> Result<(), String> {
             }
         };
         if !ok {
-            return Err(format!(
-                "PETSc option {token} {value}: the value must be {what}"
-            ));
+            return Err(refused(Some(value)));
         }
     }
     Ok(())
@@ -233,7 +282,7 @@ mod tests {
             ("-ksp_rtol -snes_monitor", "-ksp_rtol needs a value"),
             ("-snes_max_it", "-snes_max_it needs a value"),
         ] {
-            let e = check_petsc_options(bad).expect_err(bad);
+            let e = check_petsc_options(bad).expect_err(bad).to_string();
             assert!(e.contains(needle), "{bad}: {e}");
         }
     }

@@ -11,11 +11,11 @@ use crate::config::{
 };
 use crate::contact::Contact;
 use crate::geometry::{Geometry, Region, Seeding};
-use crate::grid::{Grid, GridError};
-use crate::input::BadValue;
+use crate::grid::Grid;
+use crate::input::{BadValue, shown};
 use crate::material::Material;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
-use crate::particles::{ParticleError, Particles};
+use crate::particles::{ParticleError, Particles, SeedingParameter};
 use crate::space::{Frame, lift3};
 use nalgebra::Vector2;
 use std::collections::HashMap;
@@ -23,16 +23,9 @@ use std::collections::HashMap;
 /// Failure to build a run from a valid configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
-    /// Seeding failed (e.g. a geometry with no material).
-    #[error("{what}: {source}")]
-    Seeding {
-        /// Which body.
-        what: String,
-        /// Cause.
-        source: ParticleError,
-    },
-    /// A value of the configuration that cannot be built: a body's geometry that holds no material
-    /// point, a constraint box that holds no grid node, a plate that cannot be extruded.
+    /// A value of the configuration that cannot be built, named by its key: a body's geometry that holds
+    /// no material point, a cell size or points per cell that cannot seed a body, a grid with too many
+    /// nodes, a constraint box that holds no grid node, a plate that cannot be extruded.
     #[error(transparent)]
     Input(#[from] BadValue),
     /// A body whose material the configuration's checks did not build (a configuration changed after
@@ -42,9 +35,6 @@ pub enum ScenarioError {
         /// Which material (`ct.material`, `body[0]`, ...).
         what: String,
     },
-    /// Grid construction failed.
-    #[error(transparent)]
-    Grid(#[from] GridError),
 }
 
 impl ScenarioError {
@@ -206,10 +196,7 @@ impl Plan<'_> {
                 seeding
                     .count(geometry, gauss)
                     .map(|c| n + c)
-                    .map_err(|source| ScenarioError::Seeding {
-                        what: format!("{key} (`{name}`)"),
-                        source,
-                    })
+                    .map_err(|e| seeder.refused((key, name), e).into())
             })
     }
 
@@ -516,28 +503,47 @@ impl Seeder {
     /// The points of `geometry` with `density`, tagged `body`; `key` and `name` name the body in errors.
     fn points(
         &self,
-        (key, name): (&str, &str),
+        id: (&str, &str),
         geometry: &Geometry,
         density: f64,
         body: u16,
-    ) -> Result<Particles, ScenarioError> {
-        let what = format!("{key} (`{name}`)");
-        let p = (self.seed)(geometry, &self.seeding(density, body))
-            .map_err(|source| ScenarioError::Seeding { what, source })?;
-        if p.is_empty() {
-            return Err(BadValue::new(
+    ) -> Result<Particles, BadValue> {
+        (self.seed)(geometry, &self.seeding(density, body)).map_err(|e| self.refused(id, e))
+    }
+
+    /// The refused value behind the seeding error `e` of the body `key` (its geometry's configuration
+    /// key) named `name`: the body's geometry, or the cell size or points per cell that cannot seed it.
+    fn refused(&self, (key, name): (&str, &str), e: ParticleError) -> BadValue {
+        let body = format!("`{name}`");
+        let ppc = self.ppc;
+        match e {
+            ParticleError::NoPoints => BadValue::new(
                 key,
-                format!("`{name}`"),
+                body,
                 format!(
                     "a geometry that holds a material point at cell size {} mm with {ppc}x{ppc} points \
                      per cell (this one holds none)",
-                    self.h,
-                    ppc = self.ppc
+                    self.h
                 ),
-            )
-            .into());
+            ),
+            ParticleError::InvalidSeeding {
+                parameter: SeedingParameter::CellSize,
+                reason,
+            } => BadValue::new(
+                "grid.cell_size",
+                shown(self.h),
+                format!("a cell size that can seed {key} ({body}): {reason}"),
+            ),
+            ParticleError::InvalidSeeding {
+                parameter: SeedingParameter::PointsPerCell,
+                reason,
+            } => BadValue::new(
+                "shape.points_per_cell",
+                ppc.to_string(),
+                format!("points per cell that can seed {key} ({body}): {reason}"),
+            ),
+            e => BadValue::new(key, body, format!("a body that can be seeded: {e}")),
         }
-        Ok(p)
     }
 
     /// The deformable bodies' points (tagged by body, with their initial velocities) and materials.
@@ -547,11 +553,8 @@ impl Seeder {
         for (tag, body) in bodies.into_iter().enumerate() {
             let id = (body.key.as_str(), body.name.as_str());
             let mut p = self.points(id, &body.geometry, body.density, tag as u16)?;
-            let what = format!("{} (`{}`)", body.key, body.name);
             p.v.iter_mut().for_each(|v| *v = body.velocity);
-            particles
-                .append(&p)
-                .map_err(|source| ScenarioError::Seeding { what, source })?;
+            particles.append(&p).map_err(|e| self.refused(id, e))?;
             materials.push(body.material);
         }
         Ok((particles, materials))
@@ -625,7 +628,15 @@ fn covering_grid(
             own.y
         );
     }
-    Ok(Grid::covering(lo, hi, h, margin)?)
+    Grid::covering(lo, hi, h, margin).map_err(|e| {
+        // The margin or the cell size, whichever makes the most of the grid's cells.
+        let body_cells = ((hi - lo) / h).max();
+        let (key, value) = match 2.0 * margin as f64 >= body_cells {
+            true => ("grid.margin_cells", margin.to_string()),
+            false => ("grid.cell_size", shown(h)),
+        };
+        BadValue::new(key, value, format!("a grid that can be built: {e}")).into()
+    })
 }
 
 /// The node boxes of the `[[constraint]]` sections; each must hold a node of `grid` (cell size `h`, mm).

@@ -14,7 +14,7 @@
 //! geometry.
 
 use crate::geometry::{Body, GeometryError, Seeding};
-use crate::particles::{ParticleError, Particles, lattice};
+use crate::particles::{ParticleError, Particles, SeedingParameter, lattice};
 use nalgebra::{SMatrix, SVector};
 
 impl<const D: usize> Particles<D> {
@@ -22,37 +22,17 @@ impl<const D: usize> Particles<D> {
     /// `geometry`: points at `(i + (a + 1/2)/n) h` per direction, volume `(h/n)^D`, half-edges `h/(2n)`
     /// along the axes. Errors for an invalid geometry or seeding, and when no point is material.
     pub fn seed<B: Body<D>>(geometry: &B, seeding: &Seeding) -> Result<Self, ParticleError> {
-        let Seeding {
-            h,
-            points_per_cell: n,
-            density,
-            body,
-        } = *seeding;
-        let cells = checked_lattice(geometry, seeding)?;
-        let nf = n as f64;
-        let vol0 = (h / nf).powi(D as i32);
-        let r0 = SMatrix::<f64, D, D>::identity() * (h / (2.0 * nf));
-        let mut particles = Self::new();
-        each_point(geometry, seeding, cells, |x| {
-            particles.push(x, vol0, density * vol0, r0, body)
-        });
-        if particles.is_empty() {
-            return Err(ParticleError::NoPoints);
-        }
-        Ok(particles)
+        let vol0 = (seeding.h / seeding.points_per_cell as f64).powi(D as i32);
+        Self::seeded(geometry, seeding, |cells, push| {
+            each_point(geometry, seeding, cells, |x| push(x, vol0))
+        })
     }
 
     /// FEM mode seeding: the `n^D` Gauss points (`n` = 1, 2 or 3) of every lattice cell whose centre is
     /// material, with the Gauss weights times the cell's volume as `V_p^0` (so that sums over points
     /// integrate polynomials of degree `2n - 1` per direction exactly). Half-edges `h/(2n)`.
     pub fn seed_gauss<B: Body<D>>(geometry: &B, seeding: &Seeding) -> Result<Self, ParticleError> {
-        let Seeding {
-            h,
-            points_per_cell: n,
-            density,
-            body,
-        } = *seeding;
-        let cells = checked_lattice(geometry, seeding)?;
+        let (h, n) = (seeding.h, seeding.points_per_cell);
         let g = 1.0 / 3.0_f64.sqrt();
         let q = 0.6_f64.sqrt();
         let rule: &[(f64, f64)] = match n {
@@ -61,18 +41,37 @@ impl<const D: usize> Particles<D> {
             3 => &[(-q, 5.0 / 9.0), (0.0, 8.0 / 9.0), (q, 5.0 / 9.0)],
             _ => {
                 return Err(ParticleError::InvalidSeeding {
+                    parameter: SeedingParameter::PointsPerCell,
                     reason: format!("{n} Gauss points per direction: 1, 2 or 3 are available"),
                 });
             }
         };
-        let r0 = SMatrix::<f64, D, D>::identity() * (h / (2.0 * n as f64));
+        Self::seeded(geometry, seeding, |cells, push| {
+            each_material_cell(geometry, h, cells, |centre| {
+                for sub in lattice::<D>([n; D]) {
+                    let x = centre + SVector::from_fn(|d, _| 0.5 * h * rule[sub[d]].0);
+                    let vol = (0..D).map(|d| rule[sub[d]].1 * 0.5 * h).product::<f64>();
+                    push(x, vol);
+                }
+            })
+        })
+    }
+
+    /// The points of a seeding on the checked lattice of `geometry` ([`checked_lattice`]): `place` hands
+    /// each point's position (mm) and initial volume `V_p^0` (mm^3) to its `push`, which gives it the mass
+    /// `rho V_p^0`, the body tag and half-edges `h/(2n)` along the axes. Errors for an invalid geometry or
+    /// seeding, and when no point is material.
+    fn seeded<B: Body<D>>(
+        geometry: &B,
+        seeding: &Seeding,
+        place: impl FnOnce(([f64; D], [usize; D]), &mut dyn FnMut(SVector<f64, D>, f64)),
+    ) -> Result<Self, ParticleError> {
+        let cells = checked_lattice(geometry, seeding)?;
+        let half_edge = seeding.h / (2.0 * seeding.points_per_cell as f64);
+        let r0 = SMatrix::<f64, D, D>::identity() * half_edge;
         let mut particles = Self::new();
-        each_material_cell(geometry, h, cells, |centre| {
-            for sub in lattice::<D>([n; D]) {
-                let x = centre + SVector::from_fn(|d, _| 0.5 * h * rule[sub[d]].0);
-                let vol = (0..D).map(|d| rule[sub[d]].1 * 0.5 * h).product::<f64>();
-                particles.push(x, vol, density * vol, r0, body);
-            }
+        place(cells, &mut |x, vol| {
+            particles.push(x, vol, seeding.density * vol, r0, seeding.body)
         });
         if particles.is_empty() {
             return Err(ParticleError::NoPoints);
@@ -165,15 +164,24 @@ fn cell_lattice<const D: usize, B: Body<D>>(
         density,
         ..
     } = *seeding;
-    let bad = |reason: String| Err(ParticleError::InvalidSeeding { reason });
+    let bad = |parameter, reason: String| Err(ParticleError::InvalidSeeding { parameter, reason });
     if !(h.is_finite() && h > 0.0) {
-        return bad(format!("cell size h = {h} mm must be positive"));
+        return bad(
+            SeedingParameter::CellSize,
+            format!("cell size h = {h} mm must be positive"),
+        );
     }
     if n == 0 {
-        return bad("points_per_cell must be at least 1".into());
+        return bad(
+            SeedingParameter::PointsPerCell,
+            "points_per_cell must be at least 1".into(),
+        );
     }
     if !(density.is_finite() && density > 0.0) {
-        return bad(format!("density = {density} t/mm^3 must be positive"));
+        return bad(
+            SeedingParameter::Density,
+            format!("density = {density} t/mm^3 must be positive"),
+        );
     }
     let (lo, hi) = geometry
         .bounding_box()
@@ -194,6 +202,7 @@ fn checked_lattice<const D: usize, B: Body<D>>(
         counts.iter().product::<f64>() * (seeding.points_per_cell as f64).powi(D as i32);
     if candidates.is_nan() || candidates > u32::MAX as f64 {
         return Err(ParticleError::InvalidSeeding {
+            parameter: SeedingParameter::CellSize,
             reason: format!("{candidates} candidate points: cell size too small for the geometry"),
         });
     }

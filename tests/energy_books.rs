@@ -44,13 +44,12 @@ fn session() -> SessionGuard {
 }
 
 fn material(gamma_0: f64) -> Material {
-    let cfg: MaterialConfig = toml::from_str(&format!(
+    MaterialConfig::build_toml(&format!(
         "model = \"microplane\"\npreset = \"paper\"\nc = 9.0\n\
          gradient_activity = {{ kind = \"localizing\", residual = 0.45, decay = 0.0 }}\n\
          gamma_0 = {gamma_0:e}\n"
     ))
-    .expect("material");
-    cfg.build().expect("valid material")
+    .expect("valid material")
 }
 
 fn bar(method: Method) -> Setup {

@@ -1,5 +1,6 @@
 //! Inputs a hostile user tries, on the real binary and a tiny CT specimen (360 points): extreme finite
-//! values, vectors of the wrong length, a self-crossing polygon, a grid coarser than the bodies, options
+//! values, vectors of the wrong length, a self-crossing polygon, a grid coarser than the bodies, a grid
+//! with too many nodes, a body that holds no point, options
 //! named as the user typed them, whole tables replaced by `--set`, corrupt or locked run directories for
 //! `crack` and `--resume`, `material-driver`'s output and configuration, and clap's usage errors. Each is
 //! refused with exit code 2 and one line (two for a usage error: the error and where the help is), and
@@ -106,6 +107,23 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
                 "`body[0]` is an entry of [[body]]",
                 "--set body[0].name=...",
             ],
+        ),
+        (
+            "block.toml",
+            vec!["--allow-large", "--set", "grid.margin_cells=100000000"],
+            vec![
+                "`grid.margin_cells` = 100000000",
+                "200000005 x 200000005 cells",
+                "too many nodes",
+            ],
+        ),
+        (
+            "block.toml",
+            vec![
+                "--set",
+                "body[0].geometry.exclude=[{type=\"rect\",min=[-1.0,-1.0],max=[11.0,11.0]}]",
+            ],
+            vec!["`body[0].geometry` = `b`", "(this one holds none)"],
         ),
         (
             "block.toml",

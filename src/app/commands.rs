@@ -34,17 +34,12 @@ pub fn crack(run_dir: &Path, petsc_args: &[String]) -> Result<()> {
         other => other.into(),
     })?;
     for s in &states {
-        let bands: Vec<String> = s
-            .bands
-            .iter()
-            .map(|b| format!("{:.0}", b.angle_degrees))
-            .collect();
         println!(
             "t = {:8.1} us: {:<10} length {:6.1} mm, bands [{}] deg, band width {:.1} mm (max {:.1})",
             s.time * 1e6,
             s.classification,
             s.length,
-            bands.join(", "),
+            s.band_angles(),
             s.band_width,
             s.band_width_max
         );

@@ -152,8 +152,10 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         overrides.push(format!("run.steps={n}"));
     }
     let (cfg, effective) = RunConfig::load(path, &overrides).map_err(bad)?;
-    preflight::check_petsc_options(&cfg.run.petsc_options)
-        .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
+    preflight::check_petsc_options(&cfg.run.petsc_options).map_err(|e| {
+        let label = config::source_label(&file, &overrides);
+        bad(ConfigError::in_file(&label, e.at_key("run.petsc_options")))
+    })?;
     let command_options = petsc_args[1..].join(" ");
     preflight::check_petsc_options(&command_options)
         .map_err(|e| bad(format!("command line: {e}")))?;

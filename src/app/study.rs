@@ -176,7 +176,7 @@ pub fn check_sets(config: &Path, sets: &[OptionSet], sets_file: &Path) -> Result
         let (cfg, _) = crate::config::RunConfig::load(config, &set.overrides)
             .map_err(|e| format!("{at}: {e}"))?;
         crate::preflight::check_petsc_options(&cfg.run.petsc_options)
-            .map_err(|e| format!("{at}: run.petsc_options: {e}"))?;
+            .map_err(|e| format!("{at}: {}", e.at_key("run.petsc_options")))?;
     }
     Ok(())
 }
@@ -637,41 +637,46 @@ mod tests {
                 line: 1,
             }
         );
-        for (line, needle) in [
-            ("a: --sets x=1\n", "`--sets` is no option of a set line"),
-            ("a: --set\n", "--set needs a value"),
+        // (file, where the error points, what it says)
+        let set_a = "sets.txt:1: set `a`";
+        for (text, at, needle) in [
+            (
+                "a: --sets x=1\n",
+                set_a,
+                "`--sets` is no option of a set line",
+            ),
+            ("a: --set\n", set_a, "--set needs a value"),
             (
                 "a: --set grid.cell_size\n",
+                set_a,
                 "--set grid.cell_size: expected key=value",
             ),
-            ("a: --steps 0\n", "--steps 0: a number of steps >= 1"),
-            ("a: grid.cell_size=1\n", "`grid.cell_size=1` is no option"),
+            ("a: --steps 0\n", set_a, "--steps 0: a number of steps >= 1"),
+            (
+                "a: grid.cell_size=1\n",
+                set_a,
+                "`grid.cell_size=1` is no option",
+            ),
+            (
+                "a: -pc_type lu\nb: -pc_type ilu\na: -pc_type jacobi\n",
+                "sets.txt:3",
+                "\"a\" is already used on line 1",
+            ),
+            (
+                "a: -ksp_type gmres -ksp_rtol -5\n",
+                "sets.txt:1",
+                "-ksp_rtol -5",
+            ),
+            (
+                "no colon here\n",
+                "sets.txt:1",
+                "name: [--set key=value ...] -petsc",
+            ),
         ] {
-            std::fs::write(&p, line).expect("write");
+            std::fs::write(&p, text).expect("write");
             let e = read_sets(&p).unwrap_err();
-            assert!(
-                e.contains("sets.txt:1: set `a`") && e.contains(needle),
-                "{e}"
-            );
+            assert!(e.contains(at) && e.contains(needle), "{e}");
         }
-        std::fs::write(&p, "a: -pc_type lu\nb: -pc_type ilu\na: -pc_type jacobi\n").expect("write");
-        let e = read_sets(&p).unwrap_err();
-        assert!(
-            e.contains("sets.txt:3") && e.contains("\"a\" is already used on line 1"),
-            "{e}"
-        );
-        std::fs::write(&p, "a: -ksp_type gmres -ksp_rtol -5\n").expect("write");
-        let e = read_sets(&p).unwrap_err();
-        assert!(
-            e.contains("sets.txt:1") && e.contains("-ksp_rtol -5"),
-            "{e}"
-        );
-        std::fs::write(&p, "no colon here\n").expect("write");
-        let e = read_sets(&p).unwrap_err();
-        assert!(
-            e.contains("sets.txt:1") && e.contains("name: [--set key=value ...] -petsc"),
-            "{e}"
-        );
         std::fs::remove_dir_all(&dir).ok();
     }
 

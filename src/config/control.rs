@@ -1,6 +1,7 @@
 //! The run-control sections: `[run]`, `[time]`, `[grid]`, `[shape]` and `[extrusion]`, with their checks.
 
 use super::{Check, ConfigError, shown};
+use crate::input::serde_defaults;
 use crate::model::{InitialAcceleration, Method};
 use crate::shape::ShapeKind;
 use serde::Deserialize;
@@ -38,8 +39,8 @@ pub struct RunSection {
     pub petsc_options: String,
 }
 
-fn default_output_every() -> usize {
-    100
+serde_defaults! {
+    default_output_every: usize = 100;
 }
 
 /// `[time]`
@@ -65,14 +66,10 @@ pub struct TimeSection {
     pub initial_acceleration: InitialAcceleration,
 }
 
-fn default_dt() -> f64 {
-    1e-6
-}
-fn default_beta() -> f64 {
-    0.25
-}
-fn default_gamma() -> f64 {
-    0.5
+serde_defaults! {
+    default_dt: f64 = 1e-6;
+    default_beta: f64 = 0.25;
+    default_gamma: f64 = 0.5;
 }
 
 impl Default for TimeSection {
@@ -108,12 +105,9 @@ pub struct GridSection {
     pub rotation: f64,
 }
 
-fn default_mass_tolerance() -> f64 {
-    1e-6
-}
-
-fn default_margin() -> usize {
-    3
+serde_defaults! {
+    default_mass_tolerance: f64 = 1e-6;
+    default_margin: usize = 3;
 }
 
 /// `[shape]`
@@ -132,11 +126,9 @@ pub struct ShapeSection {
     pub method: Method,
 }
 
-fn default_kind() -> ShapeKind {
-    ShapeKind::Cpdi1
-}
-fn default_ppc() -> usize {
-    2
+serde_defaults! {
+    default_kind: ShapeKind = ShapeKind::Cpdi1;
+    default_ppc: usize = 2;
 }
 
 impl Default for ShapeSection {
@@ -199,89 +191,82 @@ impl TimeSection {
     /// Checks `[time]`.
     pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
         let (lo, hi) = super::DT_RANGE;
-        if !(self.dt.is_finite() && self.dt >= lo && self.dt <= hi) {
-            return Err(c.bad(
-                "time.dt",
-                shown(self.dt),
-                "a time step in [1e-12, 1000] s (the CT demo takes 1e-6)",
-            ));
-        }
-        if let Some(m) = self.dt_min
-            && !(m >= lo && m <= self.dt)
-        {
-            return Err(c.bad(
+        c.ensure(
+            self.dt.is_finite() && self.dt >= lo && self.dt <= hi,
+            "time.dt",
+            shown(self.dt),
+            "a time step in [1e-12, 1000] s (the CT demo takes 1e-6)",
+        )?;
+        if let Some(m) = self.dt_min {
+            c.ensure(
+                m >= lo && m <= self.dt,
                 "time.dt_min",
                 shown(m),
                 "1e-12 <= dt_min <= dt (s): the smallest step of the retry halving",
-            ));
+            )?;
         }
-        if !(self.beta > 0.0 && self.beta <= 0.5) {
-            return Err(c.bad(
-                "time.beta",
-                shown(self.beta),
-                "Newmark beta in (0, 0.5]; 0 (explicit) is not supported",
-            ));
-        }
-        if !(0.5..=1.0).contains(&self.gamma) {
-            return Err(c.bad("time.gamma", shown(self.gamma), "Newmark gamma in [0.5, 1]"));
-        }
-        Ok(())
+        c.ensure(
+            self.beta > 0.0 && self.beta <= 0.5,
+            "time.beta",
+            shown(self.beta),
+            "Newmark beta in (0, 0.5]; 0 (explicit) is not supported",
+        )?;
+        c.ensure(
+            (0.5..=1.0).contains(&self.gamma),
+            "time.gamma",
+            shown(self.gamma),
+            "Newmark gamma in [0.5, 1]",
+        )
     }
 }
 
 impl GridSection {
     /// Checks `[grid]`.
     pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
-        if !(self.cell_size.is_finite() && self.cell_size > 0.0) {
-            return Err(c.bad(
-                "grid.cell_size",
-                shown(self.cell_size),
-                "a cell size > 0 (mm)",
-            ));
-        }
-        if !(0.0..1e-2).contains(&self.mass_tolerance) {
-            return Err(c.bad(
-                "grid.mass_tolerance",
-                shown(self.mass_tolerance),
-                "a fraction in [0, 0.01)",
-            ));
-        }
-        if !(self.rotation.is_finite() && self.rotation.abs() <= 360.0) {
-            return Err(c.bad(
-                "grid.rotation",
-                self.rotation.to_string(),
-                "an angle from -360 to 360 (degrees)",
-            ));
-        }
-        Ok(())
+        c.ensure(
+            self.cell_size.is_finite() && self.cell_size > 0.0,
+            "grid.cell_size",
+            shown(self.cell_size),
+            "a cell size > 0 (mm)",
+        )?;
+        c.ensure(
+            (0.0..1e-2).contains(&self.mass_tolerance),
+            "grid.mass_tolerance",
+            shown(self.mass_tolerance),
+            "a fraction in [0, 0.01)",
+        )?;
+        c.ensure(
+            self.rotation.is_finite() && self.rotation.abs() <= 360.0,
+            "grid.rotation",
+            self.rotation.to_string(),
+            "an angle from -360 to 360 (degrees)",
+        )
     }
 }
 
 impl ShapeSection {
     /// Checks `[shape]`.
     pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
-        if self.points_per_cell == 0 || self.points_per_cell > 8 {
-            return Err(c.bad(
-                "shape.points_per_cell",
-                self.points_per_cell.to_string(),
-                "1 to 8 points per direction",
-            ));
-        }
+        let ppc = self.points_per_cell;
+        c.ensure(
+            (1..=8).contains(&ppc),
+            "shape.points_per_cell",
+            ppc.to_string(),
+            "1 to 8 points per direction",
+        )?;
         if self.method == Method::Fem {
-            if self.kind != ShapeKind::Linear {
-                return Err(c.bad(
-                    "shape.kind",
-                    self.kind.name().into(),
-                    "\"linear\" with method = \"fem\" (bilinear elements)",
-                ));
-            }
-            if !(1..=3).contains(&self.points_per_cell) {
-                return Err(c.bad(
-                    "shape.points_per_cell",
-                    self.points_per_cell.to_string(),
-                    "1, 2 or 3 Gauss points per direction with method = \"fem\"",
-                ));
-            }
+            c.ensure(
+                self.kind == ShapeKind::Linear,
+                "shape.kind",
+                self.kind.name().into(),
+                "\"linear\" with method = \"fem\" (bilinear elements)",
+            )?;
+            c.ensure(
+                (1..=3).contains(&ppc),
+                "shape.points_per_cell",
+                ppc.to_string(),
+                "1, 2 or 3 Gauss points per direction with method = \"fem\"",
+            )?;
         }
         Ok(())
     }

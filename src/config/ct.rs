@@ -4,6 +4,7 @@ use super::choice::Choice;
 use super::{
     Check, ConfigError, DENSITY_ALLOWED, SPEED_MAX, TIME_ALLOWED, density_ok, shown, time_ok,
 };
+use crate::input::serde_defaults;
 use crate::material::{ElasticConfig, Material, MaterialConfig};
 use serde::Deserialize;
 
@@ -160,30 +161,17 @@ impl CtSection {
     }
 }
 
-fn ct_width() -> f64 {
-    200.0
+serde_defaults! {
+    ct_width: f64 = 200.0;
+    ct_height: f64 = 200.0;
+    ct_notch_length: f64 = 110.0;
+    ct_notch_width: f64 = 10.0;
+    ct_load_zone: [f64; 2] = [0.0, 30.0];
+    ct_plate_thickness: f64 = 2.0;
+    ct_density: f64 = 2.4e-9;
+    ct_insert_density: f64 = 7.85e-9;
 }
-fn ct_height() -> f64 {
-    200.0
-}
-fn ct_notch_length() -> f64 {
-    110.0
-}
-fn ct_notch_width() -> f64 {
-    10.0
-}
-fn ct_load_zone() -> [f64; 2] {
-    [0.0, 30.0]
-}
-fn ct_plate_thickness() -> f64 {
-    2.0
-}
-fn ct_density() -> f64 {
-    2.4e-9
-}
-fn ct_insert_density() -> f64 {
-    7.85e-9
-}
+
 fn ct_insert_material() -> MaterialConfig {
     MaterialConfig::NeoHookean(ElasticConfig {
         youngs_modulus: Some(210_000.0),

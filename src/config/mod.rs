@@ -110,6 +110,20 @@ impl Check<'_> {
         }
     }
 
+    /// `Ok` where `ok` holds, else the error of `field` = `value` ([`Check::bad`]).
+    fn ensure(
+        self,
+        ok: bool,
+        field: &str,
+        value: String,
+        allowed: &str,
+    ) -> Result<(), ConfigError> {
+        match ok {
+            true => Ok(()),
+            false => Err(self.bad(field, value, allowed)),
+        }
+    }
+
     /// The error of the material of the table `section` (e.g. `ct.material`): a parameter out of its
     /// range is named by its full key and value, other errors by the table.
     fn material(self, section: &str, e: &MaterialError) -> ConfigError {

@@ -24,17 +24,12 @@
 use serde::{Deserialize, Serialize};
 
 use super::{MaterialError, invalid};
+use crate::input::serde_defaults;
 
-fn default_residual() -> f64 {
-    0.01
-}
-
-fn default_decay() -> f64 {
-    5.0
-}
-
-fn default_exponent() -> f64 {
-    1.0
+serde_defaults! {
+    default_residual: f64 = 0.01;
+    default_decay: f64 = 5.0;
+    default_exponent: f64 = 1.0;
 }
 
 /// How the gradient activity `c` evolves; `c_0` is the material's `c` (mm^2).

@@ -162,6 +162,9 @@ pub enum MaterialError {
     /// Invalid arguments of a material-point path.
     #[error("material-point driver: {0}")]
     DriverArgument(String),
+    /// A material section given as text does not parse (unknown model or key, wrong type).
+    #[error("material section: {0}")]
+    Section(String),
 }
 
 /// The error of a parameter `field` (config key) whose `value` lies outside the range `allowed`.
@@ -485,6 +488,14 @@ impl MaterialConfig {
             }
             MaterialConfig::IsotropicDamage(c) => Material::IsotropicDamage(c.build()?),
         })
+    }
+
+    /// The material of a section given as TOML text (`model = "svk"\nyoungs_modulus = 100.0 ...`),
+    /// built ([`MaterialConfig::build`]): for tests, examples and studies that write a law inline.
+    pub fn build_toml(text: &str) -> Result<Material, MaterialError> {
+        let cfg: MaterialConfig = toml::from_str(text)
+            .map_err(|e| MaterialError::Section(e.message().trim().replace('\n', " ")))?;
+        cfg.build()
     }
 }
 

@@ -325,17 +325,26 @@ fn shape_undeformed_seeded_points_have_compact_supports() {
     )
     .unwrap();
     let mut table = ShapeTable::new();
-    for (kind, expected) in [
-        (ShapeKind::Linear, 4),
-        (ShapeKind::Gimp, 4),
-        (ShapeKind::Cpdi1, 4),
-        (ShapeKind::Cpdi2, 4),
-        (ShapeKind::Bspline2, 9),
-    ] {
-        table.compute(kind, &grid(), &ps).unwrap();
-        assert!(table.iter().all(|(_, ws)| ws.len() == expected), "{kind:?}");
+    for kind in ShapeKind::ALL {
+        assert_compact_supports(kind, &mut table, &grid(), &ps);
         check_invariants(kind, &grid(), &ps, &ps.x);
     }
+}
+
+/// The supports of undeformed points whose domains lie on grid lines: the `2^D` nodes of the owning
+/// cell for every interpolator but the quadratic B-spline, which reaches `3^D` nodes.
+fn assert_compact_supports<const D: usize>(
+    kind: ShapeKind,
+    table: &mut ShapeTable<D>,
+    grid: &Grid<D>,
+    ps: &Particles<D>,
+) {
+    table.compute(kind, grid, ps).unwrap();
+    let expected = match kind {
+        ShapeKind::Bspline2 => 3_usize.pow(D as u32),
+        _ => 1 << D,
+    };
+    assert!(table.iter().all(|(_, ws)| ws.len() == expected), "{kind:?}");
 }
 
 #[test]
@@ -491,16 +500,9 @@ fn shape_3d_seeded_supports_and_out_of_grid_errors() {
         .collect();
     let ps = points(&xs, Matrix3::identity());
     let mut table = ShapeTable::new();
-    for (kind, expected) in [
-        (ShapeKind::Linear, 8),
-        (ShapeKind::Gimp, 8),
-        (ShapeKind::Cpdi1, 8),
-        (ShapeKind::Cpdi2, 8),
-        (ShapeKind::Bspline2, 27),
-    ] {
-        table.compute(kind, &g, &ps).unwrap();
+    for kind in ShapeKind::ALL {
+        assert_compact_supports(kind, &mut table, &g, &ps);
         assert_eq!(table.stride(), kind.max_support::<3>());
-        assert!(table.iter().all(|(_, ws)| ws.len() == expected), "{kind:?}");
     }
     let out = points(
         &[g.upper() - Vector3::new(1.0, 1.0, 0.1 * H)],

@@ -22,8 +22,7 @@ use nalgebra::Vector2;
 
 /// A constitutive law from its TOML section.
 pub fn material(toml_text: &str) -> Material {
-    let cfg: MaterialConfig = toml::from_str(toml_text).expect("material config");
-    cfg.build().expect("valid material")
+    MaterialConfig::build_toml(toml_text).expect("valid material")
 }
 
 /// The PETSc session with the solver `options` (a PETSc options string, usually under the test's own

@@ -290,60 +290,67 @@ impl Report {
     }
 }
 
+/// Appends a Markdown table: `header` (the line of column names and the rule under it) and one line per
+/// row of `rows`, its cells joined by ` | `.
+fn markdown_table(s: &mut String, header: &str, rows: impl IntoIterator<Item = Vec<String>>) {
+    s.push_str(header);
+    for row in rows {
+        let _ = writeln!(s, "| {} |", row.join(" | "));
+    }
+}
+
 /// Appends the table of a history reference: one row per column.
 fn history_table(s: &mut String, file: &str, rows: usize, columns: &[ColumnReport]) {
     let _ = writeln!(s, "\n{file}: history reference, {rows} rows\n");
-    s.push_str("| column | rel. L2 | rel. max | largest error at t (s) | peak ref @ t (s) | peak run @ t (s) | |\n|---|---|---|---|---|---|---|\n");
-    for c in columns {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} @ {} | {} @ {} | {} |",
-            c.column,
-            num(c.rel_l2),
-            num(c.rel_max),
-            num(c.max_error_time),
-            num(c.peak_reference.value),
-            num(c.peak_reference.time),
-            num(c.peak_run.value),
-            num(c.peak_run.time),
-            ok(c.passed)
-        );
-    }
+    let header = "| column | rel. L2 | rel. max | largest error at t (s) | peak ref @ t (s) | peak run @ t (s) | |\n|---|---|---|---|---|---|---|\n";
+    let at = |p: &Peak| format!("{} @ {}", num(p.value), num(p.time));
+    markdown_table(
+        s,
+        header,
+        columns.iter().map(|c| {
+            vec![
+                c.column.clone(),
+                num(c.rel_l2),
+                num(c.rel_max),
+                num(c.max_error_time),
+                at(&c.peak_reference),
+                at(&c.peak_run),
+                ok(c.passed).into(),
+            ]
+        }),
+    );
 }
 
 /// Appends the tables of a point reference: one row per group, then one row per point.
 fn point_table(s: &mut String, file: &str, rows: usize, groups: &[GroupReport]) {
     let _ = writeln!(s, "\n{file}: point reference, {rows} rows\n");
-    s.push_str("| quantity | t (s) | snapshot | points | scale | rel. L2 | rel. max | |\n|---|---|---|---|---|---|---|---|\n");
-    for g in groups {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} ({} s) | {} | {} | {} | {} | {} |",
-            g.quantity,
+    let header = "| quantity | t (s) | snapshot | points | scale | rel. L2 | rel. max | |\n|---|---|---|---|---|---|---|---|\n";
+    let group_rows = groups.iter().map(|g| {
+        vec![
+            g.quantity.clone(),
             num(g.time),
-            g.snapshot,
-            num(g.snapshot_time),
-            g.points.len(),
+            format!("{} ({} s)", g.snapshot, num(g.snapshot_time)),
+            g.points.len().to_string(),
             num(g.scale),
             num(g.rel_l2),
             num(g.rel_max),
-            ok(g.passed)
-        );
-    }
-    s.push_str("\n| quantity | t (s) | x (mm) | y (mm) | reference | run | error / scale |\n|---|---|---|---|---|---|---|\n");
-    for g in groups {
-        for p in &g.points {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {} | {} | {} | {} |",
-                g.quantity,
+            ok(g.passed).into(),
+        ]
+    });
+    markdown_table(s, header, group_rows);
+    let header = "\n| quantity | t (s) | x (mm) | y (mm) | reference | run | error / scale |\n|---|---|---|---|---|---|---|\n";
+    let point_rows = groups.iter().flat_map(|g| {
+        g.points.iter().map(|p| {
+            vec![
+                g.quantity.clone(),
                 num(g.time),
                 short(p.x),
                 short(p.y),
                 num(p.reference),
                 num(p.run),
-                num(p.error)
-            );
-        }
-    }
+                num(p.error),
+            ]
+        })
+    });
+    markdown_table(s, header, point_rows);
 }

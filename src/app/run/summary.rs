@@ -84,20 +84,13 @@ fn summary_results(out: &RunOutput) {
         }
     }
     if let Some(c) = out.cracks().last() {
-        let angles: Vec<String> = c
-            .bands
-            .iter()
-            .map(|b| format!("{:.0} deg", b.angle_degrees))
-            .collect();
+        let angles = match c.bands.is_empty() {
+            true => "-".to_owned(),
+            false => format!("{} deg", c.band_angles()),
+        };
         println!(
-            "| crack | {} (length {:.1} mm, bands at {}; criteria in crack.json) |",
-            c.classification,
-            c.length,
-            if angles.is_empty() {
-                "-".to_owned()
-            } else {
-                angles.join(", ")
-            }
+            "| crack | {} (length {:.1} mm, bands at {angles}; criteria in crack.json) |",
+            c.classification, c.length,
         );
     }
     println!("| output | {} |", out.dir().display());
