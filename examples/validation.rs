@@ -1,0 +1,277 @@
+//! Post-processing of the benchmark runs of `docs/validation.md`: reads a finished run of a configuration in
+//! `configs/benchmarks/` (its `history.csv` and last `fields_*.h5`), converts the load set's reaction to
+//! the specimen's load in kN, draws the load-displacement curve with the reference range and the final
+//! damage map, measures the crack path, and prints the rows of the comparison tables.
+//!
+//! ```sh
+//! mpm-concrete run configs/benchmarks/l-panel.toml --output runs/l-panel
+//! cargo run --release --example validation -- l-panel runs/l-panel --out docs/img
+//! mpm-concrete run configs/benchmarks/petersson-3pb.toml --output runs/petersson-3pb
+//! cargo run --release --example validation -- petersson-3pb runs/petersson-3pb --out docs/img
+//! ```
+//!
+//! Writes `<out>/validation-<bench>-force.png`, `<out>/validation-<bench>-damage.png` and
+//! `<out>/validation-<bench>.json`. Units: mm, N (kN in the tables and plots), MPa.
+
+use mpm_concrete::plot::{LinePlot, ScatterField};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+/// Damage from which a point counts as cracked (the crack metrics of the CT use the same threshold).
+const CRACKED: f64 = 0.9;
+
+/// A benchmark: how its load set's history becomes the specimen's load and displacement, and its
+/// reference peak load.
+struct Bench {
+    /// Name of the configuration (`configs/benchmarks/<name>.toml`).
+    name: &'static str,
+    /// Specimen load in kN per N/mm of the plane run's `load_fy` (thickness, symmetry and sign).
+    force_scale: f64,
+    /// Sign that makes the load point's displacement positive.
+    displacement_sign: f64,
+    /// Reference range of the peak load (kN) and its legend entry.
+    reference_peak: (f64, f64, &'static str),
+    /// x-axis label of the load-displacement plot.
+    x_label: &'static str,
+    /// Cell size of the configuration (mm): strips of the crack path and the map's squares.
+    h: f64,
+    /// The crack path's strips (see [`crack_path`]): axis, from, to (mm), and the table's heading.
+    path: (usize, f64, f64, &'static str),
+}
+
+const BENCHES: [Bench; 2] = [
+    Bench {
+        name: "l-panel",
+        force_scale: 100.0 / 1000.0,
+        displacement_sign: 1.0,
+        reference_peak: (6.0, 8.0, "experimental peak range (Winkler et al.)"),
+        x_label: "upward displacement of the load point [mm]",
+        h: 5.0,
+        // From the re-entrant corner (250, 250) towards the panel's left face, in vertical strips.
+        path: (
+            0,
+            250.0,
+            0.0,
+            "| x [mm] | cracked y from [mm] | mean y [mm] | to [mm] |",
+        ),
+    },
+    Bench {
+        name: "petersson-3pb",
+        force_scale: -2.0 * 50.0 / 1000.0,
+        displacement_sign: -1.0,
+        reference_peak: (0.75, 0.80, "experimental peak range (Petersson)"),
+        x_label: "load-point deflection [mm]",
+        h: 5.0,
+        // From the notch tip (1000, 100) up the beam, in horizontal strips.
+        path: (
+            1,
+            100.0,
+            200.0,
+            "| y [mm] | cracked x from [mm] | mean x [mm] | to [mm] |",
+        ),
+    },
+];
+
+/// The columns `names` of a run's `history.csv`, one vector per name.
+fn history(dir: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
+    let path = dir.join("history.csv");
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.is_empty());
+    let header: Vec<&str> = lines
+        .next()
+        .ok_or("empty history.csv")?
+        .split(',')
+        .collect();
+    let index: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            header
+                .iter()
+                .position(|h| h == n)
+                .ok_or_else(|| format!("{}: no column `{n}`", path.display()))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    let mut columns = vec![Vec::new(); names.len()];
+    for line in lines {
+        let cells: Vec<&str> = line.split(',').collect();
+        for (c, &k) in columns.iter_mut().zip(&index) {
+            c.push(cells.get(k).ok_or("short row")?.parse::<f64>()?);
+        }
+    }
+    Ok(columns)
+}
+
+/// Positions (x, y) and damage of the points in the run's last snapshot.
+fn last_snapshot(dir: &Path) -> Result<(Vec<[f64; 2]>, Vec<f64>, PathBuf)> {
+    let mut snapshots: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("fields_") && n.ends_with(".h5"))
+        })
+        .collect();
+    snapshots.sort();
+    let path = snapshots.pop().ok_or("no fields_*.h5 in the run")?;
+    let file = hdf5_metno::File::open(&path)?;
+    let damage: Vec<f64> = file.dataset("damage")?.read_raw()?;
+    let position: Vec<f64> = file.dataset("position")?.read_raw()?;
+    if position.len() != 3 * damage.len() {
+        return Err(format!("{}: position is not 3 values per point", path.display()).into());
+    }
+    let x = position.chunks_exact(3).map(|p| [p[0], p[1]]).collect();
+    Ok((x, damage, path))
+}
+
+/// The crack path, strip by strip across the crack: for every strip of one cell (its centre along
+/// `axis`, mm) between `from` and `to` that holds cracked points, the smallest, mean and largest
+/// coordinate of those points in the other direction (mm). `axis` 0: vertical strips (a crack running
+/// along x, the L-panel's), 1: horizontal strips (the beam's crack running up).
+fn crack_path(
+    x: &[[f64; 2]],
+    damage: &[f64],
+    h: f64,
+    axis: usize,
+    from: f64,
+    to: f64,
+) -> Vec<[f64; 4]> {
+    let other = 1 - axis;
+    let mut strips = Vec::new();
+    let mut c = from.min(to) + 0.5 * h;
+    while c < from.max(to) {
+        let across: Vec<f64> = x
+            .iter()
+            .zip(damage)
+            .filter(|(p, d)| **d >= CRACKED && (p[axis] - c).abs() < 0.5 * h)
+            .map(|(p, _)| p[other])
+            .collect();
+        if !across.is_empty() {
+            let mean = across.iter().sum::<f64>() / across.len() as f64;
+            let lo = across.iter().copied().fold(f64::MAX, f64::min);
+            let hi = across.iter().copied().fold(f64::MIN, f64::max);
+            strips.push([c, lo, mean, hi]);
+        }
+        c += h;
+    }
+    if from > to {
+        strips.reverse();
+    }
+    strips
+}
+
+/// The load-displacement curve of a run (mm, kN), from the origin, and the run's counts: steps, Newton
+/// iterations, summed wall time (s), final damage dissipation (N mm per mm thickness).
+fn load_curve(bench: &Bench, dir: &Path) -> Result<(Vec<(f64, f64)>, [f64; 4])> {
+    let names = [
+        "load_uy",
+        "load_fy",
+        "newton_its",
+        "wall_total",
+        "damage_dissipation",
+    ];
+    let cols = history(dir, &names)?;
+    let curve = std::iter::once((0.0, 0.0))
+        .chain(
+            cols[0]
+                .iter()
+                .zip(&cols[1])
+                .map(|(u, f)| (bench.displacement_sign * u, bench.force_scale * f)),
+        )
+        .collect();
+    let counts = [
+        cols[0].len() as f64,
+        cols[2].iter().sum(),
+        cols[3].iter().sum(),
+        cols[4].last().copied().unwrap_or(0.0),
+    ];
+    Ok((curve, counts))
+}
+
+/// Plots, tables and the JSON summary of the run in `dir` into `out`.
+fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
+    let name = bench.name;
+    let (curve, [steps, newton, wall, dissipation]) = load_curve(bench, dir)?;
+    let (u_peak, f_peak) = curve
+        .iter()
+        .copied()
+        .fold((0.0, f64::MIN), |a, p| if p.1 > a.1 { p } else { a });
+    let (u_end, f_end) = *curve.last().ok_or("no steps")?;
+    let (lo, hi, label) = bench.reference_peak;
+    LinePlot::new(
+        format!("{name}: load against displacement"),
+        bench.x_label,
+        "load [kN]",
+    )
+    .with_series("this code (plane strain, 5 mm cells)", curve)
+    .with_series(format!("{label}: {lo} kN"), vec![(0.0, lo), (u_end, lo)])
+    .with_series(format!("{label}: {hi} kN"), vec![(0.0, hi), (u_end, hi)])
+    .save_png(out.join(format!("validation-{name}-force.png")))?;
+    let (x, damage, snapshot) = last_snapshot(dir)?;
+    ScatterField {
+        title: format!("{name}: damage at {u_end:.3} mm"),
+        x: x.iter().map(|p| p[0]).collect(),
+        y: x.iter().map(|p| p[1]).collect(),
+        value: damage.clone(),
+        value_label: "damage [-]".into(),
+        range: Some((0.0, 1.0)),
+        point_size: 0.5 * bench.h,
+    }
+    .save_png(out.join(format!("validation-{name}-damage.png")))?;
+    let (axis, from, to, heading) = bench.path;
+    let strips = crack_path(&x, &damage, bench.h, axis, from, to);
+    println!(
+        "{name}: peak {f_peak:.3} kN at {u_peak:.4} mm (reference {lo}-{hi} kN); end {f_end:.3} kN at \
+         {u_end:.4} mm; {steps} steps, {newton} Newton iterations, wall {wall:.0} s; damage dissipation \
+         {dissipation:.3} N mm/mm; snapshot {}",
+        snapshot.display()
+    );
+    println!("{heading}\n|---|---|---|---|");
+    for r in &strips {
+        println!("| {:.1} | {:.1} | {:.1} | {:.1} |", r[0], r[1], r[2], r[3]);
+    }
+    let strips: Vec<_> = strips
+        .iter()
+        .map(|r| json!({"centre": r[0], "min": r[1], "mean": r[2], "max": r[3]}))
+        .collect();
+    let summary = json!({
+        "benchmark": name,
+        "run": dir.display().to_string(),
+        "units": "kN, mm, N mm per mm thickness, s",
+        "peak_load": f_peak,
+        "displacement_at_peak": u_peak,
+        "end": {"displacement": u_end, "load": f_end},
+        "reference_peak_range": [lo, hi],
+        "steps": steps,
+        "newton_iterations": newton,
+        "wall_time_sum": wall,
+        "damage_dissipation": dissipation,
+        "crack_path": {"strips_along": if axis == 0 { "x" } else { "y" }, "strips": strips},
+    });
+    let path = out.join(format!("validation-{name}.json"));
+    std::fs::write(path, serde_json::to_string_pretty(&summary)? + "\n")?;
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let usage = "usage: validation <l-panel|petersson-3pb> RUN_DIR [--out DIR]";
+    let (name, dir) = match (args.first(), args.get(1)) {
+        (Some(n), Some(d)) => (n.as_str(), PathBuf::from(d)),
+        _ => return Err(usage.into()),
+    };
+    let out = match args.get(2).map(String::as_str) {
+        Some("--out") => PathBuf::from(args.get(3).ok_or(usage)?),
+        Some(other) => return Err(format!("unknown argument `{other}`; {usage}").into()),
+        None => dir.clone(),
+    };
+    let bench = BENCHES
+        .iter()
+        .find(|b| b.name == name)
+        .ok_or_else(|| format!("unknown benchmark `{name}`; {usage}"))?;
+    std::fs::create_dir_all(&out)?;
+    report(bench, &dir, &out)
+}
