@@ -163,9 +163,12 @@ fn crack_path(
     strips
 }
 
-/// The load-displacement curve of a run (mm, kN), from the origin, and the run's counts: steps, Newton
-/// iterations, summed wall time (s), final damage dissipation (N mm per mm thickness).
-fn load_curve(bench: &Bench, dir: &Path) -> Result<(Vec<(f64, f64)>, [f64; 4])> {
+/// A load-displacement curve (mm, kN) and the run's counts: steps, Newton iterations, summed wall time
+/// (s), final damage dissipation (N mm per mm thickness).
+type Curve = (Vec<(f64, f64)>, [f64; 4]);
+
+/// The load-displacement curve of a run, from the origin, with the run's counts.
+fn load_curve(bench: &Bench, dir: &Path) -> Result<Curve> {
     let names = [
         "load_uy",
         "load_fy",
