@@ -97,6 +97,14 @@ pub enum GeometryError {
         /// What is wrong.
         reason: String,
     },
+    /// A node of a [`crate::csg::Shape`] is malformed, or the whole is unbounded or empty.
+    #[error("{key}: {reason}")]
+    InvalidShape {
+        /// The key of the node at fault (`geometry.difference[1].radius`).
+        key: String,
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 impl Region {

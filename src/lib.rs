@@ -30,6 +30,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod contact;
 pub mod crack;
+pub mod csg;
 pub mod dofs;
 pub mod geometry;
 pub mod grid;

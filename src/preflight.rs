@@ -186,10 +186,11 @@ pub fn memory_need(plan: &Plan) -> Result<MemoryNeed, ScenarioError> {
         * ((hi.y - lo.y) / h + margin).max(1.0);
     let plane_points = plan.points()?;
     // A plate: a layer of points per point spacing through the thickness, the plate's node layers plus
-    // the extrusion's margin of 2 cells on both faces.
+    // the extrusion's margin of 2 cells on both faces; the bodies of space as seeded.
     let (points, nodes, per_point) = match &cfg.extrusion {
         Some(e) => (
-            plane_points * e.thickness * cfg.shape.points_per_cell as f64 / h,
+            plane_points * e.thickness * cfg.shape.points_per_cell as f64 / h
+                + plan.space_points()?,
             nodes * (e.thickness / h + 5.0),
             BYTES_PER_POINT_3D,
         ),

@@ -10,14 +10,15 @@ use crate::config::{
     LoadSection, Materials, MotionSpec, NotchTip, RigidBodySection, RunConfig,
 };
 use crate::contact::Contact;
-use crate::geometry::{Geometry, Region, Seeding};
+use crate::csg::{BodyShape, PlaneGeometry};
+use crate::geometry::{Body, Geometry, Region, Seeding};
 use crate::grid::Grid;
 use crate::input::{BadValue, shown};
 use crate::material::Material;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles, SeedingParameter};
 use crate::space::{Frame, lift3};
-use nalgebra::Vector2;
+use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;
 
 /// Failure to build a run from a valid configuration.
@@ -87,7 +88,7 @@ struct BodyDef {
     /// The configuration key its geometry comes from (`body[1].geometry`, `ct`), for errors.
     key: String,
     name: String,
-    geometry: Geometry,
+    geometry: BodyShape,
     density: f64,
     material: Material,
     velocity: Vector2<f64>,
@@ -104,23 +105,71 @@ pub enum RunSetup {
 }
 
 /// The run of `plan` in the dimensions it runs in: [`Plan::build`], then with `[extrusion]` the
-/// extrusion to the plate.
+/// extrusion to the plate, the bodies with a geometry of space seeded in space among the extruded ones
+/// (in the order of the bodies).
 pub fn build_run(plan: Plan<'_>) -> Result<RunSetup, ScenarioError> {
     let extrusion = plan.config().extrusion.clone();
-    let plane = plan.build()?;
+    let (plane, solids) = plan.build_parts()?;
     match &extrusion {
-        None => Ok(RunSetup::Plane(plane)),
-        Some(e) => plane
-            .extrude(e.thickness)
-            .map(RunSetup::Plate)
-            .map_err(ScenarioError::Input),
+        None => no_solids(&solids).map(|()| RunSetup::Plane(plane)),
+        Some(e) => {
+            let mut plate = plane.extrude(e.thickness)?;
+            if !solids.is_empty() {
+                plate.particles = merge_by_body(&plate.particles, &solids).map_err(|e| {
+                    BadValue::new(
+                        "body",
+                        "(the bodies' points)",
+                        format!("bodies seeded alike: {e}"),
+                    )
+                })?;
+            }
+            Ok(RunSetup::Plate(plate))
+        }
     }
+}
+
+/// Refuses points of bodies with a geometry of space in a plane run (the configuration's checks
+/// refuse such bodies without `[extrusion]`).
+fn no_solids(solids: &Particles<3>) -> Result<(), ScenarioError> {
+    match solids.is_empty() {
+        true => Ok(()),
+        false => Err(BadValue::new(
+            "extrusion",
+            "(none)",
+            "an [extrusion] section for the bodies with a geometry of space (a run in 3D)",
+        )
+        .into()),
+    }
+}
+
+/// The points of `a` and `b` (each in the order of the bodies) as one set in the order of the bodies,
+/// the points of a body keeping their order; ids numbered anew from 0.
+fn merge_by_body(a: &Particles<3>, b: &Particles<3>) -> Result<Particles<3>, ParticleError> {
+    let last = a.body.iter().chain(&b.body).copied().max().unwrap_or(0);
+    let mut out = Particles::new();
+    for tag in 0..=last {
+        for set in [a, b] {
+            let keep: Vec<bool> = set.body.iter().map(|&t| t == tag).collect();
+            if keep.contains(&true) {
+                let mut part = set.clone();
+                part.retain(&keep);
+                out.append(&part)?;
+            }
+        }
+    }
+    out.id = (0..out.len() as u64).collect();
+    Ok(out)
 }
 
 /// The plane set-up described by `cfg` (options prefix: none, so plain `-snes_*` options apply):
 /// [`plan`], then [`Plan::build`].
 pub fn build(cfg: &RunConfig) -> Result<Setup, ScenarioError> {
     plan(cfg)?.build()
+}
+
+/// The CT specimen's plane body (a geometry of `include` and `exclude` lists).
+fn plane_lists(include: Vec<Region>, exclude: Vec<Region>) -> BodyShape {
+    BodyShape::Plane(PlaneGeometry::Lists(Geometry { include, exclude }))
 }
 
 /// A configuration's run before seeding: its deformable bodies (regions, density, the material the
@@ -151,7 +200,7 @@ pub fn plan(cfg: &RunConfig) -> Result<Plan<'_>, ScenarioError> {
         bodies.push(BodyDef {
             key: format!("body[{i}].geometry"),
             name: b.name.clone(),
-            geometry: b.geometry.clone(),
+            geometry: b.shape(i)?,
             density: b.density,
             material: built_material(built.bodies.get(i), &format!("body[{i}] ({})", b.name))?,
             velocity: Vector2::new(b.initial_velocity[0], b.initial_velocity[1]),
@@ -179,33 +228,40 @@ impl Plan<'_> {
     }
 
     /// The material points of the plane set-up, deformable and rigid, as seeding will place them
-    /// (counted, none stored; [`Seeding::count`]: an estimate for a lattice too large to count).
+    /// (counted, none stored; [`Seeding::count`]: an estimate for a lattice too large to count); the
+    /// bodies with a geometry of space are [`Plan::space_points`].
     pub fn points(&self) -> Result<f64, ScenarioError> {
         let seeder = Seeder::new(self.cfg);
-        let gauss = self.cfg.shape.method == Method::Fem;
-        let bodies = self
-            .bodies
-            .iter()
-            .map(|b| (&b.key, &b.name, &b.geometry, b.density));
-        let rigid =
-            (self.rigid.iter().zip(&self.rigid_keys)).map(|(r, k)| (k, &r.name, &r.geometry, 1.0));
-        bodies
-            .chain(rigid)
-            .try_fold(0.0, |n, (key, name, geometry, density)| {
-                let seeding = seeder.seeding(density, 0);
-                seeding
-                    .count(geometry, gauss)
-                    .map(|c| n + c)
-                    .map_err(|e| seeder.refused((key, name), e).into())
-            })
+        let mut n = 0.0;
+        for b in &self.bodies {
+            if let BodyShape::Plane(g) = &b.geometry {
+                n += seeder.count((&b.key, &b.name), g, b.density)?;
+            }
+        }
+        for (r, key) in self.rigid.iter().zip(&self.rigid_keys) {
+            n += seeder.count((key, &r.name), &r.geometry, 1.0)?;
+        }
+        Ok(n)
     }
 
-    /// The bounding box of the include regions of every body and rigid body (mm).
+    /// The material points of the bodies with a geometry of space, counted as [`Plan::points`].
+    pub fn space_points(&self) -> Result<f64, ScenarioError> {
+        let seeder = Seeder::new(self.cfg);
+        let mut n = 0.0;
+        for b in &self.bodies {
+            if let BodyShape::Space(s) = &b.geometry {
+                n += seeder.count((&b.key, &b.name), s, b.density)?;
+            }
+        }
+        Ok(n)
+    }
+
+    /// The bounding box of the include regions of every body and rigid body in the plane (mm), the
+    /// geometries of space projected on it.
     pub fn extent(&self) -> Option<(Vector2<f64>, Vector2<f64>)> {
-        let bodies = self.bodies.iter().map(|b| &b.geometry);
+        let bodies = self.bodies.iter().filter_map(|b| b.geometry.plane_bounds());
         bodies
-            .chain(self.rigid.iter().map(|r| &r.geometry))
-            .filter_map(Geometry::bounding_box)
+            .chain(self.rigid.iter().filter_map(|r| r.geometry.bounding_box()))
             .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
     }
 
@@ -215,8 +271,17 @@ impl Plan<'_> {
     }
 
     /// The plane set-up: the bodies and rigid bodies seeded, the grid that covers them, the node boxes,
-    /// the loads and the time integration of the configuration.
+    /// the loads and the time integration of the configuration. Refuses bodies with a geometry of space
+    /// ([`build_run`] runs them).
     pub fn build(self) -> Result<Setup, ScenarioError> {
+        let (setup, solids) = self.build_parts()?;
+        no_solids(&solids)?;
+        Ok(setup)
+    }
+
+    /// [`Plan::build`], the bodies with a geometry of space seeded apart in space (in the order of the
+    /// bodies, tagged by body) and the grid covering them too in the plane.
+    fn build_parts(self) -> Result<(Setup, Particles<3>), ScenarioError> {
         let Plan {
             cfg,
             bodies,
@@ -225,7 +290,7 @@ impl Plan<'_> {
         } = self;
         let (fields, field_of) = velocity_fields(&bodies);
         let seeder = Seeder::new(cfg);
-        let (mut particles, materials) = seeder.bodies(bodies)?;
+        let (mut particles, materials, solids) = seeder.bodies(bodies)?;
         let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid, &rigid_keys, &field_of)?;
         let frame = Frame::from_degrees(cfg.grid.rotation);
         if !frame.is_identity() {
@@ -233,10 +298,10 @@ impl Plan<'_> {
             rigid_points.iter_mut().for_each(|p| turn_points(&frame, p));
             rigid.iter_mut().for_each(|r| turn_rigid_body(&frame, r));
         }
-        let grid = covering_grid(cfg, &particles, &rigid_points)?;
+        let grid = covering_grid(cfg, &particles, &solids, &rigid_points)?;
         let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
         let t = &cfg.time;
-        Ok(Setup {
+        let setup = Setup {
             params: Parameters {
                 grid,
                 materials,
@@ -262,7 +327,8 @@ impl Plan<'_> {
             },
             particles,
             rigid_points,
-        })
+        };
+        Ok((setup, solids))
     }
 }
 
@@ -310,13 +376,13 @@ fn ct_specimen(
     let mut bodies = vec![BodyDef {
         key: "ct".into(),
         name: "concrete".into(),
-        geometry: Geometry {
-            include: vec![Region::Rect {
+        geometry: plane_lists(
+            vec![Region::Rect {
                 min: [0.0, 0.0],
                 max: [ct.width, ct.height],
             }],
-            exclude: notch(ct),
-        },
+            notch(ct),
+        ),
         density: ct.density,
         material: built_material(built.concrete.as_ref(), "ct.material")?,
         velocity: Vector2::zeros(),
@@ -353,10 +419,7 @@ fn ct_inserts(
             inserts.push(BodyDef {
                 key: "ct.insert_thickness".into(),
                 name: name.into(),
-                geometry: Geometry {
-                    include: vec![Region::Rect { min, max }],
-                    exclude: vec![],
-                },
+                geometry: plane_lists(vec![Region::Rect { min, max }], vec![]),
                 density: ct.insert_density,
                 material: built_material(built.insert.as_ref(), "ct.insert_material")?,
                 velocity: Vector2::zeros(),
@@ -473,8 +536,8 @@ struct Seeder {
     h: f64,
     /// Points per cell and direction.
     ppc: usize,
-    /// Points in the cells (MPM) or at their Gauss points (FEM).
-    seed: fn(&Geometry, &Seeding) -> Result<Particles, ParticleError>,
+    /// Points at the Gauss points of the cells (FEM) instead of in the cells (MPM).
+    gauss: bool,
 }
 
 impl Seeder {
@@ -483,10 +546,7 @@ impl Seeder {
         Self {
             h: cfg.grid.cell_size,
             ppc: cfg.shape.points_per_cell,
-            seed: match cfg.shape.method {
-                Method::Mpm => Particles::seed,
-                Method::Fem => Particles::seed_gauss,
-            },
+            gauss: cfg.shape.method == Method::Fem,
         }
     }
 
@@ -500,15 +560,33 @@ impl Seeder {
         }
     }
 
+    /// The number of points of `geometry` with `density`, as [`Seeder::points`] seeds them (an estimate
+    /// for a lattice too large to count, [`Seeding::count`]); `key` and `name` name the body in errors.
+    fn count<const D: usize, B: Body<D>>(
+        &self,
+        (key, name): (&str, &str),
+        geometry: &B,
+        density: f64,
+    ) -> Result<f64, BadValue> {
+        self.seeding(density, 0)
+            .count(geometry, self.gauss)
+            .map_err(|e| self.refused((key, name), e))
+    }
+
     /// The points of `geometry` with `density`, tagged `body`; `key` and `name` name the body in errors.
-    fn points(
+    fn points<const D: usize, B: Body<D>>(
         &self,
         id: (&str, &str),
-        geometry: &Geometry,
+        geometry: &B,
         density: f64,
         body: u16,
-    ) -> Result<Particles, BadValue> {
-        (self.seed)(geometry, &self.seeding(density, body)).map_err(|e| self.refused(id, e))
+    ) -> Result<Particles<D>, BadValue> {
+        let seeding = self.seeding(density, body);
+        let seeded = match self.gauss {
+            true => Particles::seed_gauss(geometry, &seeding),
+            false => Particles::seed(geometry, &seeding),
+        };
+        seeded.map_err(|e| self.refused(id, e))
     }
 
     /// The refused value behind the seeding error `e` of the body `key` (its geometry's configuration
@@ -546,18 +624,34 @@ impl Seeder {
         }
     }
 
-    /// The deformable bodies' points (tagged by body, with their initial velocities) and materials.
-    fn bodies(&self, bodies: Vec<BodyDef>) -> Result<(Particles, Vec<Material>), ScenarioError> {
+    /// The deformable bodies' points (tagged by body, with their initial velocities) and materials: the
+    /// points of the plane bodies, and apart those of the bodies with a geometry of space.
+    fn bodies(
+        &self,
+        bodies: Vec<BodyDef>,
+    ) -> Result<(Particles, Vec<Material>, Particles<3>), ScenarioError> {
         let mut particles = Particles::new();
+        let mut solids = Particles::<3>::new();
         let mut materials = Vec::new();
         for (tag, body) in bodies.into_iter().enumerate() {
             let id = (body.key.as_str(), body.name.as_str());
-            let mut p = self.points(id, &body.geometry, body.density, tag as u16)?;
-            p.v.iter_mut().for_each(|v| *v = body.velocity);
-            particles.append(&p).map_err(|e| self.refused(id, e))?;
+            let appended = match &body.geometry {
+                BodyShape::Plane(g) => {
+                    let mut p = self.points(id, g, body.density, tag as u16)?;
+                    p.v.iter_mut().for_each(|v| *v = body.velocity);
+                    particles.append(&p)
+                }
+                BodyShape::Space(s) => {
+                    let mut p = self.points(id, s, body.density, tag as u16)?;
+                    let v = Vector3::new(body.velocity.x, body.velocity.y, 0.0);
+                    p.v.iter_mut().for_each(|pv| *pv = v);
+                    solids.append(&p)
+                }
+            };
+            appended.map_err(|e| self.refused(id, e))?;
             materials.push(body.material);
         }
-        Ok((particles, materials))
+        Ok((particles, materials, solids))
     }
 
     /// The rigid bodies of `defs` and their points (`keys`: the configuration key of each one's geometry);
@@ -592,24 +686,26 @@ impl Seeder {
     }
 }
 
-/// The grid that covers the points of the bodies and of the rigid bodies with `grid.margin_cells` (at
-/// least one) empty cells around them.
+/// The grid that covers the points of the bodies (the plane ones and, in the plane, those of space,
+/// `solids`) and of the rigid bodies with `grid.margin_cells` (at least one) empty cells around them.
 fn covering_grid(
     cfg: &RunConfig,
     particles: &Particles,
+    solids: &Particles<3>,
     rigid_points: &[Particles],
 ) -> Result<Grid, ScenarioError> {
-    let bounds = |points: &mut dyn Iterator<Item = &Vector2<f64>>| {
+    let bounds = |points: &mut dyn Iterator<Item = Vector2<f64>>| {
         points.fold(
             (
                 Vector2::repeat(f64::INFINITY),
                 Vector2::repeat(f64::NEG_INFINITY),
             ),
-            |(lo, hi), x| (lo.inf(x), hi.sup(x)),
+            |(lo, hi), x| (lo.inf(&x), hi.sup(&x)),
         )
     };
-    let (blo, bhi) = bounds(&mut particles.x.iter());
-    let (rlo, rhi) = bounds(&mut rigid_points.iter().flat_map(|r| r.x.iter()));
+    let in_plane = solids.x.iter().map(|x| x.xy());
+    let (blo, bhi) = bounds(&mut particles.x.iter().copied().chain(in_plane));
+    let (rlo, rhi) = bounds(&mut rigid_points.iter().flat_map(|r| r.x.iter().copied()));
     let (lo, hi) = (blo.inf(&rlo), bhi.sup(&rhi));
     let (h, margin) = (cfg.grid.cell_size, cfg.grid.margin_cells.max(1));
     // A rigid body far from the bodies makes the grid cover the space between: say so when it grows the

@@ -42,7 +42,8 @@ pub enum Solid {
 }
 
 impl Solid {
-    fn validate(&self) -> Result<(), String> {
+    /// Checks the values (finite, positive radius, corners and z range in order).
+    pub(crate) fn validate(&self) -> Result<(), String> {
         let finite = |v: &[f64]| v.iter().all(|c| c.is_finite());
         match self {
             Solid::Box { min, max } => {

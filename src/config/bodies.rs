@@ -6,8 +6,12 @@ use super::{
     Check, ConfigError, DENSITY_ALLOWED, LOAD_FORCE_MAX, SPEED_ALLOWED, TIME_ALLOWED, density_ok,
     finite, shown, speed_ok, time_ok,
 };
-use crate::geometry::Geometry;
+use crate::csg::{BodyShape, PlaneGeometry};
+use crate::geometry::{BOUNDARY_TOL, Body, Geometry};
+use crate::input::BadValue;
 use crate::material::{Material, MaterialConfig};
+use crate::particles::lattice;
+use nalgebra::SVector;
 use serde::Deserialize;
 
 /// `[[body]]`
@@ -18,8 +22,9 @@ pub struct BodySection {
     pub name: String,
     /// Density (t/mm^3), e.g. 2.4e-9 for concrete.
     pub density: f64,
-    /// Geometry: union of include regions minus exclude regions.
-    pub geometry: Geometry,
+    /// Geometry: the union of include regions minus exclude regions, or primitives of the plane or of
+    /// space combined by union, intersection and difference ([`crate::csg`]).
+    pub geometry: BodyGeometry,
     /// Constitutive law.
     pub material: MaterialConfig,
     /// Initial velocity (mm/s).
@@ -30,6 +35,48 @@ pub struct BodySection {
     /// (bonded where they touch).
     #[serde(default)]
     pub own_field: bool,
+}
+
+/// A `[[body]]`'s geometry as written: the `include` and `exclude` lists of plane regions (read at
+/// once), or a geometry of [`crate::csg`] (read, with errors that name its keys, by
+/// [`BodySection::shape`]).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(try_from = "toml::Value")]
+pub enum BodyGeometry {
+    /// `{ include = [...], exclude = [...] }`.
+    Lists(Geometry),
+    /// Any other table: a primitive or an operation over geometries.
+    Shape(toml::Value),
+}
+
+impl TryFrom<toml::Value> for BodyGeometry {
+    type Error = String;
+
+    /// The lists when the table has `include` or `exclude`, else the table as it is.
+    fn try_from(v: toml::Value) -> Result<Self, String> {
+        let lists = v
+            .as_table()
+            .is_some_and(|t| t.contains_key("include") || t.contains_key("exclude"));
+        match lists {
+            true => v
+                .try_into()
+                .map(BodyGeometry::Lists)
+                .map_err(|e: toml::de::Error| e.message().trim().replace('\n', " ")),
+            false => Ok(BodyGeometry::Shape(v)),
+        }
+    }
+}
+
+impl BodySection {
+    /// The geometry of this body, the `i`-th `[[body]]`: the lists as they are (checked by
+    /// [`Geometry::validate`]), or a [`crate::csg`] geometry read and checked, errors naming the key
+    /// under `body[i].geometry`.
+    pub fn shape(&self, i: usize) -> Result<BodyShape, BadValue> {
+        match &self.geometry {
+            BodyGeometry::Lists(g) => Ok(BodyShape::Plane(PlaneGeometry::Lists(g.clone()))),
+            BodyGeometry::Shape(v) => BodyShape::parse(v, &format!("body[{i}].geometry")),
+        }
+    }
 }
 
 /// Motion of one component: "free", "fixed" or `{ velocity = v }` (mm/s).
@@ -185,39 +232,29 @@ pub struct ContactSection {
 
 /// Refuses two `[[body]]` regions that overlap (their points would be seeded twice there): a test on a
 /// lattice of points at most half a cell `h` (mm) apart over the intersection of each pair's bounding
-/// boxes (at most 200 per direction), off the boxes' edges so that bodies that only touch pass.
-pub(super) fn check_overlaps(bodies: &[BodySection], h: f64, c: Check) -> Result<(), ConfigError> {
-    for (j, b) in bodies.iter().enumerate() {
-        for (i, a) in bodies[..j].iter().enumerate() {
-            let (Some((alo, ahi)), Some((blo, bhi))) =
-                (a.geometry.bounding_box(), b.geometry.bounding_box())
-            else {
-                continue;
+/// boxes (at most 200 per direction in the plane, 40 in space), off the boxes' edges so that bodies that
+/// only touch pass. `shapes` are the bodies' geometries; with a plate of `thickness` (mm, `[extrusion]`)
+/// a pair with a geometry of space is tested in space, the plane one extruded over the plate.
+pub(super) fn check_overlaps(
+    bodies: &[BodySection],
+    shapes: &[BodyShape],
+    h: f64,
+    thickness: Option<f64>,
+    c: Check,
+) -> Result<(), ConfigError> {
+    for (j, b) in shapes.iter().enumerate() {
+        for (i, a) in shapes[..j].iter().enumerate() {
+            let inside = match (a, b, thickness) {
+                (BodyShape::Plane(a), BodyShape::Plane(b), _) => plane_overlap(a, b, h),
+                (a, b, Some(t)) => space_overlap(a, b, h, t),
+                _ => None,
             };
-            let (lo, hi) = (alo.sup(&blo), ahi.inf(&bhi));
-            let extent = hi - lo;
-            if extent.x <= 0.0 || extent.y <= 0.0 {
-                continue;
-            }
-            let n = extent.map(|e| (2.0 * e / h).ceil().clamp(1.0, 200.0) as usize);
-            let step = extent.component_div(&n.map(|k| k as f64));
-            let inside = (0..n.x)
-                .flat_map(|u| (0..n.y).map(move |v| (u, v)))
-                .find_map(|(u, v)| {
-                    let x = lo
-                        + step
-                            .component_mul(&nalgebra::Vector2::new(u as f64 + 0.5, v as f64 + 0.5));
-                    (a.geometry.contains(x) && b.geometry.contains(x)).then_some(x)
-                });
             if let Some(x) = inside {
                 return Err(c.bad(
                     &format!("body[{j}].geometry"),
-                    format!(
-                        "(overlaps body[{i}] `{}` at ({:.3}, {:.3}) mm)",
-                        a.name, x.x, x.y
-                    ),
+                    format!("(overlaps body[{i}] `{}` at {x} mm)", bodies[i].name),
                     "a region no other [[body]] covers: the points of both would be seeded there \
-                     (give one an exclude region)",
+                     (give one an exclude region, or subtract the other with a difference)",
                 ));
             }
         }
@@ -225,14 +262,96 @@ pub(super) fn check_overlaps(bodies: &[BodySection], h: f64, c: Check) -> Result
     Ok(())
 }
 
-/// Checks the `[[body]]` sections and returns their materials; `ct`: the run has a `[ct]` section (whose
-/// bodies' names are taken, and whose concrete is the specimen).
+/// A point (shown) of two plane geometries' common material: [`check_overlaps`].
+fn plane_overlap(a: &PlaneGeometry, b: &PlaneGeometry, h: f64) -> Option<String> {
+    let ((alo, ahi), (blo, bhi)) = (a.bounding_box()?, b.bounding_box()?);
+    let (lo, hi) = (alo.sup(&blo), ahi.inf(&bhi));
+    let extent = hi - lo;
+    if extent.x <= 0.0 || extent.y <= 0.0 {
+        return None;
+    }
+    let n = extent.map(|e| (2.0 * e / h).ceil().clamp(1.0, 200.0) as usize);
+    let step = extent.component_div(&n.map(|k| k as f64));
+    (0..n.x)
+        .flat_map(|u| (0..n.y).map(move |v| (u, v)))
+        .find_map(|(u, v)| {
+            let x =
+                lo + step.component_mul(&nalgebra::Vector2::new(u as f64 + 0.5, v as f64 + 0.5));
+            (a.contains(&x) && b.contains(&x)).then_some(x)
+        })
+        .map(|x| format!("({:.3}, {:.3})", x.x, x.y))
+}
+
+/// A point (shown) of two bodies' common material in space, a plane geometry extruded over the plate's
+/// `thickness` (mm): [`check_overlaps`].
+fn space_overlap(a: &BodyShape, b: &BodyShape, h: f64, thickness: f64) -> Option<String> {
+    let ((alo, ahi), (blo, bhi)) = (a.space_bounds(thickness)?, b.space_bounds(thickness)?);
+    let (lo, hi) = (alo.sup(&blo), ahi.inf(&bhi));
+    let extent = hi - lo;
+    if extent.iter().any(|e| *e <= 0.0) {
+        return None;
+    }
+    let n: [usize; 3] =
+        std::array::from_fn(|d| (2.0 * extent[d] / h).ceil().clamp(1.0, 40.0) as usize);
+    lattice(n)
+        .map(|k| {
+            SVector::<f64, 3>::from_fn(|d, _| lo[d] + extent[d] / n[d] as f64 * (k[d] as f64 + 0.5))
+        })
+        .find(|x| a.contains_in_space(x, thickness) && b.contains_in_space(x, thickness))
+        .map(|x| format!("({:.3}, {:.3}, {:.3})", x.x, x.y, x.z))
+}
+
+/// Refuses the geometry of space `shape` of `body[i]` without a plate (`thickness`, mm, of
+/// `[extrusion]`) or beyond its `0 <= z <= thickness`.
+fn check_space_body(
+    shape: &BodyShape,
+    i: usize,
+    thickness: Option<f64>,
+    c: Check,
+) -> Result<(), ConfigError> {
+    let BodyShape::Space(s) = shape else {
+        return Ok(());
+    };
+    let key = format!("body[{i}].geometry");
+    let Some(t) = thickness else {
+        return Err(c.bad(
+            &key,
+            "(a geometry of space)".into(),
+            "a plane geometry (rect, polygon, disk, half-plane), or [extrusion] with a thickness for \
+             a run in 3D, the geometry of space within its 0 <= z <= thickness",
+        ));
+    };
+    let (lo, hi) = s.bounds();
+    if lo.z < -BOUNDARY_TOL || hi.z > t + BOUNDARY_TOL {
+        return Err(c.bad(
+            &key,
+            format!(
+                "(a geometry of space from z = {} to {} mm)",
+                shown(lo.z),
+                shown(hi.z)
+            ),
+            &format!(
+                "one within 0 <= z <= extrusion.thickness = {} mm, the z extent of the run (the \
+                 plane parts, rigid bodies and constraints, are extruded over it): raise \
+                 extrusion.thickness or move the body",
+                shown(t)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the `[[body]]` sections and returns their materials and geometries; `ct`: the run has a `[ct]`
+/// section (whose bodies' names are taken, and whose concrete is the specimen); `thickness`: the plate's
+/// of `[extrusion]` (mm), which geometries of space need.
 pub(super) fn validate_bodies(
     bodies: &[BodySection],
     ct: bool,
+    thickness: Option<f64>,
     c: Check,
-) -> Result<Vec<Material>, ConfigError> {
+) -> Result<(Vec<Material>, Vec<BodyShape>), ConfigError> {
     let mut materials = Vec::with_capacity(bodies.len());
+    let mut shapes = Vec::with_capacity(bodies.len());
     for (i, b) in bodies.iter().enumerate() {
         if b.name.trim().is_empty() {
             return Err(c.bad(&format!("body[{i}].name"), "\"\"".into(), "a name"));
@@ -264,13 +383,18 @@ pub(super) fn validate_bodies(
                 SPEED_ALLOWED,
             ));
         }
-        b.geometry.validate().map_err(|e| {
-            c.bad(
-                &format!("body[{i}].geometry"),
-                format!("(body {:?})", b.name),
-                &e.to_string(),
-            )
-        })?;
+        let shape = b.shape(i).map_err(|e| ConfigError::in_file(c.file, e))?;
+        if let BodyShape::Plane(PlaneGeometry::Lists(g)) = &shape {
+            g.validate().map_err(|e| {
+                c.bad(
+                    &format!("body[{i}].geometry"),
+                    format!("(body {:?})", b.name),
+                    &e.to_string(),
+                )
+            })?;
+        }
+        check_space_body(&shape, i, thickness, c)?;
+        shapes.push(shape);
         materials.push(
             b.material
                 .build()
@@ -285,7 +409,7 @@ pub(super) fn validate_bodies(
             ));
         }
     }
-    Ok(materials)
+    Ok((materials, shapes))
 }
 
 /// Checks the motions `x` and `y` of the section `field` and the time `rise_time` over which they rise.

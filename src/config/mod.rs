@@ -26,7 +26,7 @@ mod ct;
 mod tests;
 
 pub use bodies::{
-    BodySection, ConstraintSection, ContactSection, Keyword, LoadSection, MotionSpec,
+    BodyGeometry, BodySection, ConstraintSection, ContactSection, Keyword, LoadSection, MotionSpec,
     RigidBodySection,
 };
 pub use choice::Choice;
@@ -181,7 +181,19 @@ pub use crate::input::shown;
 /// every vector, point and range of a configuration (`body_force`, `initial_velocity`, corners, vertices,
 /// normals, pins, forces, `load_zone`) has an x and a y component, the set-up being plane (`[extrusion]`
 /// extrudes it along z).
+/// A `[[body]]`'s geometry other than the `include`/`exclude` lists is skipped: it may be of space, and
+/// its reader checks its vectors ([`crate::csg`]).
 fn check_vector_lengths(v: &toml::Value, path: &str, c: Check) -> Result<(), ConfigError> {
+    let body_geometry = path
+        .strip_prefix("body[")
+        .and_then(|r| r.strip_suffix("].geometry"))
+        .is_some_and(|i| i.parse::<usize>().is_ok());
+    if body_geometry
+        && v.as_table()
+            .is_some_and(|t| !t.contains_key("include") && !t.contains_key("exclude"))
+    {
+        return Ok(());
+    }
     let join = |k: &str| match path {
         "" => k.to_owned(),
         _ => format!("{path}.{k}"),
@@ -567,8 +579,10 @@ impl RunConfig {
         if !time_ok(self.body_force_ramp) {
             return Err(c.bad("body_force_ramp", shown(self.body_force_ramp), TIME_ALLOWED));
         }
-        let bodies = bodies::validate_bodies(&self.body, self.ct.is_some(), c)?;
-        bodies::check_overlaps(&self.body, self.grid.cell_size, c)?;
+        let thickness = self.extrusion.as_ref().map(|e| e.thickness);
+        let (bodies, shapes) =
+            bodies::validate_bodies(&self.body, self.ct.is_some(), thickness, c)?;
+        bodies::check_overlaps(&self.body, &shapes, self.grid.cell_size, thickness, c)?;
         for (i, s) in self.constraint.iter().enumerate() {
             s.validate(c, i)?;
         }
@@ -594,7 +608,7 @@ impl RunConfig {
         };
         bodies::validate_names(c, &self.history_names())?;
         self.check_rotation(c)?;
-        self.check_cell_size(c)?;
+        self.check_cell_size(c, &shapes)?;
         let materials = Materials {
             concrete,
             insert,
@@ -605,9 +619,14 @@ impl RunConfig {
     }
 
     /// Refuses a cell size so large that no point could be seeded: the bodies (the [ct] plate and the
-    /// `[[body]]` regions together) span less than half a point spacing `h / (2 n)` in a direction (`n`
-    /// points per cell and direction, the first of them half a spacing inside its cell).
-    fn check_cell_size(&self, c: Check) -> Result<(), ConfigError> {
+    /// `[[body]]` regions together, `shapes`, in the plane) span less than half a point spacing `h / (2 n)`
+    /// in a direction (`n` points per cell and direction, the first of them half a spacing inside its
+    /// cell).
+    fn check_cell_size(
+        &self,
+        c: Check,
+        shapes: &[crate::csg::BodyShape],
+    ) -> Result<(), ConfigError> {
         let plate = self.ct.as_ref().map(|ct| {
             (
                 nalgebra::Vector2::zeros(),
@@ -616,7 +635,11 @@ impl RunConfig {
         });
         let Some((lo, hi)) = plate
             .into_iter()
-            .chain(self.body.iter().filter_map(|b| b.geometry.bounding_box()))
+            .chain(
+                shapes
+                    .iter()
+                    .filter_map(crate::csg::BodyShape::plane_bounds),
+            )
             .reduce(|(lo, hi), (l, h)| (lo.inf(&l), hi.sup(&h)))
         else {
             return Ok(());
