@@ -150,7 +150,13 @@ fn bad_geometries_are_refused_on_the_binary_naming_the_key() {
             ],
         ),
     ];
-    for (file, geometry, needles) in cases {
+    // A key inside the file's geometry, reached by --set.
+    let hole = (
+        beam.as_path(),
+        "body[0].geometry.difference[2].radius=0".to_owned(),
+        vec!["`body[0].geometry.difference[2].radius` = 0: a radius > 0 (mm)"],
+    );
+    for (file, geometry, needles) in cases.into_iter().chain([hole]) {
         let o = run(
             &dir,
             &[

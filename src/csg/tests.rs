@@ -194,6 +194,32 @@ fn a_box_minus_a_cylinder_seeds_its_exact_volume_to_the_seeding_resolution() {
     assert_eq!(p.len(), 8 * 1600);
 }
 
+#[test]
+fn a_prism_seeds_the_points_of_its_section_in_layers() {
+    // A plate with a hole as a prism 3 mm thick seeds, layer by layer, the points the plane geometry
+    // seeds, with their volume times the point spacing: what [extrusion] does with a plane body.
+    let section = r#"{ difference = [{ type = "rect", min = [0, 0], max = [12, 6] },
+                                     { type = "disk", centre = [6, 3], radius = 2.0 }] }"#;
+    let plate = Particles::<2>::seed(&plane(section), &Seeding::concrete(1.0, 2)).unwrap();
+    let prism = space(&format!(
+        r#"{{ type = "prism", z = [0, 3], section = {section} }}"#
+    ));
+    let solid = Particles::<3>::seed(&prism, &Seeding::concrete(1.0, 2)).unwrap();
+    assert_eq!(solid.len(), 6 * plate.len());
+    for k in 0..6 {
+        let z = 0.25 + 0.5 * k as f64;
+        let layer: Vec<Vector2<f64>> = solid
+            .x
+            .iter()
+            .filter(|x| x.z == z)
+            .map(|x| x.xy())
+            .collect();
+        assert_eq!(layer, plate.x, "layer {k}");
+    }
+    let volume = |v: &[f64]| v.iter().sum::<f64>();
+    assert!((volume(&solid.vol0) - 3.0 * volume(&plate.vol0)).abs() < 1e-9);
+}
+
 /// The error of the geometry `text` at `body[1].geometry`, as `key = value: allowed`.
 fn refusal(text: &str) -> String {
     let e = shape(text).unwrap_err();
