@@ -1,7 +1,8 @@
 //! The bodies to seed, as regions of the plane (mm): rectangles, polygons and disks combined into a
 //! [`Geometry`] (the union of the `include` regions minus the `exclude` regions), boxes in any dimension
 //! ([`BoxBody`]), and the [`Body`] interface that [`crate::particles::Particles::seed`] fills with points
-//! (the solids of space are in [`crate::solids`]); the seeding parameters ([`Seeding`]).
+//! (the solids of space are in [`crate::solids`], primitives of the plane and of space combined by union,
+//! intersection and difference in [`crate::csg`]); the seeding parameters ([`Seeding`]).
 //!
 //! Boundaries: include regions are closed and exclude regions are open, i.e. a point exactly on a boundary
 //! (within [`BOUNDARY_TOL`]) counts as material: the body is the closure of the union of the includes minus
