@@ -156,3 +156,103 @@ fn bar_is_followed_through_its_snap_back_to_separation() {
         );
     }
 }
+
+/// A 10 x 4 mm block of a St Venant-Kirchhoff solid on 1 mm cells, held at x = 0 and pulled at x = 10
+/// with a velocity of 1e-3 mm/s, under path following of the elongation between the points nearest
+/// `from` and `to`; `extra` is appended to the text.
+fn block(extra: &str) -> String {
+    format!(
+        r#"
+[run]
+name = "path-block"
+steps = 3
+[time]
+dt = 1.0
+quasi_static = true
+[grid]
+cell_size = 1.0
+[[body]]
+name = "block"
+density = 1e-9
+geometry = {{ include = [{{ type = "rect", min = [0.0, 0.0], max = [10.0, 4.0] }}] }}
+material = {{ model = "svk", youngs_modulus = 1000.0, poisson_ratio = 0.2 }}
+[[constraint]]
+name = "held"
+min = [-1.0, -1.0]
+max = [0.0, 5.0]
+x = "fixed"
+y = "fixed"
+[[constraint]]
+name = "pulled"
+min = [10.0, -1.0]
+max = [11.0, 5.0]
+x = {{ velocity = 1e-3 }}
+{extra}
+"#
+    )
+}
+
+const PATH: &str = "[path]\nfrom = [2.0, 2.0]\nto = [8.0, 2.0]\nincrement = 2e-3\n";
+
+#[test]
+fn a_configured_path_controls_an_mpm_run() {
+    let s = session();
+    let setup = common::config_setup(&block(PATH), "block.toml", "pf_");
+    let mut sim = mpm_concrete::solver::Simulation::new(setup).expect("simulation");
+    let mut ratio = 0.0;
+    for step in 1..=3 {
+        let r = sim.advance(&s).expect("step");
+        let p = r.path.expect("path point");
+        assert!((p.opening - 2e-3 * step as f64).abs() < 1e-12, "{p:?}");
+        // Elastic and nearly homogeneous: the end moves by about 10 / 6 of the gauge's opening (1.65 on
+        // this grid), by the same amount in every step (to finite-strain terms).
+        let u = r.displacements[1].1[0];
+        assert!((u - p.lambda * 1e-3).abs() < 1e-15);
+        assert!(
+            (u / p.opening - 10.0 / 6.0).abs() < 2e-2,
+            "u {u:e}, w {:e}",
+            p.opening
+        );
+        if step > 1 {
+            assert!((p.ratio - ratio).abs() < 1e-4 * ratio.abs(), "{p:?}");
+        }
+        ratio = p.ratio;
+    }
+}
+
+#[test]
+fn bad_path_tables_are_refused_naming_the_key() {
+    use mpm_concrete::config::RunConfig;
+    let refused = |text: String, key: &str, says: &str| {
+        let e = match RunConfig::from_str_named(&text, "block.toml") {
+            Err(e) => e.to_string(),
+            Ok(cfg) => {
+                let setup = mpm_concrete::scenario::build(&cfg).expect("set-up");
+                match mpm_concrete::solver::Simulation::new(setup) {
+                    Err(e) => e.to_string(),
+                    Ok(_) => panic!("accepted: {text}"),
+                }
+            }
+        };
+        assert!(
+            e.contains(key) && e.contains(says) && !e.contains('\n'),
+            "{key}: {e}"
+        );
+    };
+    let dynamic = block(PATH).replace("quasi_static = true", "quasi_static = false");
+    refused(dynamic, "time.quasi_static", "[path]");
+    refused(block(&PATH.replace("2e-3", "0.0")), "path.increment", "> 0");
+    let same = "[path]\nfrom = [2.0, 2.0]\nto = [2.0, 2.0]\nincrement = 1e-3\n";
+    refused(block(same), "path.direction", "nonzero");
+    let one_point = "[path]\nfrom = [2.25, 2.25]\nto = [2.3, 2.25]\nincrement = 1e-3\n";
+    refused(block(one_point), "path", "nearest material points differ");
+    let rise = block(PATH).replace(
+        "x = { velocity = 1e-3 }",
+        "x = { velocity = 1e-3 }\nrise_time = 1.0",
+    );
+    refused(rise, "path", "rise_time = 0");
+    let still = block(PATH).replace("x = { velocity = 1e-3 }", "x = \"fixed\"");
+    refused(still, "path", "nonzero velocity");
+    let load = "[[load]]\nname = \"f\"\nfrom = [10.0, 0.0]\nto = [10.0, 4.0]\nforce = [1.0, 0.0]\n";
+    refused(block(&format!("{PATH}{load}")), "path", "no [[load]]");
+}
