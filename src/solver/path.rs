@@ -312,15 +312,21 @@ fn owned_vector(like: &Vector, owned: &OwnedRows, all: &[f64]) -> Result<Vector,
     Ok(v)
 }
 
-/// The bordered Newton's outcome as a [`SolveInfo`] (reason codes and names as SNES's).
-fn info(iterations: usize, linear: usize, norms: Vec<f64>, outcome: (i32, &str)) -> SolveInfo {
+/// The bordered Newton's outcome as a [`SolveInfo`] (reason codes and names as SNES's; `domain`: the
+/// messages of the iterates outside the material's domain).
+fn info(
+    (iterations, linear): (usize, usize),
+    norms: Vec<f64>,
+    domain: &[String],
+    outcome: (i32, &str),
+) -> SolveInfo {
     SolveInfo {
         iterations,
         linear_iterations: linear,
         reason: outcome.0,
         reason_name: outcome.1.to_owned(),
         residual_norms: norms,
-        domain_errors: Vec::new(),
+        domain_errors: domain.to_vec(),
     }
 }
 
@@ -367,14 +373,15 @@ fn bordered_newton<const D: usize>(
     );
     let mut norm = match residual(problem, x, &mut r, &q, path.ratio)? {
         Ok(n) => n,
-        Err(_) => return Ok(info(0, 0, vec![], (-1, "DIVERGED_FUNCTION_DOMAIN"))),
+        Err(m) => return Ok(info((0, 0), vec![], &[m], (-1, "DIVERGED_FUNCTION_DOMAIN"))),
     };
+    let mut domain = Vec::new();
     let mut norms = vec![norm];
     let goal = tol.atol.max(tol.rtol * norm);
     let (mut its, mut lits) = (0, 0);
     while norm > goal || its == 0 {
         if its >= tol.max_it.max(1) as usize {
-            return Ok(info(its, lits, norms, (-5, "DIVERGED_MAX_IT")));
+            return Ok(info((its, lits), norms, &domain, (-5, "DIVERGED_MAX_IT")));
         }
         its += 1;
         problem.jacobian(x, jac).map_err(|e| match e {
@@ -386,7 +393,12 @@ fn bordered_newton<const D: usize>(
             let ls = snes.linear_solve(jac, v, out)?;
             lits += ls.iterations;
             if !ls.converged() {
-                return Ok(info(its, lits, norms, (-3, "DIVERGED_LINEAR_SOLVE")));
+                return Ok(info(
+                    (its, lits),
+                    norms,
+                    &domain,
+                    (-3, "DIVERGED_LINEAR_SOLVE"),
+                ));
             }
         }
         let cb = c.dot(&b)?;
@@ -408,16 +420,25 @@ fn bordered_newton<const D: usize>(
                     path.ratio += step * dk;
                     break;
                 }
-                Err(_) if step > 1.0 / 256.0 => {
+                Err(m) => {
                     x.axpy(-step, &a)?;
+                    domain.push(m);
+                    if step <= 1.0 / 256.0 {
+                        let outcome = (-1, "DIVERGED_FUNCTION_DOMAIN");
+                        return Ok(info((its, lits), norms, &domain, outcome));
+                    }
                     step *= 0.5;
                 }
-                Err(_) => return Ok(info(its, lits, norms, (-1, "DIVERGED_FUNCTION_DOMAIN"))),
             }
         }
         norms.push(norm);
         if !norm.is_finite() {
-            return Ok(info(its, lits, norms, (-4, "DIVERGED_FNORM_NAN")));
+            return Ok(info(
+                (its, lits),
+                norms,
+                &domain,
+                (-4, "DIVERGED_FNORM_NAN"),
+            ));
         }
     }
     let reason = if norm <= tol.atol {
@@ -425,5 +446,5 @@ fn bordered_newton<const D: usize>(
     } else {
         (3, "CONVERGED_FNORM_RELATIVE")
     };
-    Ok(info(its, lits, norms, reason))
+    Ok(info((its, lits), norms, &domain, reason))
 }
