@@ -345,12 +345,74 @@ pub(super) fn newton<const D: usize>(
     }
 }
 
+/// The vectors of the bordered Newton (this process's parts).
+struct Bordering {
+    /// Residual `R(x, k)`, its negative, and the solutions `a = J^-1 (-R)`, `b = J^-1 q`.
+    r: Vector,
+    rhs: Vector,
+    a: Vector,
+    b: Vector,
+    /// `q = s p`: the nominal prescribed increments on the constrained rows, scaled.
+    q: Vector,
+    /// The opening's coefficients.
+    c: Vector,
+}
+
+impl Bordering {
+    /// Solves `J a = -R` and `J b = q` with the KSP of `snes`; the linear iterations, or `None` if a
+    /// solve failed.
+    fn solve(&mut self, snes: &mut Snes, jac: &Matrix) -> Result<Option<usize>, PetscError> {
+        self.rhs.set_all(0.0)?;
+        self.rhs.axpy(-1.0, &self.r)?;
+        let mut its = 0;
+        for (v, out) in [(&self.rhs, &mut self.a), (&self.q, &mut self.b)] {
+            let ls = snes.linear_solve(jac, v, out)?;
+            its += ls.iterations;
+            if !ls.converged() {
+                return Ok(None);
+            }
+        }
+        Ok(Some(its))
+    }
+
+    /// Moves `x` by `a` (the update, with `b` folded in) and the ratio by `dk`, halving the step while
+    /// the residual meets a point outside the material's domain (messages into `domain`); the new
+    /// residual norm, or `None` after 8 halvings.
+    fn advance<const D: usize>(
+        &mut self,
+        problem: &mut StepProblem<'_, '_, D>,
+        x: &mut Vector,
+        (path, dk): (&mut PathStep, f64),
+        domain: &mut Vec<String>,
+    ) -> Result<Option<f64>, PetscError> {
+        let mut step = 1.0;
+        loop {
+            x.axpy(step, &self.a)?;
+            match residual(problem, x, &mut self.r, &self.q, path.ratio + step * dk)? {
+                Ok(n) => {
+                    path.ratio += step * dk;
+                    return Ok(Some(n));
+                }
+                Err(m) => {
+                    x.axpy(-step, &self.a)?;
+                    domain.push(m);
+                    if step <= 1.0 / 256.0 {
+                        return Ok(None);
+                    }
+                    step *= 0.5;
+                }
+            }
+        }
+    }
+}
+
 /// Newton on the step's equations and the path constraint from the guess in `x` (overwritten) and the
 /// ratio `path.ratio` (updated), by the bordering algorithm with the KSP of `snes` (its options, its
 /// preconditioner) and the Jacobian `jac`; converged when `|R| <= max(atol, rtol |R_0|)` with SNES's
 /// tolerances, at most `max_it` iterations. A step along the direction that meets a point outside its
-/// domain is halved (up to 8 times). Failures are reported as SNES would
-/// (`DIVERGED_LINEAR_SOLVE`, `DIVERGED_MAX_IT`, `DIVERGED_FUNCTION_DOMAIN`).
+/// domain is halved (up to 8 times). Failures are reported as SNES would (`DIVERGED_LINEAR_SOLVE`,
+/// `DIVERGED_MAX_IT`, `DIVERGED_FUNCTION_DOMAIN`, `DIVERGED_JACOBIAN_DOMAIN`): the step is retried
+/// with half the increment.
 fn bordered_newton<const D: usize>(
     snes: &mut Snes,
     problem: &mut StepProblem<'_, '_, D>,
@@ -363,45 +425,57 @@ fn bordered_newton<const D: usize>(
     let nominal: Vec<f64> = (0..dofs.len())
         .map(|i| dofs.prescribed(i).map_or(0.0, |v| s * v))
         .collect();
-    let q = owned_vector(x, owned, &nominal)?;
-    let c = owned_vector(x, owned, &path.coefficients)?;
-    let (mut r, mut a, mut b, mut rhs) = (
-        x.duplicate()?,
-        x.duplicate()?,
-        x.duplicate()?,
-        x.duplicate()?,
-    );
-    let mut norm = match residual(problem, x, &mut r, &q, path.ratio)? {
-        Ok(n) => n,
-        Err(m) => return Ok(info((0, 0), vec![], &[m], (-1, "DIVERGED_FUNCTION_DOMAIN"))),
+    let mut v = Bordering {
+        r: x.duplicate()?,
+        rhs: x.duplicate()?,
+        a: x.duplicate()?,
+        b: x.duplicate()?,
+        q: owned_vector(x, owned, &nominal)?,
+        c: owned_vector(x, owned, &path.coefficients)?,
     };
     let mut domain = Vec::new();
+    let mut norm = match residual(problem, x, &mut v.r, &v.q, path.ratio)? {
+        Ok(n) => n,
+        Err(m) => {
+            domain.push(m);
+            f64::NAN
+        }
+    };
     let mut norms = vec![norm];
     let goal = tol.atol.max(tol.rtol * norm);
     let (mut its, mut lits) = (0, 0);
-    while norm > goal || its == 0 {
+    let outcome = loop {
+        if !norm.is_finite() {
+            break if domain.is_empty() {
+                (-4, "DIVERGED_FNORM_NAN")
+            } else {
+                (-1, "DIVERGED_FUNCTION_DOMAIN")
+            };
+        }
+        if norm <= goal && its > 0 {
+            break if norm <= tol.atol {
+                (2, "CONVERGED_FNORM_ABS")
+            } else {
+                (3, "CONVERGED_FNORM_RELATIVE")
+            };
+        }
         if its >= tol.max_it.max(1) as usize {
-            return Ok(info((its, lits), norms, &domain, (-5, "DIVERGED_MAX_IT")));
+            break (-5, "DIVERGED_MAX_IT");
         }
         its += 1;
-        problem.jacobian(x, jac).map_err(|e| match e {
-            CallbackError::Domain(m) | CallbackError::Fatal(m) => fatal(m),
-        })?;
-        rhs.set_all(0.0)?;
-        rhs.axpy(-1.0, &r)?;
-        for (v, out) in [(&rhs, &mut a), (&q, &mut b)] {
-            let ls = snes.linear_solve(jac, v, out)?;
-            lits += ls.iterations;
-            if !ls.converged() {
-                return Ok(info(
-                    (its, lits),
-                    norms,
-                    &domain,
-                    (-3, "DIVERGED_LINEAR_SOLVE"),
-                ));
+        match problem.jacobian(x, jac) {
+            Ok(()) => {}
+            Err(CallbackError::Domain(m)) => {
+                domain.push(m);
+                break (-10, "DIVERGED_JACOBIAN_DOMAIN");
             }
+            Err(CallbackError::Fatal(m)) => return Err(fatal(m)),
         }
-        let cb = c.dot(&b)?;
+        let Some(l) = v.solve(snes, jac)? else {
+            break (-3, "DIVERGED_LINEAR_SOLVE");
+        };
+        lits += l;
+        let cb = v.c.dot(&v.b)?;
         if cb.is_nan() || cb.abs() <= 1e-300 {
             return Err(fatal(
                 "path following: the measured opening does not respond to the prescribed motion \
@@ -409,42 +483,12 @@ fn bordered_newton<const D: usize>(
                     .into(),
             ));
         }
-        let dk = (path.target - c.dot(x)? - c.dot(&a)?) / cb;
-        a.axpy(dk, &b)?;
-        let mut step = 1.0;
-        loop {
-            x.axpy(step, &a)?;
-            match residual(problem, x, &mut r, &q, path.ratio + step * dk)? {
-                Ok(n) => {
-                    norm = n;
-                    path.ratio += step * dk;
-                    break;
-                }
-                Err(m) => {
-                    x.axpy(-step, &a)?;
-                    domain.push(m);
-                    if step <= 1.0 / 256.0 {
-                        let outcome = (-1, "DIVERGED_FUNCTION_DOMAIN");
-                        return Ok(info((its, lits), norms, &domain, outcome));
-                    }
-                    step *= 0.5;
-                }
-            }
-        }
+        let dk = (path.target - v.c.dot(x)? - v.c.dot(&v.a)?) / cb;
+        v.a.axpy(dk, &v.b)?;
+        norm = v
+            .advance(problem, x, (path, dk), &mut domain)?
+            .unwrap_or(f64::NAN);
         norms.push(norm);
-        if !norm.is_finite() {
-            return Ok(info(
-                (its, lits),
-                norms,
-                &domain,
-                (-4, "DIVERGED_FNORM_NAN"),
-            ));
-        }
-    }
-    let reason = if norm <= tol.atol {
-        (2, "CONVERGED_FNORM_ABS")
-    } else {
-        (3, "CONVERGED_FNORM_RELATIVE")
     };
-    Ok(info((its, lits), norms, &domain, reason))
+    Ok(info((its, lits), norms, &domain, outcome))
 }
