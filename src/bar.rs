@@ -21,7 +21,7 @@ use crate::model::{Parameters, Setup, TimeIntegration};
 use crate::particles::Particles;
 use crate::petsc::SessionGuard;
 use crate::shape::ShapeKind;
-use crate::solver::{Simulation, StepError, StepReport};
+use crate::solver::{PathControl, Simulation, StepError, StepReport};
 
 /// Geometry, loading and time stepping of the bar.
 #[derive(Clone, Debug, PartialEq)]
@@ -48,6 +48,20 @@ pub struct BarSpec {
     pub quasi_static: bool,
     /// PETSc options prefix of the runs (e.g. `rb_`).
     pub options_prefix: String,
+    /// Path following (quasi-static only): the opening of a gauge across the weak zone controls the
+    /// steps, the ends' motion follows; `None`: the ends move at `speed`.
+    pub path: Option<BarPath>,
+}
+
+/// Indirect displacement control of the bar: the elongation of a gauge centred on the weak zone, at
+/// mid-height of the strip, grows by `increment` per step; each end moves by `speed dt` times the
+/// step's load ratio (negative on a snap-back).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BarPath {
+    /// Gauge length (mm): the points nearest `L/2 -+ gauge/2` are measured.
+    pub gauge: f64,
+    /// Elongation of the gauge per step (mm).
+    pub increment: f64,
 }
 
 impl BarSpec {
@@ -66,6 +80,7 @@ impl BarSpec {
             density: 2.4e-9,
             quasi_static: false,
             options_prefix: "rb_".into(),
+            path: None,
         }
     }
 }
@@ -176,6 +191,12 @@ pub fn bar_simulation(spec: &BarSpec, h: f64, material: &MicroplaneConfig) -> Re
             ),
         ],
         options_prefix: Some(spec.options_prefix.clone()),
+        path: spec.path.map(|p| PathControl {
+            from: Vector2::new(0.5 * (l - p.gauge), 0.5 * h),
+            to: Vector2::new(0.5 * (l + p.gauge), 0.5 * h),
+            direction: Vector2::x(),
+            increment: p.increment,
+        }),
         ..Parameters::new(
             grid,
             vec![weak.build()?, strong.build()?],

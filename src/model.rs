@@ -17,6 +17,7 @@ use crate::input::BadValue;
 use crate::material::{Constitutive, Material};
 use crate::particles::Particles;
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
+use crate::solver::{Gauge, PathControl};
 use nalgebra::{Matrix3, SVector};
 
 /// Time integration settings.
@@ -130,6 +131,9 @@ pub struct Parameters<const D: usize = 2> {
     /// Options prefix of a fallback SNES (e.g. with a direct solver) tried at the same time step when the
     /// main one's linear solver fails, before the time step is halved; None: halve at once.
     pub fallback_prefix: Option<String>,
+    /// Path following of a quasi-static run (indirect displacement control); None: the prescribed
+    /// motion follows time.
+    pub path: Option<PathControl<D>>,
 }
 
 impl<const D: usize> Parameters<D> {
@@ -159,6 +163,7 @@ impl<const D: usize> Parameters<D> {
             options_prefix: None,
             mass_tolerance: 1e-6,
             fallback_prefix: None,
+            path: None,
         }
     }
 }
@@ -206,6 +211,8 @@ pub struct Model<const D: usize = 2> {
     pub(crate) load_shares: Vec<Vec<(usize, f64)>>,
     /// FEM mode: the shape functions of the reference configuration (that of t = 0).
     pub(crate) fem: Option<FemReference<D>>,
+    /// Path following: the measured points and the load factor's reference set.
+    pub(crate) path: Option<Gauge<D>>,
 }
 
 /// The FEM mode's reference shape functions, fixed at t = 0.
@@ -299,6 +306,9 @@ impl<const D: usize> Model<D> {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let fem = setup.fem_reference()?;
+        let path = (params.path.as_ref())
+            .map(|c| Gauge::new(c, params, &setup.particles))
+            .transpose()?;
         let Setup {
             params,
             mut particles,
@@ -322,6 +332,7 @@ impl<const D: usize> Model<D> {
             params,
             load_shares,
             fem,
+            path,
         };
         Ok((model, state))
     }
@@ -687,6 +698,12 @@ impl Setup<2> {
             options_prefix: plane.options_prefix,
             mass_tolerance: plane.mass_tolerance,
             fallback_prefix: plane.fallback_prefix,
+            path: plane.path.map(|p| PathControl {
+                from: SVector::from([p.from.x, p.from.y, 0.5 * thickness]),
+                to: SVector::from([p.to.x, p.to.y, 0.5 * thickness]),
+                direction: SVector::from([p.direction.x, p.direction.y, 0.0]),
+                increment: p.increment,
+            }),
         };
         let particles = extrude_points(&particles, thickness)?;
         Ok(Setup {

@@ -17,6 +17,7 @@ use crate::input::{BadValue, shown};
 use crate::material::Material;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles, SeedingParameter};
+use crate::solver::PathControl;
 use crate::space::{Frame, lift3};
 use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;
@@ -324,6 +325,12 @@ impl Plan<'_> {
                 options_prefix: None,
                 mass_tolerance: cfg.grid.mass_tolerance,
                 fallback_prefix: None,
+                path: cfg.path.as_ref().map(|p| PathControl {
+                    from: frame.to_grid(Vector2::from(p.from)),
+                    to: frame.to_grid(Vector2::from(p.to)),
+                    direction: frame.to_grid(Vector2::from(p.direction())),
+                    increment: p.increment,
+                }),
             },
             particles,
             rigid_points,

@@ -42,8 +42,8 @@ pub mod file {
 
 /// Columns of `history.csv`: [`history::LEADING`], then per constraint set, rigid body and load the
 /// columns of [`history::reaction_columns`], per pinned device [`history::rotation_column`], then
-/// [`history::CONTACT_SOLVES`] (if there is any set), [`history::TRAILING`] and, in CT runs,
-/// [`history::CRACK`].
+/// [`history::CONTACT_SOLVES`] (if there is any set), [`history::TRAILING`], in CT runs
+/// [`history::CRACK`] and, with path following, [`history::PATH`].
 pub mod history {
     /// Step number.
     pub const STEP: &str = "step";
@@ -113,6 +113,16 @@ pub mod history {
     pub const CRACK_SPEED: &str = "crack_speed";
     /// Bands of the crack on the measuring ring (2 or more: branching).
     pub const CRACK_BANDS: &str = "crack_bands";
+
+    /// Path following: the load factor (s), the reference set having moved its velocity times it.
+    pub const PATH_LAMBDA: &str = "path_lambda";
+    /// Path following: the measured opening (mm).
+    pub const PATH_OPENING: &str = "path_opening";
+    /// Path following: the step's prescribed motion over its nominal one (< 0 on a snap-back).
+    pub const PATH_RATIO: &str = "path_ratio";
+
+    /// The path-following columns, last (runs with `[path]`).
+    pub const PATH: [&str; 3] = [PATH_LAMBDA, PATH_OPENING, PATH_RATIO];
 
     /// The crack columns after [`TRAILING`] (CT runs).
     pub const CRACK: [&str; 5] = [

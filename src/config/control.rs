@@ -304,3 +304,63 @@ impl ExtrusionSection {
         Ok(())
     }
 }
+
+/// `[path]`: path following of a quasi-static run by indirect displacement control (docs/theory.md,
+/// "Path following"): every step opens the distance between two material points by `increment`, and the
+/// motion of the moving constraints becomes the load factor, so that a snap-back is followed.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathSection {
+    /// Where the first measured point is at t = 0 (mm): the material point nearest it.
+    pub from: [f64; 2],
+    /// Where the second measured point is at t = 0 (mm).
+    pub to: [f64; 2],
+    /// Direction of the measured opening; default: from `from` to `to`.
+    pub direction: Option<[f64; 2]>,
+    /// Opening per step (mm), > 0.
+    pub increment: f64,
+}
+
+impl PathSection {
+    /// The direction of the opening (not normalised): `direction`, or from `from` to `to`.
+    pub fn direction(&self) -> [f64; 2] {
+        self.direction
+            .unwrap_or([self.to[0] - self.from[0], self.to[1] - self.from[1]])
+    }
+
+    /// Checks `[path]` of a run that is `quasi_static` or not.
+    pub(super) fn validate(&self, c: Check, quasi_static: bool) -> Result<(), ConfigError> {
+        if !quasi_static {
+            return Err(c.bad(
+                "time.quasi_static",
+                "false".into(),
+                "true with [path] (path following replaces time as the load parameter of a static run)",
+            ));
+        }
+        for (key, p) in [("path.from", self.from), ("path.to", self.to)] {
+            if !p.iter().all(|v| v.is_finite() && v.abs() < 1e9) {
+                return Err(c.bad(
+                    key,
+                    format!("{p:?}"),
+                    "a point with finite coordinates (mm)",
+                ));
+            }
+        }
+        let d = self.direction();
+        if !(d.iter().all(|v| v.is_finite()) && d[0].hypot(d[1]) > 0.0) {
+            return Err(c.bad(
+                "path.direction",
+                format!("{d:?}"),
+                "a nonzero direction of the opening (default: from `from` to `to`, which then must differ)",
+            ));
+        }
+        if !(self.increment.is_finite() && self.increment > 0.0 && self.increment < 1e3) {
+            return Err(c.bad(
+                "path.increment",
+                shown(self.increment),
+                "an opening per step > 0 and below 1000 (mm)",
+            ));
+        }
+        Ok(())
+    }
+}

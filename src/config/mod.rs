@@ -30,7 +30,9 @@ pub use bodies::{
     RigidBodySection,
 };
 pub use choice::Choice;
-pub use control::{ExtrusionSection, GridSection, RunSection, ShapeSection, TimeSection};
+pub use control::{
+    ExtrusionSection, GridSection, PathSection, RunSection, ShapeSection, TimeSection,
+};
 pub use ct::{CtSection, LoadIntroduction, NotchTip};
 
 use crate::input::BadValue;
@@ -367,6 +369,8 @@ pub struct RunConfig {
     pub load: Vec<LoadSection>,
     /// The plane set-up extruded to a plate and run in 3D (`[extrusion]`); absent: plane strain.
     pub extrusion: Option<ExtrusionSection>,
+    /// Path following of a quasi-static run (`[path]`); absent: the motion follows time.
+    pub path: Option<PathSection>,
     /// The materials, built by the checks (which so validate them) and kept for the scenario.
     #[serde(skip)]
     materials: Materials,
@@ -564,6 +568,9 @@ impl RunConfig {
         }
         if let Some(e) = &self.extrusion {
             e.validate(c, self.grid.cell_size, self.shape.method)?;
+        }
+        if let Some(p) = &self.path {
+            p.validate(c, self.time.quasi_static)?;
         }
         if !self
             .body_force

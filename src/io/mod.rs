@@ -506,6 +506,10 @@ impl RunOutput {
         if tip {
             columns.extend(history::CRACK.map(String::from));
         }
+        let path = self.rows.iter().any(|r| r.path.is_some());
+        if path {
+            columns.extend(history::PATH.map(String::from));
+        }
         s.push_str(&columns.join(","));
         s.push('\n');
         for r in &self.rows {
@@ -571,6 +575,9 @@ impl RunOutput {
             );
             if tip {
                 cracks::write_front(&mut s, r.crack.as_ref());
+            }
+            if let (true, Some(p)) = (path, &r.path) {
+                let _ = write!(s, ",{:.9e},{:.9e},{:.9e}", p.lambda, p.opening, p.ratio);
             }
             s.push('\n');
         }

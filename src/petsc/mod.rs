@@ -9,12 +9,14 @@
 //! * Every PETSc error becomes a [`PetscError`] carrying PETSc's own message (captured by an error
 //!   handler pushed at start-up), never an abort.
 
+mod ksp;
 mod matrix;
 mod options;
 mod snes;
 pub mod sys;
 mod vector;
 
+pub use ksp::LinearSolve;
 pub use matrix::{BlockCsr, BlockLayout, IndexSet, Matrix};
 pub use options::{
     apply_default_options, has_option, option_string, set_default_option, set_option,

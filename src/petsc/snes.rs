@@ -202,7 +202,7 @@ impl Snes {
         Ok(())
     }
 
-    fn ksp(&self) -> Result<sys::KSP> {
+    pub(super) fn ksp(&self) -> Result<sys::KSP> {
         let mut ksp = std::ptr::null_mut();
         // SAFETY: out-parameter, borrowed reference.
         check(unsafe { sys::SNESGetKSP(self.raw, &mut ksp) }, "SNESGetKSP")?;

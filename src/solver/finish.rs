@@ -22,10 +22,13 @@ impl<const D: usize> Step<'_, D> {
     pub(super) fn finish(
         &mut self,
         session: &SessionGuard,
-        plan: StepPlan<D>,
+        mut plan: StepPlan<D>,
         solved: Solved,
         t0: Instant,
     ) -> Result<StepReport, StepError> {
+        if let Some(p) = &plan.path {
+            path::scale_increments(&mut plan.set_du, p.ratio);
+        }
         let out = self.outcome(&plan, &solved.phys);
         let work = self.work(&plan, &out);
         let counted = self.own_point_count();
@@ -53,7 +56,9 @@ impl<const D: usize> Step<'_, D> {
         b.erosion += b.eroding;
         b.eroding = books[1];
         b.contact += books[2];
-        Ok(self.report(&plan, solved, &out, energies, t0))
+        let mut report = self.report(&plan, solved, &out, energies, t0);
+        report.path = self.path_point(session, plan.path.as_ref())?;
+        Ok(report)
     }
 
     /// The reactions of the constraint sets and devices and the loads' resultants, the sets'
@@ -334,6 +339,7 @@ impl<const D: usize> Step<'_, D> {
             contact_solves: solved.contact_solves,
             migrated: self.work.moved[0],
             ghosts: self.work.moved[1],
+            path: None,
         }
     }
 }

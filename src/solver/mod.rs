@@ -31,6 +31,7 @@ use std::time::Instant;
 mod contacts;
 mod finish;
 mod input;
+mod path;
 mod prepare;
 mod processes;
 mod report;
@@ -40,6 +41,7 @@ mod system;
 
 use contacts::ContactSet;
 pub use input::StepData;
+pub use path::{Gauge, PathControl, PathPoint};
 use prepare::{Loading, StepPlan};
 use processes::{agree, agreed, complete_rows};
 use report::Failure;

@@ -25,6 +25,8 @@ pub(super) struct StepPlan<const D: usize> {
     pub(super) new_pattern: bool,
     /// Wall time of the preparation (s).
     pub(super) setup_time: f64,
+    /// Path following: the control of the attempt (`path.rs`).
+    pub(super) path: Option<path::PathStep>,
 }
 
 /// Inertia and applied forces of a step: what the assembler needs besides the points and the grid.
@@ -130,6 +132,7 @@ impl<const D: usize> Step<'_, D> {
             prescribed_increment(v, rise, t, dt)
         })?;
         let contacts = self.contact_sets(session, &g.set_values, dt)?;
+        let path = self.path_step(session, dt)?;
         let plan = StepPlan {
             dt,
             t_new,
@@ -140,6 +143,7 @@ impl<const D: usize> Step<'_, D> {
             load_nodes: g.load_nodes,
             new_pattern: false,
             setup_time: 0.0,
+            path,
         };
         Ok((plan, g.eta_bar))
     }

@@ -126,4 +126,7 @@ pub struct StepReport {
     /// it `None`).
     #[serde(default)]
     pub crack: Option<crate::crack::Front>,
+    /// Path following: the load factor, the measured opening and the step's ratio after the step.
+    #[serde(default)]
+    pub path: Option<path::PathPoint>,
 }

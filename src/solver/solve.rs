@@ -208,7 +208,10 @@ impl<const D: usize> Step<'_, D> {
             ..
         } = &mut *self.work;
         let StepPlan {
-            contacts, loading, ..
+            contacts,
+            loading,
+            path,
+            ..
         } = plan;
         let input = Self::step_input(
             model,
@@ -244,7 +247,7 @@ impl<const D: usize> Step<'_, D> {
             } = sys;
             let mut problem =
                 StepProblem::new(&input, assembly_event, assembler, contacts, owned, session);
-            let info = match snes.solve(&mut problem, x, jac) {
+            let info = match path::newton(snes, &mut problem, x, jac, path.as_mut()) {
                 Ok(info) => info,
                 // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails
                 // this attempt like a diverged solve; the objects are rebuilt for the next attempt.
