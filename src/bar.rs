@@ -17,11 +17,12 @@ use crate::boundary::{Motion, NodeBox};
 use crate::geometry::{Geometry, Region, Seeding};
 use crate::grid::Grid;
 use crate::material::{MaterialConfig, MicroplaneConfig};
+use crate::model::PathControl;
 use crate::model::{Parameters, Setup, TimeIntegration};
 use crate::particles::Particles;
 use crate::petsc::SessionGuard;
 use crate::shape::ShapeKind;
-use crate::solver::{PathControl, Simulation, StepError, StepReport};
+use crate::solver::{Simulation, StepError, StepReport};
 
 /// Geometry, loading and time stepping of the bar.
 #[derive(Clone, Debug, PartialEq)]

@@ -17,7 +17,7 @@ use crate::input::{BadValue, shown};
 use crate::material::Material;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles, SeedingParameter};
-use crate::solver::PathControl;
+use crate::model::PathControl;
 use crate::space::{Frame, lift3};
 use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;

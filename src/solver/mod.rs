@@ -41,7 +41,7 @@ mod system;
 
 use contacts::ContactSet;
 pub use input::StepData;
-pub use path::{Gauge, PathControl, PathPoint};
+pub use path::PathPoint;
 use prepare::{Loading, StepPlan};
 use processes::{agree, agreed, complete_rows};
 use report::Failure;
