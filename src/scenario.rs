@@ -15,9 +15,9 @@ use crate::geometry::{Body, Geometry, Region, Seeding};
 use crate::grid::Grid;
 use crate::input::{BadValue, shown};
 use crate::material::Material;
+use crate::model::PathControl;
 use crate::model::{Method, Parameters, Setup, TimeIntegration};
 use crate::particles::{ParticleError, Particles, SeedingParameter};
-use crate::model::PathControl;
 use crate::space::{Frame, lift3};
 use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;
@@ -233,12 +233,7 @@ impl Plan<'_> {
     /// bodies with a geometry of space are [`Plan::space_points`].
     pub fn points(&self) -> Result<f64, ScenarioError> {
         let seeder = Seeder::new(self.cfg);
-        let mut n = 0.0;
-        for b in &self.bodies {
-            if let BodyShape::Plane(g) = &b.geometry {
-                n += seeder.count((&b.key, &b.name), g, b.density)?;
-            }
-        }
+        let mut n = self.body_points(&seeder, false)?;
         for (r, key) in self.rigid.iter().zip(&self.rigid_keys) {
             n += seeder.count((key, &r.name), &r.geometry, 1.0)?;
         }
@@ -247,12 +242,19 @@ impl Plan<'_> {
 
     /// The material points of the bodies with a geometry of space, counted as [`Plan::points`].
     pub fn space_points(&self) -> Result<f64, ScenarioError> {
-        let seeder = Seeder::new(self.cfg);
+        self.body_points(&Seeder::new(self.cfg), true)
+    }
+
+    /// The points of the deformable bodies with a geometry of space (`space`) or of the plane.
+    fn body_points(&self, seeder: &Seeder, space: bool) -> Result<f64, ScenarioError> {
         let mut n = 0.0;
         for b in &self.bodies {
-            if let BodyShape::Space(s) = &b.geometry {
-                n += seeder.count((&b.key, &b.name), s, b.density)?;
-            }
+            let id = (b.key.as_str(), b.name.as_str());
+            n += match (&b.geometry, space) {
+                (BodyShape::Plane(g), false) => seeder.count(id, g, b.density)?,
+                (BodyShape::Space(s), true) => seeder.count(id, s, b.density)?,
+                _ => 0.0,
+            };
         }
         Ok(n)
     }

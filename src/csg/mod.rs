@@ -234,21 +234,25 @@ impl<P: Primitive<D>, const D: usize> Shape<P, D> {
 
     /// Whether `x` (mm) lies in the closure (module docs).
     pub fn in_closure(&self, x: &SVector<f64, D>) -> bool {
-        match self {
-            Shape::Primitive(p) => p.in_closure(x),
-            Shape::Union(c) => c.iter().any(|s| s.in_closure(x)),
-            Shape::Intersection(c) => c.iter().all(|s| s.in_closure(x)),
-            Shape::Difference(c) => c[0].in_closure(x) && !c[1..].iter().any(|s| s.in_interior(x)),
-        }
+        self.holds(x, true)
     }
 
     /// Whether `x` (mm) lies in the interior (module docs).
     pub fn in_interior(&self, x: &SVector<f64, D>) -> bool {
+        self.holds(x, false)
+    }
+
+    /// Whether `x` (mm) lies in the closure (`closed`) or the interior: a difference takes the closure
+    /// of its first operand minus the interiors of the others, and the other way round.
+    fn holds(&self, x: &SVector<f64, D>, closed: bool) -> bool {
         match self {
+            Shape::Primitive(p) if closed => p.in_closure(x),
             Shape::Primitive(p) => p.in_interior(x),
-            Shape::Union(c) => c.iter().any(|s| s.in_interior(x)),
-            Shape::Intersection(c) => c.iter().all(|s| s.in_interior(x)),
-            Shape::Difference(c) => c[0].in_interior(x) && !c[1..].iter().any(|s| s.in_closure(x)),
+            Shape::Union(c) => c.iter().any(|s| s.holds(x, closed)),
+            Shape::Intersection(c) => c.iter().all(|s| s.holds(x, closed)),
+            Shape::Difference(c) => {
+                c[0].holds(x, closed) && !c[1..].iter().any(|s| s.holds(x, !closed))
+            }
         }
     }
 }

@@ -3,7 +3,7 @@
 //! following, `solver::path`).
 
 use super::{Matrix, Result, Snes, Vector, check, sys};
-use std::ffi::{CStr, c_char};
+use std::ffi::c_char;
 
 /// The outcome of one linear solve.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,14 +58,8 @@ impl Snes {
                 "KSPGetConvergedReasonString",
             )?;
         }
-        let reason_name = if name.is_null() {
-            reason.to_string()
-        } else {
-            // SAFETY: static string owned by PETSc.
-            unsafe { CStr::from_ptr(name) }
-                .to_string_lossy()
-                .into_owned()
-        };
+        // SAFETY: null or a static string owned by PETSc.
+        let reason_name = unsafe { super::reason_name(name, reason) };
         Ok(LinearSolve {
             iterations: its.max(0) as usize,
             reason,

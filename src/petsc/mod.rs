@@ -334,6 +334,21 @@ fn init_petsc(args: &[String]) -> Result<()> {
     )
 }
 
+/// The name PETSc gives a converged reason (`name` from `*GetConvergedReasonString`), or the number
+/// `reason` when it gives none.
+///
+/// # Safety
+/// `name` must be null or point to a NUL-terminated string that lives through the call.
+pub(crate) unsafe fn reason_name(name: *const std::ffi::c_char, reason: impl ToString) -> String {
+    if name.is_null() {
+        return reason.to_string();
+    }
+    // SAFETY: guaranteed by the caller.
+    unsafe { std::ffi::CStr::from_ptr(name) }
+        .to_string_lossy()
+        .into_owned()
+}
+
 /// A Rust string as a C string, or a PETSc-style error if it holds a NUL byte.
 pub(crate) fn cstring(s: &str) -> Result<CString> {
     CString::new(s).map_err(|_| PetscError {

@@ -337,14 +337,8 @@ impl Snes {
             // SAFETY: PETSc reports nhist valid entries.
             unsafe { std::slice::from_raw_parts(hist, nhist as usize) }.to_vec()
         };
-        let reason_name = if name.is_null() {
-            reason.to_string()
-        } else {
-            // SAFETY: static string owned by PETSc.
-            unsafe { CStr::from_ptr(name) }
-                .to_string_lossy()
-                .into_owned()
-        };
+        // SAFETY: null or a static string owned by PETSc.
+        let reason_name = unsafe { super::reason_name(name, reason) };
         Ok(SolveInfo {
             iterations: its as usize,
             linear_iterations: lits as usize,

@@ -32,6 +32,28 @@ impl<const D: usize> Step<'_, D> {
     }
 }
 
+impl<const D: usize> Workspace<D> {
+    /// Starts the assembler's step ([`Assembler::begin_step`]) on the workspace's shape functions,
+    /// unknowns, grid state and contact pairs with the step's `loading`.
+    pub(super) fn begin_assembly(
+        &mut self,
+        model: &Model<D>,
+        particles: &Particles<D>,
+        loading: &Loading<D>,
+    ) {
+        let Workspace {
+            table,
+            dofs,
+            grid_state,
+            partners,
+            assembler,
+            ..
+        } = self;
+        let input = Step::step_input(model, particles, table, dofs, grid_state, loading, partners);
+        assembler.begin_step(&input);
+    }
+}
+
 /// A step's data on the grid built the solver's way from a model and a state: shape functions and P2G,
 /// the unknowns with the constraints of the model's boxes and glued bodies, the loads, the pairs between
 /// bodies and the inertia of a step of `dt`: what the step prepares before its PETSc objects.

@@ -91,16 +91,8 @@ impl<const D: usize> Step<'_, D> {
         prefix: Option<&str>,
     ) -> Result<StepPlan<D>, StepError> {
         let (plan, eta_bar) = self.plan(session, dt)?;
-        let input = Self::step_input(
-            self.model,
-            &self.state.particles,
-            &self.work.table,
-            &self.work.dofs,
-            &self.work.grid_state,
-            &plan.loading,
-            &self.work.partners,
-        );
-        self.work.assembler.begin_step(&input);
+        self.work
+            .begin_assembly(self.model, &self.state.particles, &plan.loading);
         let new_pattern = self.linear_system(session, prefix)?;
         let xs = self.first_guess(&plan, &eta_bar);
         let sys = self.work.system.as_mut().expect("linear system just built");
