@@ -8,6 +8,8 @@
 //! cargo run --release --example validation -- l-panel runs/l-panel --out docs/img
 //! mpm-concrete run configs/benchmarks/petersson-3pb.toml --output runs/petersson-3pb
 //! cargo run --release --example validation -- petersson-3pb runs/petersson-3pb --out docs/img
+//! mpm-concrete run configs/benchmarks/offset-notch-3pb.toml --output runs/offset-notch-3pb
+//! cargo run --release --example validation -- offset-notch-3pb runs/offset-notch-3pb --out docs/img
 //! ```
 //!
 //! Writes `<out>/validation-<bench>-force.png`, `<out>/validation-<bench>-damage.png` and
@@ -27,6 +29,9 @@ const CRACKED: f64 = 0.9;
 struct Bench {
     /// Name of the configuration (`configs/benchmarks/<name>.toml`).
     name: &'static str,
+    /// The `history.csv` column on the x-axis (mm): the load point's `load_uy` or the path control's
+    /// `path_opening` (the crack-mouth opening of the offset-notched beam).
+    x_column: &'static str,
     /// Specimen load in kN per N/mm of the plane run's `load_fy` (thickness, symmetry and sign).
     force_scale: f64,
     /// Sign that makes the load point's displacement positive.
@@ -39,11 +44,94 @@ struct Bench {
     h: f64,
     /// The crack path's strips (see [`crack_path`]): axis, from, to (mm), and the table's heading.
     path: (usize, f64, f64, &'static str),
+    /// Measured reference curves (x in mm, load in kN) drawn with the run, each with its legend entry.
+    curves: &'static [(&'static str, &'static [[f64; 2]])],
 }
 
-const BENCHES: [Bench; 2] = [
+/// The offset-notched beam's experimental load-CMOD band (Garcia-Alvarez, Gettu & Carol 2012, Sadhana
+/// 37(1) 187-205), as digitised in `examples/data/mixed_mode_fracture.csv` of the MIT-licensed
+/// `mark-hobbs/pypd` (columns `cmod, load_min, load_max`), sampled here: CMOD (mm), the two bounding
+/// curves (N). The first curve ends at 0.127 mm; `OFFSET_NOTCH_TAIL` continues the second.
+const OFFSET_NOTCH_BAND: [[f64; 3]; 34] = [
+    [0.0000, 10.0, 19.0],
+    [0.0025, 982.0, 797.0],
+    [0.0050, 2257.0, 2040.0],
+    [0.0075, 3533.0, 3285.0],
+    [0.0100, 4324.0, 4238.0],
+    [0.0125, 4525.0, 4654.0],
+    [0.0150, 4687.0, 5105.0],
+    [0.0175, 4834.0, 5355.0],
+    [0.0186, 4894.0, 5361.0],
+    [0.0200, 4866.0, 5377.0],
+    [0.0211, 4846.0, 5405.0],
+    [0.0225, 4819.0, 5212.0],
+    [0.0250, 4664.0, 5085.0],
+    [0.0275, 4411.0, 4865.0],
+    [0.0300, 4230.0, 4731.0],
+    [0.0350, 3839.0, 4494.0],
+    [0.0400, 3553.0, 4291.0],
+    [0.0450, 3343.0, 4019.0],
+    [0.0500, 3025.0, 3692.0],
+    [0.0550, 2760.0, 3478.0],
+    [0.0600, 2552.0, 3269.0],
+    [0.0650, 2263.0, 3051.0],
+    [0.0700, 2078.0, 2875.0],
+    [0.0750, 1927.0, 2719.0],
+    [0.0800, 1805.0, 2597.0],
+    [0.0850, 1693.0, 2476.0],
+    [0.0900, 1544.0, 2386.0],
+    [0.0950, 1434.0, 2320.0],
+    [0.1000, 1342.0, 2226.0],
+    [0.1050, 1275.0, 2134.0],
+    [0.1100, 1204.0, 2059.0],
+    [0.1150, 1122.0, 1978.0],
+    [0.1200, 1076.0, 1892.0],
+    [0.1250, 1015.0, 1813.0],
+];
+
+/// The second bounding curve of [`OFFSET_NOTCH_BAND`] beyond 0.127 mm: CMOD (mm), load (N).
+const OFFSET_NOTCH_TAIL: [[f64; 2]; 13] = [
+    [0.1300, 1747.0],
+    [0.1400, 1599.0],
+    [0.1500, 1526.0],
+    [0.1600, 1428.0],
+    [0.1700, 1342.0],
+    [0.1800, 1276.0],
+    [0.1900, 1199.0],
+    [0.2000, 1148.0],
+    [0.2100, 1069.0],
+    [0.2200, 1021.0],
+    [0.2300, 936.0],
+    [0.2400, 892.0],
+    [0.2500, 827.0],
+];
+
+/// One bounding curve of the offset-notched beam's band in kN: `k` = 1 or 2 (the band's column), the
+/// second continued by the tail.
+const fn band_curve<const N: usize>(k: usize) -> [[f64; 2]; N] {
+    let mut out = [[0.0; 2]; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = if i < OFFSET_NOTCH_BAND.len() {
+            [OFFSET_NOTCH_BAND[i][0], OFFSET_NOTCH_BAND[i][k] / 1000.0]
+        } else {
+            let t = OFFSET_NOTCH_TAIL[i - OFFSET_NOTCH_BAND.len()];
+            [t[0], t[1] / 1000.0]
+        };
+        i += 1;
+    }
+    out
+}
+
+/// The band's first curve (kN).
+const OFFSET_NOTCH_LOWER: [[f64; 2]; 34] = band_curve(1);
+/// The band's second curve with its tail (kN).
+const OFFSET_NOTCH_UPPER: [[f64; 2]; 47] = band_curve(2);
+
+const BENCHES: [Bench; 3] = [
     Bench {
         name: "l-panel",
+        x_column: "load_uy",
         force_scale: 100.0 / 1000.0,
         displacement_sign: 1.0,
         reference_peak: (6.0, 8.0, "experimental peak range (Winkler et al.)"),
@@ -56,9 +144,11 @@ const BENCHES: [Bench; 2] = [
             0.0,
             "| x [mm] | cracked y from [mm] | mean y [mm] | to [mm] |",
         ),
+        curves: &[],
     },
     Bench {
         name: "petersson-3pb",
+        x_column: "load_uy",
         force_scale: -2.0 * 50.0 / 1000.0,
         displacement_sign: -1.0,
         reference_peak: (0.75, 0.80, "experimental peak range (Petersson)"),
@@ -71,6 +161,31 @@ const BENCHES: [Bench; 2] = [
             200.0,
             "| y [mm] | cracked x from [mm] | mean x [mm] | to [mm] |",
         ),
+        curves: &[],
+    },
+    Bench {
+        name: "offset-notch-3pb",
+        x_column: "path_opening",
+        force_scale: -50.0 / 1000.0,
+        displacement_sign: 1.0,
+        reference_peak: (
+            4.89,
+            5.41,
+            "experimental peak range (Garcia-Alvarez et al.)",
+        ),
+        x_label: "crack-mouth opening (CMOD, 20 mm gauge) [mm]",
+        h: 2.5,
+        // From the notch tip (75, 20) up towards the load at (125, 80), in horizontal strips.
+        path: (
+            1,
+            20.0,
+            80.0,
+            "| y [mm] | cracked x from [mm] | mean x [mm] | to [mm] |",
+        ),
+        curves: &[
+            ("experiment, first bounding curve", &OFFSET_NOTCH_LOWER),
+            ("experiment, second bounding curve", &OFFSET_NOTCH_UPPER),
+        ],
     },
 ];
 
@@ -170,7 +285,7 @@ type Curve = (Vec<(f64, f64)>, [f64; 4]);
 /// The load-displacement curve of a run, from the origin, with the run's counts.
 fn load_curve(bench: &Bench, dir: &Path) -> Result<Curve> {
     let names = [
-        "load_uy",
+        bench.x_column,
         "load_fy",
         "newton_its",
         "wall_total",
@@ -204,15 +319,21 @@ fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
         .fold((0.0, f64::MIN), |a, p| if p.1 > a.1 { p } else { a });
     let (u_end, f_end) = *curve.last().ok_or("no steps")?;
     let (lo, hi, label) = bench.reference_peak;
-    LinePlot::new(
+    let mut plot = LinePlot::new(
         format!("{name}: load against displacement"),
         bench.x_label,
         "load [kN]",
     )
-    .with_series("this code (plane strain, 5 mm cells)", curve)
+    .with_series(
+        format!("this code (plane strain, {} mm cells)", bench.h),
+        curve,
+    )
     .with_series(format!("{label}: {lo} kN"), vec![(0.0, lo), (u_end, lo)])
-    .with_series(format!("{label}: {hi} kN"), vec![(0.0, hi), (u_end, hi)])
-    .save_png(out.join(format!("validation-{name}-force.png")))?;
+    .with_series(format!("{label}: {hi} kN"), vec![(0.0, hi), (u_end, hi)]);
+    for (legend, points) in bench.curves {
+        plot = plot.with_series(*legend, points.iter().map(|p| (p[0], p[1])).collect());
+    }
+    plot.save_png(out.join(format!("validation-{name}-force.png")))?;
     let (x, damage, snapshot) = last_snapshot(dir)?;
     ScatterField {
         title: format!("{name}: damage at {u_end:.3} mm"),
@@ -248,6 +369,7 @@ fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
         "displacement_at_peak": u_peak,
         "end": {"displacement": u_end, "load": f_end},
         "reference_peak_range": [lo, hi],
+        "x_column": bench.x_column,
         "steps": steps,
         "newton_iterations": newton,
         "wall_time_sum": wall,
@@ -261,7 +383,7 @@ fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: validation <l-panel|petersson-3pb> RUN_DIR [--out DIR]";
+    let usage = "usage: validation <l-panel|petersson-3pb|offset-notch-3pb> RUN_DIR [--out DIR]";
     let (name, dir) = match (args.first(), args.get(1)) {
         (Some(n), Some(d)) => (n.as_str(), PathBuf::from(d)),
         _ => return Err(usage.into()),
