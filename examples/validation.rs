@@ -40,8 +40,6 @@ struct Bench {
     reference_peak: (f64, f64, &'static str),
     /// x-axis label of the load-displacement plot.
     x_label: &'static str,
-    /// Cell size of the configuration (mm): strips of the crack path and the map's squares.
-    h: f64,
     /// The crack path's strips (see [`crack_path`]): axis, from, to (mm), and the table's heading.
     path: (usize, f64, f64, &'static str),
     /// Measured reference curves (x in mm, load in kN) drawn with the run, each with its legend entry.
@@ -136,7 +134,6 @@ const BENCHES: [Bench; 3] = [
         displacement_sign: 1.0,
         reference_peak: (6.0, 8.0, "experimental peak range (Winkler et al.)"),
         x_label: "upward displacement of the load point [mm]",
-        h: 5.0,
         // From the re-entrant corner (250, 250) towards the panel's left face, in vertical strips.
         path: (
             0,
@@ -153,7 +150,6 @@ const BENCHES: [Bench; 3] = [
         displacement_sign: -1.0,
         reference_peak: (0.75, 0.80, "experimental peak range (Petersson)"),
         x_label: "load-point deflection [mm]",
-        h: 5.0,
         // From the notch tip (1000, 100) up the beam, in horizontal strips.
         path: (
             1,
@@ -174,7 +170,6 @@ const BENCHES: [Bench; 3] = [
             "experimental peak range (Garcia-Alvarez et al.)",
         ),
         x_label: "crack-mouth opening (CMOD, 20 mm gauge) [mm]",
-        h: 2.5,
         // From the notch tip (75, 20) up towards the load at (125, 80), in horizontal strips.
         path: (
             1,
@@ -218,6 +213,19 @@ fn history(dir: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
         }
     }
     Ok(columns)
+}
+
+/// The cell size (mm) of the run in `dir`, from its effective configuration `config.toml` (the file with
+/// the `--set` overrides): the crack path's strips and the damage map's squares.
+fn cell_size(dir: &Path) -> Result<f64> {
+    let path = dir.join("config.toml");
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let config: toml::Table = toml::from_str(&text)?;
+    config
+        .get("grid")
+        .and_then(|g| g.get("cell_size"))
+        .and_then(toml::Value::as_float)
+        .ok_or_else(|| format!("{}: no grid.cell_size", path.display()).into())
 }
 
 /// Positions (x, y) and damage of the points in the run's last snapshot.
@@ -313,6 +321,7 @@ fn load_curve(bench: &Bench, dir: &Path) -> Result<Curve> {
 fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
     let name = bench.name;
     let (curve, [steps, newton, wall, dissipation]) = load_curve(bench, dir)?;
+    let h = cell_size(dir)?;
     let (u_peak, f_peak) = curve
         .iter()
         .copied()
@@ -324,10 +333,7 @@ fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
         bench.x_label,
         "load [kN]",
     )
-    .with_series(
-        format!("this code (plane strain, {} mm cells)", bench.h),
-        curve,
-    )
+    .with_series(format!("this code (plane strain, {h} mm cells)"), curve)
     .with_series(format!("{label}: {lo} kN"), vec![(0.0, lo), (u_end, lo)])
     .with_series(format!("{label}: {hi} kN"), vec![(0.0, hi), (u_end, hi)]);
     for (legend, points) in bench.curves {
@@ -342,11 +348,11 @@ fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
         value: damage.clone(),
         value_label: "damage [-]".into(),
         range: Some((0.0, 1.0)),
-        point_size: 0.5 * bench.h,
+        point_size: 0.5 * h,
     }
     .save_png(out.join(format!("validation-{name}-damage.png")))?;
     let (axis, from, to, heading) = bench.path;
-    let strips = crack_path(&x, &damage, bench.h, axis, from, to);
+    let strips = crack_path(&x, &damage, h, axis, from, to);
     println!(
         "{name}: peak {f_peak:.3} kN at {u_peak:.4} mm (reference {lo}-{hi} kN); end {f_end:.3} kN at \
          {u_end:.4} mm; {steps} steps, {newton} Newton iterations, wall {wall:.0} s; damage dissipation \
@@ -370,6 +376,7 @@ fn report(bench: &Bench, dir: &Path, out: &Path) -> Result<()> {
         "end": {"displacement": u_end, "load": f_end},
         "reference_peak_range": [lo, hi],
         "x_column": bench.x_column,
+        "cell_size": h,
         "steps": steps,
         "newton_iterations": newton,
         "wall_time_sum": wall,
