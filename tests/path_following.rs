@@ -256,3 +256,37 @@ fn bad_path_tables_are_refused_naming_the_key() {
     let load = "[[load]]\nname = \"f\"\nfrom = [10.0, 0.0]\nto = [10.0, 4.0]\nforce = [1.0, 0.0]\n";
     refused(block(&format!("{PATH}{load}")), "path", "no [[load]]");
 }
+
+/// The notched beam of `configs/tpb-path.toml` (CMOD control, 1 um per step) with the run's default
+/// solver options: at CMOD 15 um the plain bordered Newton leaves the material's domain (an inverted
+/// point after 16 iterations; before the line search the step was retried at half the increment). The
+/// retry of the attempt with the line search converges it at the full increment: every one of the first
+/// 15 steps takes one attempt, the CMOD is 1 um per step, and only step 15's residual history holds
+/// both Newton runs: the retry starts from the same guess, so its first norm repeats the first one
+/// exactly.
+#[test]
+fn a_notched_beam_step_the_plain_newton_fails_converges_at_the_full_increment() {
+    let s = common::session(
+        "-tp_ksp_type preonly -tp_pc_type lu -tp_pc_factor_mat_solver_type mumps \
+         -tp_snes_rtol 1e-8 -tp_snes_atol 1e-8 -tp_snes_max_it 25",
+    );
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/configs/tpb-path.toml"
+    ))
+    .expect("configs/tpb-path.toml");
+    let setup = common::config_setup(&text, "tpb-path.toml", "tp_");
+    let mut sim = mpm_concrete::solver::Simulation::new(setup).expect("simulation");
+    let mut rescued = Vec::new();
+    for step in 1..=15 {
+        let r = sim.advance(&s).expect("step");
+        let p = r.path.expect("path point");
+        assert_eq!(r.attempts, 1, "step {step} was retried: {:?}", r.solve);
+        assert!((p.opening - 1e-3 * step as f64).abs() < 1e-12, "{p:?}");
+        let norms = &r.solve.residual_norms;
+        if norms[1..].contains(&norms[0]) {
+            rescued.push(step);
+        }
+    }
+    assert_eq!(rescued, [15], "steps whose plain Newton failed");
+}

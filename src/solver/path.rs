@@ -11,6 +11,8 @@
 //! is solved by the two-solve bordering algorithm with the step's own KSP and Jacobian: `J a = -R`,
 //! `J b = q`, `dk = (dw - c.x - c.a) / c.b`, `dx = a + dk b`. With the opening growing monotonically the
 //! path is followed through snap-backs, where the prescribed displacement itself decreases (`k < 0`).
+//! Each iteration is globalised by a backtracking line search on `|R(x, k)|` along the curve
+//! `x0 + t a + dk(t) b` on which the constraint holds exactly (the full step `t = 1` first).
 //!
 //! Hooks in the step: `Step::plan` builds the [`PathStep`], `Step::solve` calls [`newton`] (the
 //! bordered Newton instead of SNES's with path following), `Step::finish` scales the sets' increments by `k` and reports the
@@ -166,7 +168,7 @@ fn info(
     (iterations, linear): (usize, usize),
     norms: Vec<f64>,
     domain: &[String],
-    outcome: (i32, &str),
+    outcome: Outcome,
 ) -> SolveInfo {
     SolveInfo {
         iterations,
@@ -195,7 +197,7 @@ pub(super) fn newton<const D: usize>(
 
 /// The vectors of the bordered Newton (this process's parts).
 struct Bordering {
-    /// Residual `R(x, k)`, its negative, and the solutions `a = J^-1 (-R)`, `b = J^-1 q`.
+    /// Residual `R(x, k)`, its negative (also scratch for the full step), and the solutions `a = J^-1 (-R)`, `b = J^-1 q`.
     r: Vector,
     rhs: Vector,
     a: Vector,
@@ -204,6 +206,8 @@ struct Bordering {
     q: Vector,
     /// The opening's coefficients.
     c: Vector,
+    /// The unknowns at the start of the iteration (the line search's origin).
+    x0: Vector,
 }
 
 impl Bordering {
@@ -223,44 +227,182 @@ impl Bordering {
         Ok(Some(its))
     }
 
-    /// Moves `x` by `a` (the update, with `b` folded in) and the ratio by `dk`, halving the step while
+    /// The scalars of the iteration's line search at `x` with the opening increment `target` (mm),
+    /// after [`Bordering::solve`]; a fatal error when the opening does not respond to the load
+    /// (`c . b = 0`).
+    fn search(&self, x: &Vector, target: f64) -> Result<Search, PetscError> {
+        let cb = self.c.dot(&self.b)?;
+        if cb.is_nan() || cb.abs() <= 1e-300 {
+            return Err(fatal(
+                "path following: the measured opening does not respond to the prescribed motion \
+                 (c . K^-1 q = 0); measure across the crack that the moving sets open"
+                    .into(),
+            ));
+        }
+        let (gap, ca) = (target - self.c.dot(x)?, self.c.dot(&self.a)?);
+        Ok(Search {
+            gap,
+            ca,
+            cb,
+            dk: (gap - ca) / cb,
+        })
+    }
+
+    /// The plain Newton update: moves `x` by `a + dk b` and the ratio by `dk`, halving the step while
     /// the residual meets a point outside the material's domain (messages into `domain`); the new
-    /// residual norm, or `None` after 8 halvings.
+    /// residual norm, or the failure after 8 halvings.
     fn advance<const D: usize>(
         &mut self,
         problem: &mut StepProblem<'_, '_, D>,
         x: &mut Vector,
         (path, dk): (&mut PathStep, f64),
         domain: &mut Vec<String>,
-    ) -> Result<Option<f64>, PetscError> {
+    ) -> Result<Result<f64, Outcome>, PetscError> {
+        self.a.axpy(dk, &self.b)?;
         let mut step = 1.0;
         loop {
             x.axpy(step, &self.a)?;
             match residual(problem, x, &mut self.r, &self.q, path.ratio + step * dk)? {
                 Ok(n) => {
                     path.ratio += step * dk;
-                    return Ok(Some(n));
+                    return Ok(Ok(n));
                 }
                 Err(m) => {
                     x.axpy(-step, &self.a)?;
                     domain.push(m);
                     if step <= 1.0 / 256.0 {
-                        return Ok(None);
+                        return Ok(Err(DOMAIN));
                     }
                     step *= 0.5;
                 }
             }
         }
     }
+
+    /// Places `x` at the fraction `t` of the iteration from `x0`: `x0 + t a + dk(t) b` with
+    /// `dk(t) = (g - t c.a) / (c.b)` ([`Search`]), so that the constraint holds exactly for every `t`;
+    /// the full step is `x0 + a + dk b` as the plain bordered Newton takes it. Returns `dk(t)`.
+    fn place(&mut self, x: &mut Vector, s: &Search, t: f64) -> Result<f64, PetscError> {
+        x.set_all(0.0)?;
+        x.axpy(1.0, &self.x0)?;
+        if t == 1.0 {
+            self.rhs.set_all(0.0)?;
+            self.rhs.axpy(1.0, &self.a)?;
+            self.rhs.axpy(s.dk, &self.b)?;
+            x.axpy(1.0, &self.rhs)?;
+            return Ok(s.dk);
+        }
+        let dk = (s.gap - t * s.ca) / s.cb;
+        x.axpy(t, &self.a)?;
+        x.axpy(dk, &self.b)?;
+        Ok(dk)
+    }
+
+    /// The line search of one iteration from `x0` (copied from `x`) along the bordered direction with
+    /// the constraint kept exact ([`Bordering::place`]), on the merit `phi(t) = |R(t)|^2`, whose slope at
+    /// `t = 0` is `-2 |R_0|^2` (the linearised residual is `(1 - t) R_0` for every `dk`, since
+    /// `J b = q`). The full step is tried first and accepted when `phi(1) <= (1 - 2 alpha) phi(0)`
+    /// (Armijo, `alpha` = [`ARMIJO`]); otherwise `t` backtracks to the minimiser of the quadratic through
+    /// `phi(0)`, `phi'(0)` and `phi(t)`, kept within `[t/10, t/2]`, and is halved where the residual
+    /// meets a point outside the material's domain (messages into `domain`), down to [`MIN_STEP`]. If no
+    /// `t` satisfies Armijo, the tried `t` of least `|R|` is taken when it lowers `|R|` at all. Returns
+    /// the new `|R|` (with `x`, `R` and `path.ratio` at the accepted point), or the SNES-like failure.
+    fn line_search<const D: usize>(
+        &mut self,
+        problem: &mut StepProblem<'_, '_, D>,
+        x: &mut Vector,
+        (path, s, norm0): (&mut PathStep, &Search, f64),
+        domain: &mut Vec<String>,
+    ) -> Result<Result<f64, Outcome>, PetscError> {
+        self.x0.set_all(0.0)?;
+        self.x0.axpy(1.0, x)?;
+        let phi0 = norm0 * norm0;
+        let (mut t, mut best) = (1.0f64, None::<(f64, f64)>);
+        loop {
+            let dk = self.place(x, s, t)?;
+            let next = match residual(problem, x, &mut self.r, &self.q, path.ratio + dk)? {
+                Ok(n) if n.is_finite() => {
+                    if n * n <= (1.0 - 2.0 * ARMIJO * t) * phi0 {
+                        path.ratio += dk;
+                        return Ok(Ok(n));
+                    }
+                    if best.is_none_or(|(_, b)| n < b) {
+                        best = Some((t, n));
+                    }
+                    let tq = phi0 * t * t / (n * n - phi0 + 2.0 * phi0 * t);
+                    tq.clamp(0.1 * t, 0.5 * t)
+                }
+                Ok(_) => 0.5 * t,
+                Err(m) => {
+                    domain.push(m);
+                    0.5 * t
+                }
+            };
+            if next < MIN_STEP {
+                break;
+            }
+            t = next;
+        }
+        match best {
+            Some((t, n)) if n < norm0 => {
+                let dk = self.place(x, s, t)?;
+                let again = residual(problem, x, &mut self.r, &self.q, path.ratio + dk)?;
+                path.ratio += dk;
+                Ok(again.map_err(|m| {
+                    domain.push(m);
+                    DOMAIN
+                }))
+            }
+            _ => {
+                x.set_all(0.0)?;
+                x.axpy(1.0, &self.x0)?;
+                let tried_domain = best.is_none() && !domain.is_empty();
+                Ok(Err(if tried_domain { DOMAIN } else { LINE_SEARCH }))
+            }
+        }
+    }
+}
+
+/// SNES's reason code and name of a bordered Newton's end.
+type Outcome = (i32, &'static str);
+
+/// A residual outside the material's domain at every tried step.
+const DOMAIN: Outcome = (-1, "DIVERGED_FUNCTION_DOMAIN");
+
+/// A residual that is not a number (without a domain error).
+const FNORM_NAN: Outcome = (-4, "DIVERGED_FNORM_NAN");
+
+/// No step along the direction lowers the residual.
+const LINE_SEARCH: Outcome = (-6, "DIVERGED_LINE_SEARCH");
+
+/// Armijo's sufficient-decrease parameter `alpha` of the line search (PETSc's `bt` default).
+const ARMIJO: f64 = 1e-4;
+
+/// The smallest step fraction `t` the line search tries (2^-10).
+const MIN_STEP: f64 = 1.0 / 1024.0;
+
+/// The scalars of one iteration's line search: `dk(t) = (gap - t ca) / cb`.
+struct Search {
+    /// `g = dw - c . x0`: what the constraint misses at the iteration's start (mm).
+    gap: f64,
+    /// `c . a` (mm).
+    ca: f64,
+    /// `c . b` (mm per unit of `k`).
+    cb: f64,
+    /// `dk(1)`, the full step's change of the ratio.
+    dk: f64,
 }
 
 /// Newton on the step's equations and the path constraint from the guess in `x` (overwritten) and the
 /// ratio `path.ratio` (updated), by the bordering algorithm with the KSP of `snes` (its options, its
 /// preconditioner) and the Jacobian `jac`; converged when `|R| <= max(atol, rtol |R_0|)` with SNES's
-/// tolerances, at most `max_it` iterations. A step along the direction that meets a point outside its
-/// domain is halved (up to 8 times). Failures are reported as SNES would (`DIVERGED_LINEAR_SOLVE`,
-/// `DIVERGED_MAX_IT`, `DIVERGED_FUNCTION_DOMAIN`, `DIVERGED_JACOBIAN_DOMAIN`): the step is retried
-/// with half the increment.
+/// tolerances, at most `max_it` iterations. First the plain bordered Newton (full steps, a step that
+/// meets a point outside the material's domain halved up to 8 times); if it ends in `DIVERGED_MAX_IT`
+/// or `DIVERGED_FUNCTION_DOMAIN`, the attempt is repeated from the same guess with every iteration
+/// globalised by the line search of [`Bordering::line_search`] (the iterations and messages of both
+/// count). Failures are reported as SNES would (`DIVERGED_LINEAR_SOLVE`, `DIVERGED_MAX_IT`,
+/// `DIVERGED_LINE_SEARCH`, `DIVERGED_FUNCTION_DOMAIN`, `DIVERGED_JACOBIAN_DOMAIN`): the step is
+/// retried with half the increment.
 fn bordered_newton<const D: usize>(
     snes: &mut Snes,
     problem: &mut StepProblem<'_, '_, D>,
@@ -268,7 +410,6 @@ fn bordered_newton<const D: usize>(
     jac: &mut Matrix,
     path: &mut PathStep,
 ) -> Result<SolveInfo, PetscError> {
-    let tol = snes.tolerances()?;
     let (owned, dofs, s) = (problem.owned, problem.input.dofs, problem.row_scale);
     let nominal: Vec<f64> = (0..dofs.len())
         .map(|i| dofs.prescribed(i).map_or(0.0, |v| s * v))
@@ -280,7 +421,41 @@ fn bordered_newton<const D: usize>(
         b: x.duplicate()?,
         q: owned_vector(x, owned, &nominal)?,
         c: owned_vector(x, owned, &path.coefficients)?,
+        x0: x.duplicate()?,
     };
+    let mut guess = x.duplicate()?;
+    guess.axpy(1.0, x)?;
+    let ratio = path.ratio;
+    let plain = iterate(snes, problem, (x, jac), (path, &mut v), false)?;
+    let rescuable = matches!(plain.reason, -5 | -1) && plain.iterations > 0;
+    if !rescuable {
+        return Ok(plain);
+    }
+    x.set_all(0.0)?;
+    x.axpy(1.0, &guess)?;
+    path.ratio = ratio;
+    let mut searched = iterate(snes, problem, (x, jac), (path, &mut v), true)?;
+    searched.iterations += plain.iterations;
+    searched.linear_iterations += plain.linear_iterations;
+    let mut norms = plain.residual_norms;
+    norms.append(&mut searched.residual_norms);
+    searched.residual_norms = norms;
+    let mut domain = plain.domain_errors;
+    domain.append(&mut searched.domain_errors);
+    searched.domain_errors = domain;
+    Ok(searched)
+}
+
+/// The bordered Newton iterations of [`bordered_newton`] from `x` and `path.ratio`, with the line
+/// search in every iteration (`globalised`) or plain full steps ([`Bordering::advance`]).
+fn iterate<const D: usize>(
+    snes: &mut Snes,
+    problem: &mut StepProblem<'_, '_, D>,
+    (x, jac): (&mut Vector, &mut Matrix),
+    (path, v): (&mut PathStep, &mut Bordering),
+    globalised: bool,
+) -> Result<SolveInfo, PetscError> {
+    let tol = snes.tolerances()?;
     let mut domain = Vec::new();
     let mut norm = match residual(problem, x, &mut v.r, &v.q, path.ratio)? {
         Ok(n) => n,
@@ -294,11 +469,7 @@ fn bordered_newton<const D: usize>(
     let (mut its, mut lits) = (0, 0);
     let outcome = loop {
         if !norm.is_finite() {
-            break if domain.is_empty() {
-                (-4, "DIVERGED_FNORM_NAN")
-            } else {
-                (-1, "DIVERGED_FUNCTION_DOMAIN")
-            };
+            break if domain.is_empty() { FNORM_NAN } else { DOMAIN };
         }
         if norm <= goal && its > 0 {
             break if norm <= tol.atol {
@@ -323,19 +494,16 @@ fn bordered_newton<const D: usize>(
             break (-3, "DIVERGED_LINEAR_SOLVE");
         };
         lits += l;
-        let cb = v.c.dot(&v.b)?;
-        if cb.is_nan() || cb.abs() <= 1e-300 {
-            return Err(fatal(
-                "path following: the measured opening does not respond to the prescribed motion \
-                 (c . K^-1 q = 0); measure across the crack that the moving sets open"
-                    .into(),
-            ));
+        let search = v.search(x, path.target)?;
+        let moved = if globalised {
+            v.line_search(problem, x, (path, &search, norm), &mut domain)?
+        } else {
+            v.advance(problem, x, (path, search.dk), &mut domain)?
+        };
+        match moved {
+            Ok(n) => norm = n,
+            Err(failed) => break failed,
         }
-        let dk = (path.target - v.c.dot(x)? - v.c.dot(&v.a)?) / cb;
-        v.a.axpy(dk, &v.b)?;
-        norm = v
-            .advance(problem, x, (path, dk), &mut domain)?
-            .unwrap_or(f64::NAN);
         norms.push(norm);
     };
     Ok(info((its, lits), norms, &domain, outcome))
