@@ -140,8 +140,9 @@ fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path, extra: &[&str]) ->
 fn run_on_two_and_three_processes_matches_serial() {
     let base = std::env::temp_dir().join(format!("mpmc-mpi-ct-{}", std::process::id()));
     let steps = 30;
-    ct_demo(1, steps, &base.join("serial"), &[]);
+    let serial_err = ct_demo(1, steps, &base.join("serial"), &[]);
     let serial = history(&base.join("serial"));
+    let serial_points = points_per_process(&serial_err)[0];
     for ranks in [2, 3] {
         let dir = base.join(format!("ranks{ranks}"));
         let err = ct_demo(ranks, steps, &dir, &[]);
@@ -151,6 +152,32 @@ fn run_on_two_and_three_processes_matches_serial() {
             .count();
         assert_eq!(headers, 1, "one process reports: {err}");
         assert!(err.contains(&format!("{ranks} processes")), "{err}");
+        // Each process seeded its own band: the counts sum to the serial run's, each about 1/P of it.
+        let counts = points_per_process(&err);
+        assert_eq!(counts.len(), ranks, "{err}");
+        let total: usize = counts.iter().sum();
+        assert_eq!(total, serial_points, "{err}");
+        for n in &counts {
+            let share = *n as f64 / total as f64;
+            assert!((share - 1.0 / ranks as f64).abs() < 0.05, "{counts:?}");
+        }
+        // The seeded points, gathered into the step-0 file, are the serial run's: every dataset with
+        // the same values in the same order, bit for bit; later files hold the same datasets.
+        let fields =
+            |d: &std::path::Path, step: &str| datasets(&d.join(format!("fields_{step}.h5")));
+        let (a, b) = (
+            fields(&base.join("serial"), "000000"),
+            fields(&dir, "000000"),
+        );
+        assert_eq!(a, b, "{ranks} processes: step-0 fields differ from serial");
+        let shape = |m: std::collections::BTreeMap<String, Vec<f64>>| -> Vec<(String, usize)> {
+            m.into_iter().map(|(k, v)| (k, v.len())).collect()
+        };
+        let (a, b) = (
+            fields(&base.join("serial"), "000030"),
+            fields(&dir, "000030"),
+        );
+        assert_eq!(shape(a), shape(b), "{ranks} processes: step-30 datasets");
         for file in [
             "fields_000000.h5",
             "fields_000030.h5",
@@ -215,6 +242,47 @@ fn run_on_two_and_three_processes_matches_serial() {
     let d = rel_l2(&from_one["loading_plate_fy"], &from_two["loading_plate_fy"]);
     assert!(d <= 1e-6, "resumed runs differ: {d:e}");
     std::fs::remove_dir_all(&base).ok();
+}
+
+/// The points each process holds after seeding, from the run line (`N material points` on one process,
+/// `N (a + b + .. per process) material points` on several).
+fn points_per_process(stderr: &str) -> Vec<usize> {
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("material points"))
+        .unwrap_or_else(|| panic!("no run line: {stderr}"));
+    let text = line.split(": ").nth(1).expect("name: ...");
+    let text = text.split(" material points").next().expect("points");
+    match text.split_once('(') {
+        None => vec![text.trim().parse().expect("a count")],
+        Some((_, each)) => each
+            .trim_end_matches(" per process)")
+            .split(" + ")
+            .map(|n| n.trim().parse().expect("a count"))
+            .collect(),
+    }
+}
+
+/// Every dataset of a fields file (`fields_NNNNNN.h5`) by name, flattened (the connectivity's integers
+/// as floats).
+fn datasets(file: &std::path::Path) -> std::collections::BTreeMap<String, Vec<f64>> {
+    let f = hdf5_metno::File::open(file).expect("fields file");
+    let names = f.member_names().expect("datasets");
+    assert!(names.len() > 5, "{}: {names:?}", file.display());
+    names
+        .into_iter()
+        .map(|name| {
+            let ds = f.dataset(&name).expect("dataset");
+            let values = match name.as_str() {
+                "connectivity" => ds
+                    .read_raw::<i64>()
+                    .map(|v| v.iter().map(|&i| i as f64).collect()),
+                _ => ds.read_raw::<f64>(),
+            };
+            let values = values.unwrap_or_else(|e| panic!("{}: {name}: {e}", file.display()));
+            (name, values)
+        })
+        .collect()
 }
 
 /// A point dataset of a fields file (`fields_NNNNNN.h5`), flattened.

@@ -251,12 +251,9 @@ fn simulate<const D: usize>(
         share_out(session, &mut sim)?;
     }
     // The output's reference state (initial positions, the step-0 fields) is the state at step 0 as
-    // built (gathered where the points are shared out), also for a resumed run, on the process that
-    // writes (the others keep the records only).
-    let whole = crate::partition::whole_state(session, &sim.state);
-    let initial = agreed(session, whole.context("gathering the points on process 0"))?
-        .filter(|_| root)
-        .map(|state| state.into_owned());
+    // built, also for a resumed run, whole on the process that writes (the others keep the records
+    // only). Where the points are shared out each process keeps its own, gathered after the first step.
+    let built = (root || sim.state.distributed).then(|| sim.state.clone());
     let resumed = resume(&prepared, &mut sim, root)?;
     let interrupted = on_signal(root)?;
     let counts = points_per_process(session, &sim.state)?;
@@ -278,6 +275,7 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
+    let initial = whole_initial(session, built, root)?;
     let opened = open_output(invocation, &prepared, &sim, (root, lock), initial.as_ref());
     let mut records = agreed(session, opened)?;
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
@@ -292,6 +290,8 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(records.abandon(session, &sim, e, &hint));
     }
+    // Written: process 0 need not hold a whole state through the run.
+    drop((initial, resumed));
     let steps = Steps {
         session,
         bar: &bar,
@@ -314,6 +314,25 @@ fn simulate<const D: usize>(
         eprintln!("warning: {n}");
     }
     report_unused_fallback(session, &defaults)
+}
+
+/// The state at step 0 as `built` (a copy of every point on process 0, of this process's own points
+/// on every process where they are shared out), whole on process 0 (`root`: gathered where shared out)
+/// and `None` on the others. Collective where the points are shared out.
+fn whole_initial<const D: usize>(
+    session: &SessionGuard,
+    built: Option<State<D>>,
+    root: bool,
+) -> Result<Option<State<D>>> {
+    let Some(built) = built else {
+        return Ok(None);
+    };
+    if !built.distributed {
+        return Ok(root.then_some(built));
+    }
+    let whole = crate::partition::whole_state(session, &built);
+    let whole = agreed(session, whole.context("gathering the points on process 0"))?;
+    Ok(whole.map(std::borrow::Cow::into_owned))
 }
 
 /// Loads the checkpoint of a resumed run into `sim`; on process 0 (`root`) returns a copy of the loaded
