@@ -24,11 +24,38 @@ pub fn build_run_on(
     resuming: bool,
 ) -> Result<(RunSetup, bool), ScenarioError> {
     if !resuming && plan.seeds_in_bands(session.size()) {
+        let extrusion = plan.config().extrusion.clone();
         if let Some(setup) = plan.build_band(session)? {
-            return Ok((RunSetup::Plane(setup), true));
+            let setup = match extrusion {
+                None => RunSetup::Plane(setup),
+                Some(e) => RunSetup::Plate(extrude_band(setup, e.thickness)?),
+            };
+            return Ok((setup, true));
         }
     }
     build_run(plan).map(|setup| (setup, false))
+}
+
+/// The band `setup` extruded to the plate of `thickness` (mm) as [`Setup::extrude`] extrudes the whole
+/// set: every plane point becomes `c` points through the thickness (the same `c` for all, seeded alike),
+/// so plane point `i` becomes points `c i .. c i + c - 1`, numbered here as in the whole plate.
+fn extrude_band(setup: Setup, thickness: f64) -> Result<Setup<3>, ScenarioError> {
+    let plane_ids = setup.particles.id.clone();
+    let mut plate = setup.extrude(thickness)?;
+    let copies = plate.particles.len() / plane_ids.len().max(1);
+    if plate.particles.len() != copies * plane_ids.len() {
+        return Err(ScenarioError::Processes(format!(
+            "{} plate points from {} plane points: not the same number through the thickness for each",
+            plate.particles.len(),
+            plane_ids.len()
+        )));
+    }
+    let c = copies as u64;
+    plate.particles.id = plane_ids
+        .iter()
+        .flat_map(|&i| (0..c).map(move |k| c * i + k))
+        .collect();
+    Ok(plate)
 }
 
 /// A body's points per layer of its seeding lattice, summed over the processes.
@@ -40,15 +67,14 @@ struct Counted {
 }
 
 impl Plan<'_> {
-    /// Whether the points can be seeded in bands on `processes` processes: MPM in the plane (no
-    /// extrusion, no body of space, no turned grid) with every body on the specimen's velocity field and
-    /// no path following (its gauge picks the points nearest two places among all). Otherwise every
+    /// Whether the points can be seeded in bands on `processes` processes: MPM with bodies of the plane
+    /// (extruded or not; no body of space, no turned grid), every body on the specimen's velocity field
+    /// and no path following (its gauge picks the points nearest two places among all). Otherwise every
     /// process seeds every point and keeps its own at the first step.
     fn seeds_in_bands(&self, processes: usize) -> bool {
         let cfg = self.cfg;
         let plane = |b: &BodyDef| matches!(b.geometry, BodyShape::Plane(_)) && !b.own_field;
         processes > 1
-            && cfg.extrusion.is_none()
             && cfg.shape.method == Method::Mpm
             && cfg.path.is_none()
             && Frame::from_degrees(cfg.grid.rotation).is_identity()
