@@ -304,6 +304,44 @@ fn rel_max(a: &[f64], b: &[f64]) -> f64 {
     diff / scale
 }
 
+/// A checkpoint of the crossing block (`tests/data/mpi-crossing.toml`) written on 2 processes (each
+/// seeded its own band) at step 20 resumes on 1 and on 3 processes, and both reach the uninterrupted
+/// serial run's step 40 to 1e-9 in every point's position, velocity and stress and in the histories.
+#[test]
+fn a_checkpoint_written_on_two_processes_resumes_on_one_and_three() {
+    let base = std::env::temp_dir().join(format!("mpmc-mpi-restart-{}", std::process::id()));
+    let config = "tests/data/mpi-crossing.toml";
+    run(config, 1, 40, &base.join("serial"), &[]);
+    let (_, err) = run(config, 2, 20, &base.join("two"), &[]);
+    assert_eq!(points_per_process(&err).len(), 2, "{err}");
+    let last = "fields_000040.h5";
+    let serial = history(&base.join("serial"));
+    for ranks in [1, 3] {
+        let dir = base.join(format!("two-then-{ranks}"));
+        std::fs::create_dir_all(&dir).expect("copy");
+        for entry in std::fs::read_dir(base.join("two")).expect("run directory") {
+            let entry = entry.expect("entry");
+            if entry.file_type().expect("type").is_file() {
+                std::fs::copy(entry.path(), dir.join(entry.file_name())).expect("copy");
+            }
+        }
+        run(config, ranks, 40, &dir, &["--resume"]);
+        let resumed = history(&dir);
+        assert_eq!(resumed["step"].len(), 40, "2 -> {ranks} processes: steps");
+        for name in ["wall_fy", "kinetic_energy", "stored_energy"] {
+            let d = rel_l2(&serial[name], &resumed[name]);
+            assert!(d <= 1e-9, "2 -> {ranks} processes: {name} differs by {d:e}");
+        }
+        for name in ["position", "velocity", "sigma_yy", "sigma_xy"] {
+            let a = point_field(&base.join("serial").join(last), name);
+            let b = point_field(&dir.join(last), name);
+            let d = rel_max(&a, &b);
+            assert!(d <= 1e-9, "2 -> {ranks} processes: {name} differs by {d:e}");
+        }
+    }
+    std::fs::remove_dir_all(&base).ok();
+}
+
 /// A block flying into a wall (`tests/data/mpi-crossing.toml`) on 2 and 3 processes: its points cross
 /// the processes' bands (the run reports how many moved) and every point ends, in the files gathered on
 /// process 0 in the serial order, where the serial run puts it, with its velocity and stress: a point
