@@ -5,6 +5,8 @@
 //! then seeds the layers of its band and numbers its points as the whole seeding would (the points of a
 //! body are seeded layer by layer, so a band's points are one run of ids per body): the same points with
 //! the same data, order and ids as a process keeps from the whole set ([`crate::partition::keep_own`]).
+//! A plate (`[extrusion]`) extrudes its band of plane points ([`Setup::extrude`]); its points are
+//! numbered as in the whole plate.
 
 use super::*;
 use crate::grid::SLOWEST_AXIS;
