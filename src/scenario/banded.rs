@@ -17,9 +17,9 @@ use crate::seeding::LayerCounts;
 use std::ops::Range;
 
 /// [`build_run`] on the processes of `session`: on more than one, when the configuration allows it
-/// ([`Plan::seeds_in_bands`]) and not `resuming` (a checkpoint holds every point), each process seeds its
-/// own band only. Returns the set-up and whether its points are this process's band (else every point).
-/// Collective.
+/// (MPM with plane bodies on one velocity field, no turned grid, no path following) and not
+/// `resuming` (a checkpoint holds every point), each process seeds its own band only. Returns the
+/// set-up and whether its points are this process's band (else every point). Collective.
 pub fn build_run_on(
     plan: Plan<'_>,
     session: &SessionGuard,
