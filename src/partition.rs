@@ -58,6 +58,29 @@ impl Partition {
         Self::from_counts(session.rank(), session.size(), grid, &counts)
     }
 
+    /// Bands of about equal sums of `counts` (points per cell row of `grid`, of every process's points)
+    /// for the processes of `session`: the bands [`Partition::balanced`] cuts from the same points, known
+    /// before the points are seeded ([`Partition::row_of`] finds a point's row).
+    pub fn from_row_counts<const D: usize>(
+        session: &SessionGuard,
+        grid: &Grid<D>,
+        counts: &[f64],
+    ) -> Result<Self, String> {
+        Self::from_counts(session.rank(), session.size(), grid, counts)
+    }
+
+    /// The cell row of `grid` at height `y` (mm, along [`SLOWEST_AXIS`]), clamped to the grid: the row
+    /// a point at that height is counted in.
+    pub fn row_of<const D: usize>(grid: &Grid<D>, y: f64) -> usize {
+        let axis = SLOWEST_AXIS;
+        cell_row(grid.origin()[axis], grid.cell_size(), grid.cells()[axis], y)
+    }
+
+    /// This process's index.
+    pub fn rank(&self) -> usize {
+        self.rank
+    }
+
     /// Bands of about equal sums of `counts` (points per cell row) for process `rank` of `size`.
     fn from_counts<const D: usize>(
         rank: usize,

@@ -22,6 +22,9 @@ use crate::space::{Frame, lift3};
 use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;
 
+mod banded;
+pub use banded::build_run_on;
+
 /// Failure to build a run from a valid configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
@@ -37,6 +40,9 @@ pub enum ScenarioError {
         /// Which material (`ct.material`, `body[0]`, ...).
         what: String,
     },
+    /// Seeding in bands on several processes failed ([`build_run_on`]).
+    #[error("seeding the processes' bands: {0}")]
+    Processes(String),
 }
 
 impl ScenarioError {
@@ -293,22 +299,59 @@ impl Plan<'_> {
         } = self;
         let (fields, field_of) = velocity_fields(&bodies);
         let seeder = Seeder::new(cfg);
-        let (mut particles, materials, solids) = seeder.bodies(bodies)?;
-        let (mut rigid, mut rigid_points) = seeder.rigid_bodies(&rigid, &rigid_keys, &field_of)?;
+        let (particles, materials, solids) = seeder.bodies(bodies)?;
+        let (rigid, rigid_points) = seeder.rigid_bodies(&rigid, &rigid_keys, &field_of)?;
+        let mut seeded = Seeded {
+            particles,
+            materials,
+            fields,
+            rigid,
+            rigid_points,
+        };
         let frame = Frame::from_degrees(cfg.grid.rotation);
         if !frame.is_identity() {
-            turn_points(&frame, &mut particles);
-            rigid_points.iter_mut().for_each(|p| turn_points(&frame, p));
-            rigid.iter_mut().for_each(|r| turn_rigid_body(&frame, r));
+            seeded.turn(&frame);
         }
-        let grid = covering_grid(cfg, &particles, &solids, &rigid_points)?;
+        let in_plane = solids.x.iter().map(|x| x.xy());
+        let bounds = bounds(seeded.particles.x.iter().copied().chain(in_plane));
+        Ok((seeded.setup(cfg, bounds)?, solids))
+    }
+}
+
+/// The seeded parts of a plane set-up before its grid: the deformable bodies' points (all of them, or
+/// this process's band), their materials and velocity fields, the rigid bodies and their points.
+struct Seeded {
+    particles: Particles,
+    materials: Vec<Material>,
+    fields: Vec<u16>,
+    rigid: Vec<RigidBody>,
+    rigid_points: Vec<Particles>,
+}
+
+impl Seeded {
+    /// The parts turned by `frame` inside the grid.
+    fn turn(&mut self, frame: &Frame) {
+        turn_points(frame, &mut self.particles);
+        let rigid_points = self.rigid_points.iter_mut();
+        rigid_points.for_each(|p| turn_points(frame, p));
+        self.rigid
+            .iter_mut()
+            .for_each(|r| turn_rigid_body(frame, r));
+    }
+
+    /// The plane set-up of `cfg` from these parts: the grid covering the bodies' points (within
+    /// `body_bounds`, mm: of every point, also where this process holds a band only) and the rigid
+    /// bodies' points, the node boxes, the loads and the time integration.
+    fn setup(self, cfg: &RunConfig, body_bounds: Bounds) -> Result<Setup, ScenarioError> {
+        let frame = Frame::from_degrees(cfg.grid.rotation);
+        let grid = covering_grid(cfg, body_bounds, &self.rigid_points)?;
         let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
         let t = &cfg.time;
-        let setup = Setup {
+        Ok(Setup {
             params: Parameters {
                 grid,
-                materials,
-                fields,
+                materials: self.materials,
+                fields: self.fields,
                 shape: cfg.shape.kind,
                 time: TimeIntegration {
                     dt: t.dt,
@@ -321,7 +364,7 @@ impl Plan<'_> {
                 body_force: frame.to_grid(Vector2::new(cfg.body_force[0], cfg.body_force[1])),
                 body_force_ramp: cfg.body_force_ramp,
                 boxes,
-                rigid,
+                rigid: self.rigid,
                 loads: cfg.load.iter().map(nodal_load).collect(),
                 method: cfg.shape.method,
                 options_prefix: None,
@@ -334,11 +377,24 @@ impl Plan<'_> {
                     increment: p.increment,
                 }),
             },
-            particles,
-            rigid_points,
-        };
-        Ok((setup, solids))
+            particles: self.particles,
+            rigid_points: self.rigid_points,
+        })
     }
+}
+
+/// A bounding box in the plane (mm): lower and upper corner, `(+inf, -inf)` per axis for no point.
+type Bounds = (Vector2<f64>, Vector2<f64>);
+
+/// The bounding box of `points` (mm).
+fn bounds(points: impl Iterator<Item = Vector2<f64>>) -> Bounds {
+    points.fold(
+        (
+            Vector2::repeat(f64::INFINITY),
+            Vector2::repeat(f64::NEG_INFINITY),
+        ),
+        |(lo, hi), x| (lo.inf(&x), hi.sup(&x)),
+    )
 }
 
 /// The points of a set-up turned by `frame` inside the grid: positions, velocities, accelerations, CPDI
@@ -695,26 +751,15 @@ impl Seeder {
     }
 }
 
-/// The grid that covers the points of the bodies (the plane ones and, in the plane, those of space,
-/// `solids`) and of the rigid bodies with `grid.margin_cells` (at least one) empty cells around them.
+/// The grid that covers the points of the bodies (within `(blo, bhi)`, mm: the plane ones and, in the
+/// plane, those of space) and of the rigid bodies with `grid.margin_cells` (at least one) empty cells
+/// around them.
 fn covering_grid(
     cfg: &RunConfig,
-    particles: &Particles,
-    solids: &Particles<3>,
+    (blo, bhi): Bounds,
     rigid_points: &[Particles],
 ) -> Result<Grid, ScenarioError> {
-    let bounds = |points: &mut dyn Iterator<Item = Vector2<f64>>| {
-        points.fold(
-            (
-                Vector2::repeat(f64::INFINITY),
-                Vector2::repeat(f64::NEG_INFINITY),
-            ),
-            |(lo, hi), x| (lo.inf(&x), hi.sup(&x)),
-        )
-    };
-    let in_plane = solids.x.iter().map(|x| x.xy());
-    let (blo, bhi) = bounds(&mut particles.x.iter().copied().chain(in_plane));
-    let (rlo, rhi) = bounds(&mut rigid_points.iter().flat_map(|r| r.x.iter().copied()));
+    let (rlo, rhi) = bounds(rigid_points.iter().flat_map(|r| r.x.iter().copied()));
     let (lo, hi) = (blo.inf(&rlo), bhi.sup(&rhi));
     let (h, margin) = (cfg.grid.cell_size, cfg.grid.margin_cells.max(1));
     // A rigid body far from the bodies makes the grid cover the space between: say so when it grows the

@@ -115,6 +115,92 @@ impl Seeding {
     }
 }
 
+/// The material points of MPM seeding per layer of lattice cells (a layer: the cells of one index along
+/// the lattice's last axis, `y` in the plane), counted without storing any, for the processes that seed
+/// in bands ([`Particles::seed_layers`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerCounts<const D: usize> {
+    /// The lattice's first layer, in cells (its lower face at `first h`, mm).
+    pub first: f64,
+    /// Material points per layer (0 for the layers not counted).
+    pub counts: Vec<f64>,
+    /// The bounding box of the counted points (mm): `(+inf, -inf)` per axis when none was counted.
+    pub bounds: (SVector<f64, D>, SVector<f64, D>),
+}
+
+impl Seeding {
+    /// [`LayerCounts`] of MPM seeding ([`Particles::seed`]) of `geometry`, over the layers for which
+    /// `counted` is true (e.g. every `P`-th one: processes share the count, then sum it). Errors as
+    /// [`Particles::seed`] for an invalid geometry or seeding; none when no point is material.
+    pub fn layer_counts<const D: usize, B: Body<D>>(
+        &self,
+        geometry: &B,
+        counted: impl Fn(usize) -> bool,
+    ) -> Result<LayerCounts<D>, ParticleError> {
+        let (first, counts) = checked_lattice(geometry, self)?;
+        let last = D - 1;
+        let mut out: LayerCounts<D> = LayerCounts {
+            first: first[last],
+            counts: vec![0.0; counts[last]],
+            bounds: (
+                SVector::repeat(f64::INFINITY),
+                SVector::repeat(f64::NEG_INFINITY),
+            ),
+        };
+        for layer in (0..counts[last]).filter(|&j| counted(j)) {
+            let (lo, hi): &mut (SVector<f64, D>, SVector<f64, D>) = &mut out.bounds;
+            let mut n = 0.0;
+            each_point(
+                geometry,
+                self,
+                layers(first, counts, layer..layer + 1),
+                |x| {
+                    n += 1.0;
+                    *lo = lo.inf(&x);
+                    *hi = hi.sup(&x);
+                },
+            );
+            out.counts[layer] = n;
+        }
+        Ok(out)
+    }
+}
+
+impl<const D: usize> Particles<D> {
+    /// MPM seeding ([`Particles::seed`]) of the cell layers `range` of the lattice only (layers as in
+    /// [`LayerCounts`]): the same points with the same data, in the same order, as the whole seeding
+    /// holds them; ids numbered from 0 (the caller offsets them by the points of the layers below). No
+    /// error when no point is material (a band may hold none of a body).
+    pub fn seed_layers<B: Body<D>>(
+        geometry: &B,
+        seeding: &Seeding,
+        range: std::ops::Range<usize>,
+    ) -> Result<Self, ParticleError> {
+        let (first, counts) = checked_lattice(geometry, seeding)?;
+        let range = range.start.min(counts[D - 1])..range.end.min(counts[D - 1]);
+        let vol0 = (seeding.h / seeding.points_per_cell as f64).powi(D as i32);
+        let half_edge = seeding.h / (2.0 * seeding.points_per_cell as f64);
+        let r0 = SMatrix::<f64, D, D>::identity() * half_edge;
+        let mut particles = Self::new();
+        each_point(geometry, seeding, layers(first, counts, range), |x| {
+            particles.push(x, vol0, seeding.density * vol0, r0, seeding.body)
+        });
+        Ok(particles)
+    }
+}
+
+/// The lattice `(first, counts)` narrowed to the layers `range` along its last axis (cell units: the
+/// first cell and the cell counts, as [`checked_lattice`]).
+fn layers<const D: usize>(
+    mut first: [f64; D],
+    mut counts: [usize; D],
+    range: std::ops::Range<usize>,
+) -> ([f64; D], [usize; D]) {
+    first[D - 1] += range.start as f64;
+    counts[D - 1] = range.len();
+    (first, counts)
+}
+
 /// Each material point of MPM seeding (module docs) on the lattice `cells` ([`checked_lattice`]).
 fn each_point<const D: usize, B: Body<D>>(
     geometry: &B,
@@ -276,6 +362,39 @@ mod tests {
         assert!((fine / exact - 1.0).abs() < 1e-3, "{fine} against {exact}");
         // Beyond what can be numbered: a count all the same.
         assert!(Seeding::concrete(1e-6, 2).count(&plate, false).unwrap() > 1e16);
+    }
+
+    #[test]
+    fn seeding_in_layers_gives_the_whole_seeding_piece_by_piece() {
+        let plate = ct_geometry();
+        let seeding = Seeding::concrete(2.0, 2);
+        let whole = Particles::seed(&plate, &seeding).unwrap();
+        // Counted by 3 processes, each every third layer, then summed.
+        let shares: Vec<LayerCounts<2>> = (0..3)
+            .map(|r| seeding.layer_counts(&plate, |j| j % 3 == r).unwrap())
+            .collect();
+        let counts: Vec<f64> = (0..shares[0].counts.len())
+            .map(|j| shares.iter().map(|s| s.counts[j]).sum())
+            .collect();
+        assert_eq!(counts.iter().sum::<f64>(), whole.len() as f64);
+        let (lo, hi) = shares.iter().fold(shares[0].bounds, |(lo, hi), s| {
+            (lo.inf(&s.bounds.0), hi.sup(&s.bounds.1))
+        });
+        let x = &whole.x;
+        let exact = x
+            .iter()
+            .fold((x[0], x[0]), |(l, h), p| (l.inf(p), h.sup(p)));
+        assert_eq!((lo, hi), exact);
+        assert_eq!(shares[0].first, 0.0);
+        // Three bands of layers, seeded apart, hold the whole seeding's points in its order.
+        let mut joined = Particles::new();
+        for range in [0..30, 30..31, 31..200] {
+            let band = Particles::seed_layers(&plate, &seeding, range.clone()).unwrap();
+            let below: f64 = counts[..range.start.min(counts.len())].iter().sum();
+            assert_eq!(joined.len() as f64, below);
+            joined.append(&band).unwrap();
+        }
+        assert_eq!(joined, whole);
     }
 
     #[test]

@@ -140,8 +140,9 @@ fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path, extra: &[&str]) ->
 fn run_on_two_and_three_processes_matches_serial() {
     let base = std::env::temp_dir().join(format!("mpmc-mpi-ct-{}", std::process::id()));
     let steps = 30;
-    ct_demo(1, steps, &base.join("serial"), &[]);
+    let serial_err = ct_demo(1, steps, &base.join("serial"), &[]);
     let serial = history(&base.join("serial"));
+    let serial_points = points_per_process(&serial_err)[0];
     for ranks in [2, 3] {
         let dir = base.join(format!("ranks{ranks}"));
         let err = ct_demo(ranks, steps, &dir, &[]);
@@ -151,6 +152,32 @@ fn run_on_two_and_three_processes_matches_serial() {
             .count();
         assert_eq!(headers, 1, "one process reports: {err}");
         assert!(err.contains(&format!("{ranks} processes")), "{err}");
+        // Each process seeded its own band: the counts sum to the serial run's, each about 1/P of it.
+        let counts = points_per_process(&err);
+        assert_eq!(counts.len(), ranks, "{err}");
+        let total: usize = counts.iter().sum();
+        assert_eq!(total, serial_points, "{err}");
+        for n in &counts {
+            let share = *n as f64 / total as f64;
+            assert!((share - 1.0 / ranks as f64).abs() < 0.05, "{counts:?}");
+        }
+        // The seeded points, gathered into the step-0 file, are the serial run's: every dataset with
+        // the same values in the same order, bit for bit; later files hold the same datasets.
+        let fields =
+            |d: &std::path::Path, step: &str| datasets(&d.join(format!("fields_{step}.h5")));
+        let (a, b) = (
+            fields(&base.join("serial"), "000000"),
+            fields(&dir, "000000"),
+        );
+        assert_eq!(a, b, "{ranks} processes: step-0 fields differ from serial");
+        let shape = |m: std::collections::BTreeMap<String, Vec<f64>>| -> Vec<(String, usize)> {
+            m.into_iter().map(|(k, v)| (k, v.len())).collect()
+        };
+        let (a, b) = (
+            fields(&base.join("serial"), "000030"),
+            fields(&dir, "000030"),
+        );
+        assert_eq!(shape(a), shape(b), "{ranks} processes: step-30 datasets");
         for file in [
             "fields_000000.h5",
             "fields_000030.h5",
@@ -217,6 +244,47 @@ fn run_on_two_and_three_processes_matches_serial() {
     std::fs::remove_dir_all(&base).ok();
 }
 
+/// The points each process holds after seeding, from the run line (`N material points` on one process,
+/// `N (a + b + .. per process) material points` on several).
+fn points_per_process(stderr: &str) -> Vec<usize> {
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("material points"))
+        .unwrap_or_else(|| panic!("no run line: {stderr}"));
+    let text = line.split(": ").nth(1).expect("name: ...");
+    let text = text.split(" material points").next().expect("points");
+    match text.split_once('(') {
+        None => vec![text.trim().parse().expect("a count")],
+        Some((_, each)) => each
+            .trim_end_matches(" per process)")
+            .split(" + ")
+            .map(|n| n.trim().parse().expect("a count"))
+            .collect(),
+    }
+}
+
+/// Every dataset of a fields file (`fields_NNNNNN.h5`) by name, flattened (the connectivity's integers
+/// as floats).
+fn datasets(file: &std::path::Path) -> std::collections::BTreeMap<String, Vec<f64>> {
+    let f = hdf5_metno::File::open(file).expect("fields file");
+    let names = f.member_names().expect("datasets");
+    assert!(names.len() > 5, "{}: {names:?}", file.display());
+    names
+        .into_iter()
+        .map(|name| {
+            let ds = f.dataset(&name).expect("dataset");
+            let values = match name.as_str() {
+                "connectivity" => ds
+                    .read_raw::<i64>()
+                    .map(|v| v.iter().map(|&i| i as f64).collect()),
+                _ => ds.read_raw::<f64>(),
+            };
+            let values = values.unwrap_or_else(|e| panic!("{}: {name}: {e}", file.display()));
+            (name, values)
+        })
+        .collect()
+}
+
 /// A point dataset of a fields file (`fields_NNNNNN.h5`), flattened.
 fn point_field(file: &std::path::Path, name: &str) -> Vec<f64> {
     let f = hdf5_metno::File::open(file).expect("fields file");
@@ -234,6 +302,44 @@ fn rel_max(a: &[f64], b: &[f64]) -> f64 {
         .zip(b)
         .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
     diff / scale
+}
+
+/// A checkpoint of the crossing block (`tests/data/mpi-crossing.toml`) written on 2 processes (each
+/// seeded its own band) at step 20 resumes on 1 and on 3 processes, and both reach the uninterrupted
+/// serial run's step 40 to 1e-9 in every point's position, velocity and stress and in the histories.
+#[test]
+fn a_checkpoint_written_on_two_processes_resumes_on_one_and_three() {
+    let base = std::env::temp_dir().join(format!("mpmc-mpi-restart-{}", std::process::id()));
+    let config = "tests/data/mpi-crossing.toml";
+    run(config, 1, 40, &base.join("serial"), &[]);
+    let (_, err) = run(config, 2, 20, &base.join("two"), &[]);
+    assert_eq!(points_per_process(&err).len(), 2, "{err}");
+    let last = "fields_000040.h5";
+    let serial = history(&base.join("serial"));
+    for ranks in [1, 3] {
+        let dir = base.join(format!("two-then-{ranks}"));
+        std::fs::create_dir_all(&dir).expect("copy");
+        for entry in std::fs::read_dir(base.join("two")).expect("run directory") {
+            let entry = entry.expect("entry");
+            if entry.file_type().expect("type").is_file() {
+                std::fs::copy(entry.path(), dir.join(entry.file_name())).expect("copy");
+            }
+        }
+        run(config, ranks, 40, &dir, &["--resume"]);
+        let resumed = history(&dir);
+        assert_eq!(resumed["step"].len(), 40, "2 -> {ranks} processes: steps");
+        for name in ["wall_fy", "kinetic_energy", "stored_energy"] {
+            let d = rel_l2(&serial[name], &resumed[name]);
+            assert!(d <= 1e-9, "2 -> {ranks} processes: {name} differs by {d:e}");
+        }
+        for name in ["position", "velocity", "sigma_yy", "sigma_xy"] {
+            let a = point_field(&base.join("serial").join(last), name);
+            let b = point_field(&dir.join(last), name);
+            let d = rel_max(&a, &b);
+            assert!(d <= 1e-9, "2 -> {ranks} processes: {name} differs by {d:e}");
+        }
+    }
+    std::fs::remove_dir_all(&base).ok();
 }
 
 /// A block flying into a wall (`tests/data/mpi-crossing.toml`) on 2 and 3 processes: its points cross

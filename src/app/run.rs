@@ -125,9 +125,13 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     petsc::apply_default_options(&session, &prepared.cfg.run.petsc_options)
         .map_err(|e| bad(format!("{file}: run.petsc_options: {e}")))?;
     // A plane set-up, or the plate it is extruded to ([extrusion]): the same run in 2D or 3D.
-    match scenario::build_run(plan).map_err(|e| bad(e.in_file(&label)))? {
-        RunSetup::Plane(setup) => simulate(&session, &invocation, prepared, setup)?,
-        RunSetup::Plate(setup) => simulate(&session, &invocation, prepared, setup)?,
+    // On several processes each seeds its own band of points where it can (`shared`).
+    let resuming = prepared.resume_from.is_some();
+    let built = scenario::build_run_on(plan, &session, resuming);
+    let (setup, shared) = agreed(&session, built.map_err(|e| bad(e.in_file(&label))))?;
+    match setup {
+        RunSetup::Plane(setup) => simulate(&session, &invocation, prepared, (setup, shared))?,
+        RunSetup::Plate(setup) => simulate(&session, &invocation, prepared, (setup, shared))?,
     }
     Session::finalize(session)?;
     Ok(())
@@ -231,24 +235,30 @@ fn check_memory(plan: &Plan, label: &str, allow_large: bool) -> Result<()> {
     Ok(())
 }
 
-/// The run of a prepared configuration from its `setup` in `D` dimensions.
+/// The run of a prepared configuration from its `setup` in `D` dimensions (`shared`: the set-up holds
+/// this process's band of points only).
 fn simulate<const D: usize>(
     session: &SessionGuard,
     invocation: &Invocation,
     mut prepared: Prepared,
-    setup: Setup<D>,
+    (setup, shared): (Setup<D>, bool),
 ) -> Result<()> {
     let lock = prepared.lock.take();
     let (cfg, file) = (&prepared.cfg, &invocation.file);
     let root = session.rank() == 0;
     let (mut sim, defaults) = build(session, setup, file)?;
+    if shared {
+        share_out(session, &mut sim)?;
+    }
     // The output's reference state (initial positions, the step-0 fields) is the state at step 0 as
-    // built, also for a resumed run, on the process that writes (the others keep the records only).
-    let initial = root.then(|| sim.state.clone());
+    // built, also for a resumed run, whole on the process that writes (the others keep the records
+    // only). Where the points are shared out each process keeps its own, gathered after the first step.
+    let built = (root || sim.state.distributed).then(|| sim.state.clone());
     let resumed = resume(&prepared, &mut sim, root)?;
     let interrupted = on_signal(root)?;
+    let counts = points_per_process(session, &sim.state)?;
     if root {
-        announce(session, cfg, &sim, &prepared.dir);
+        announce(session, cfg, &sim, (&counts, &prepared.dir));
     }
     let bar = progress_bar(
         invocation.quiet || !root,
@@ -265,6 +275,7 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
+    let initial = whole_initial(session, built, root)?;
     let opened = open_output(invocation, &prepared, &sim, (root, lock), initial.as_ref());
     let mut records = agreed(session, opened)?;
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
@@ -279,6 +290,8 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(records.abandon(session, &sim, e, &hint));
     }
+    // Written: process 0 need not hold a whole state through the run.
+    drop((initial, resumed));
     let steps = Steps {
         session,
         bar: &bar,
@@ -301,6 +314,25 @@ fn simulate<const D: usize>(
         eprintln!("warning: {n}");
     }
     report_unused_fallback(session, &defaults)
+}
+
+/// The state at step 0 as `built` (a copy of every point on process 0, of this process's own points
+/// on every process where they are shared out), whole on process 0 (`root`: gathered where shared out)
+/// and `None` on the others. Collective where the points are shared out.
+fn whole_initial<const D: usize>(
+    session: &SessionGuard,
+    built: Option<State<D>>,
+    root: bool,
+) -> Result<Option<State<D>>> {
+    let Some(built) = built else {
+        return Ok(None);
+    };
+    if !built.distributed {
+        return Ok(root.then_some(built));
+    }
+    let whole = crate::partition::whole_state(session, &built);
+    let whole = agreed(session, whole.context("gathering the points on process 0"))?;
+    Ok(whole.map(std::borrow::Cow::into_owned))
 }
 
 /// Loads the checkpoint of a resumed run into `sim`; on process 0 (`root`) returns a copy of the loaded
@@ -364,19 +396,50 @@ fn build<const D: usize>(
     Ok((sim, defaults))
 }
 
-/// The run's one-line description on standard error: points, grid, steps, unknowns, processes, output.
+/// Marks the state of a simulation built from this process's band of points ([`scenario::build_run_on`])
+/// as shared out, with the initial kinetic energy summed over the processes. Collective.
+fn share_out<const D: usize>(session: &SessionGuard, sim: &mut Simulation<D>) -> Result<()> {
+    sim.state.distributed = true;
+    let mut energy = [sim.state.counters.initial_energy];
+    session.sum(&mut energy)?;
+    sim.state.counters.initial_energy = energy[0];
+    Ok(())
+}
+
+/// The material points each process holds (all of them on each while they are not shared out), in
+/// process order. Collective.
+fn points_per_process<const D: usize>(
+    session: &SessionGuard,
+    state: &State<D>,
+) -> Result<Vec<usize>> {
+    let mut counts = vec![0.0; session.size()];
+    counts[session.rank()] = state.particles.len() as f64;
+    session.sum(&mut counts)?;
+    Ok(counts.into_iter().map(|n| n as usize).collect())
+}
+
+/// The run's one-line description on standard error: points (with the points each process holds when
+/// they are shared out, `counts`), grid, steps, unknowns, processes, output in `dir`.
 fn announce<const D: usize>(
     session: &SessionGuard,
     cfg: &RunConfig,
     sim: &Simulation<D>,
-    dir: &Path,
+    (counts, dir): (&[usize], &Path),
 ) {
     let grid = &sim.model.params.grid;
     let cells: Vec<String> = grid.cells().iter().map(usize::to_string).collect();
+    let points = match sim.state.distributed {
+        true => {
+            let each: Vec<String> = counts.iter().map(usize::to_string).collect();
+            let total: usize = counts.iter().sum();
+            format!("{total} ({} per process)", each.join(" + "))
+        }
+        false => sim.state.particles.len().to_string(),
+    };
     eprintln!(
         "{}: {} material points, grid {} cells of {} mm{}, {} steps of {:e} s, {} unknowns per node, {}output in {}",
         cfg.run.name,
-        sim.state.particles.len(),
+        points,
         cells.join("x"),
         grid.cell_size(),
         match &cfg.extrusion {
