@@ -339,6 +339,8 @@ impl<const D: usize> Step<'_, D> {
             contact_solves: solved.contact_solves,
             migrated: self.work.moved[0],
             ghosts: self.work.moved[1],
+            bytes_sent: Vec::new(),
+            bytes_unknowns: Vec::new(),
             path: None,
         }
     }

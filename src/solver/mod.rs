@@ -18,8 +18,8 @@ use crate::model::{EnergyBooks, InitialAcceleration, Model, ModelError, Setup, S
 use crate::particles::Particles;
 use crate::partition::{self, Partition};
 use crate::petsc::{
-    self, BlockCsr, CallbackError, GatherAll, IndexSet, LogEvent, Matrix, NonlinearProblem,
-    PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
+    self, BlockCsr, CallbackError, GatherAll, GatherRange, IndexSet, LogEvent, Matrix,
+    NonlinearProblem, PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
 };
 use crate::shape::{ShapeError, ShapeTable};
 use crate::space::{from_xy, rotation_xy, xy};
@@ -144,12 +144,15 @@ pub fn advance<const D: usize>(
     workspace: &mut Workspace<D>,
     session: &SessionGuard,
 ) -> Result<StepReport, StepError> {
-    Step {
+    let before = [session.bytes_sent(), session.bytes_gathered()];
+    let mut report = Step {
         model,
         state,
         work: workspace,
     }
-    .advance(session)
+    .advance(session)?;
+    [report.bytes_sent, report.bytes_unknowns] = processes::bytes_per_process(session, before)?;
+    Ok(report)
 }
 
 /// One step in progress: the model, the state it advances and the workspace it uses.

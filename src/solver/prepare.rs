@@ -95,8 +95,10 @@ impl<const D: usize> Step<'_, D> {
             .begin_assembly(self.model, &self.state.particles, &plan.loading);
         let new_pattern = self.linear_system(session, prefix)?;
         let xs = self.first_guess(&plan, &eta_bar);
+        let window = self.unknowns_window(session);
         let sys = self.work.system.as_mut().expect("linear system just built");
         sys.owned.scatter(&xs, &mut sys.x)?;
+        sys.owned.set_window(session, &sys.x, window)?;
         Ok(StepPlan {
             new_pattern,
             ..plan

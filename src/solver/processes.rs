@@ -59,6 +59,33 @@ pub(super) fn complete_rows(
     Ok(())
 }
 
+/// The bytes (B) every process sent in a step through the program's own exchanges, and of them in the
+/// gathers of the unknowns for the evaluations ([`SessionGuard::bytes_sent`],
+/// [`SessionGuard::bytes_gathered`]), one per process, from this process's counts `before` the step
+/// (collective; empty on one process).
+pub(super) fn bytes_per_process(
+    session: &SessionGuard,
+    before: [u64; 2],
+) -> Result<[Vec<u64>; 2], StepError> {
+    let size = session.size();
+    if size == 1 {
+        return Ok([Vec::new(), Vec::new()]);
+    }
+    let now = [session.bytes_sent(), session.bytes_gathered()];
+    let mut counts = vec![0.0; 2 * size];
+    for k in 0..2 {
+        counts[k * size + session.rank()] = (now[k] - before[k]) as f64;
+    }
+    session.sum(&mut counts)?;
+    let of = |k: usize| {
+        counts[k * size..(k + 1) * size]
+            .iter()
+            .map(|&b| b as u64)
+            .collect()
+    };
+    Ok([of(0), of(1)])
+}
+
 impl<const D: usize> Step<'_, D> {
     /// MPM on several processes: the points shared out (at the first step: each process keeps those of
     /// its band; later: the points that left a band migrate), then the ghosts appended.
@@ -131,5 +158,24 @@ impl<const D: usize> Step<'_, D> {
                 n * rank / size..n * (rank + 1) / size
             }
         }
+    }
+
+    /// The unknowns (indices in [`DofMap`] order) this process reads at an evaluation: those of the
+    /// active nodes from the lowest to the highest node in the support of its points (its own and the
+    /// ghosts; all points where they are not shared out) and of its own block rows, a contiguous range
+    /// because the nodes are numbered row by row.
+    pub(super) fn unknowns_window(&self, session: &SessionGuard) -> Range<usize> {
+        let table = &self.work.table;
+        let (lo, hi) = (0..table.len())
+            .flat_map(|p| table.weights(p))
+            .fold((u32::MAX, 0), |(lo, hi), w| {
+                (lo.min(w.node), hi.max(w.node))
+            });
+        let rows = self.own_rows(session);
+        let active = self.work.dofs.active_nodes();
+        let first = active.partition_point(|&a| a < lo).min(rows.start);
+        let last = active.partition_point(|&a| a <= hi).max(rows.end);
+        let nf = self.work.dofs.unknowns_per_node();
+        first * nf..last * nf
     }
 }

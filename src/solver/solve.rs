@@ -176,7 +176,7 @@ fn physical_residual<const D: usize>(
     (session, shared): (&SessionGuard, bool),
     phys: &mut [f64],
 ) -> Result<Vec<f64>, StepError> {
-    let xs = sys.owned.gather(&sys.x)?;
+    let xs = sys.owned.gather_all(&sys.x)?;
     let local = assembler
         .evaluate(input, &xs)
         .and_then(|()| assembler.residual(input, &xs, phys, true));
