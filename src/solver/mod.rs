@@ -16,7 +16,7 @@ use crate::grid::Grid;
 use crate::material::Material;
 use crate::model::{EnergyBooks, InitialAcceleration, Model, ModelError, Setup, State};
 use crate::particles::Particles;
-use crate::partition::{self, Partition};
+use crate::partition::{self, NodalWindows, Partition};
 use crate::petsc::{
     self, BlockCsr, CallbackError, GatherAll, GatherRange, IndexSet, LogEvent, Matrix,
     NonlinearProblem, PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
@@ -43,7 +43,7 @@ use contacts::ContactSet;
 pub use input::StepData;
 pub use path::PathPoint;
 use prepare::{Loading, StepPlan};
-use processes::{agree, agreed, complete_rows};
+use processes::{agree, agreed, complete_rows, largest};
 use report::Failure;
 pub use report::{StepError, StepReport};
 use solve::Solved;
@@ -96,6 +96,9 @@ pub struct Workspace<const D: usize = 2> {
     own_points: usize,
     /// Points migrated and ghosts received at the start of the step, summed over the processes.
     moved: [usize; 2],
+    /// MPM on several processes: the node rows of the step's nodal sums on every process (P2G and the
+    /// `eta_bar` projection are summed over neighbouring processes only).
+    windows: Option<NodalWindows>,
 }
 
 impl<const D: usize> Workspace<D> {

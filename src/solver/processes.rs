@@ -59,6 +59,13 @@ pub(super) fn complete_rows(
     Ok(())
 }
 
+/// The largest of `value` over the processes (collective).
+pub(super) fn largest(session: &SessionGuard, value: f64) -> Result<f64, petsc::PetscError> {
+    let mut v = [-value];
+    session.min(&mut v)?;
+    Ok(-v[0])
+}
+
 /// The bytes (B) every process sent in a step through the program's own exchanges, and of them in the
 /// gathers of the unknowns for the evaluations ([`SessionGuard::bytes_sent`],
 /// [`SessionGuard::bytes_gathered`]), one per process, from this process's counts `before` the step
@@ -177,5 +184,66 @@ impl<const D: usize> Step<'_, D> {
         let last = active.partition_point(|&a| a <= hi).max(rows.end);
         let nf = self.work.dofs.unknowns_per_node();
         first * nf..last * nf
+    }
+
+    /// The node rows of the step's nodal sums on every process ([`Partition::windows`]): this process
+    /// touches the rows its own points reach and reads its own node rows and those its own points and
+    /// ghosts reach.
+    pub(super) fn nodal_windows(
+        &self,
+        session: &SessionGuard,
+        part: &Partition,
+    ) -> Result<NodalWindows, StepError> {
+        let table = &self.work.table;
+        let touched = part.rows_reached(table, 0..self.own_point_count());
+        let (reached, own) = (
+            part.rows_reached(table, 0..table.len()),
+            part.own_node_rows(),
+        );
+        let read = match reached.is_empty() {
+            true => own,
+            false => reached.start.min(own.start)..reached.end.max(own.end),
+        };
+        Ok(part.windows(session, touched, read)?)
+    }
+
+    /// With the nodal sums complete on the rows each process reads only: mass, velocity and
+    /// acceleration also on the nodes of the constraint sets `sets` and the devices' contact candidates
+    /// beyond them (their reactions, statuses and impacts are evaluated on every process), from their
+    /// owners (collective; nothing to do where every process holds the whole grid).
+    pub(super) fn complete_beyond_windows(
+        &mut self,
+        session: &SessionGuard,
+        sets: &[Vec<usize>],
+    ) -> Result<(), StepError> {
+        let (Some(part), Some(_)) = (&self.work.partition, &self.work.windows) else {
+            return Ok(());
+        };
+        let nf = self.work.dofs.unknowns_per_node();
+        let mut nodes: Vec<usize> = sets
+            .iter()
+            .flatten()
+            .map(|&d| self.work.dofs.node(d / nf))
+            .chain(self.device_nodes())
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        let (owned, gs) = (part.owned_nodes(), &mut self.work.grid_state);
+        let width = 1 + 2 * D;
+        let mut values = vec![0.0; nodes.len() * width];
+        for (v, &n) in values.chunks_exact_mut(width).zip(&nodes) {
+            if owned.contains(&n) {
+                v[0] = gs.mass[n];
+                v[1..1 + D].copy_from_slice(gs.velocity[n].as_slice());
+                v[1 + D..].copy_from_slice(gs.acceleration[n].as_slice());
+            }
+        }
+        session.sum(&mut values)?;
+        for (v, &n) in values.chunks_exact(width).zip(&nodes) {
+            gs.mass[n] = v[0];
+            gs.velocity[n] = SVector::from_column_slice(&v[1..1 + D]);
+            gs.acceleration[n] = SVector::from_column_slice(&v[1 + D..]);
+        }
+        Ok(())
     }
 }
