@@ -43,7 +43,7 @@ use contacts::ContactSet;
 pub use input::StepData;
 pub use path::PathPoint;
 use prepare::{Loading, StepPlan};
-use processes::{agree, agreed, complete_rows, largest};
+use processes::{agree, agreed, complete_read_rows, complete_rows, largest};
 use report::Failure;
 pub use report::{StepError, StepReport};
 use solve::Solved;

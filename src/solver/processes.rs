@@ -93,6 +93,31 @@ pub(super) fn bytes_per_process(
     Ok([of(0), of(1)])
 }
 
+/// Completes the physical residual `r` after a solve where the step reads it beyond this process's
+/// own block rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they
+/// are zeroed and only the unknowns `read` ([`solve`]'s constrained and contact rows) are summed over
+/// the processes (each from its owner, the others adding zeros: the same bits on every process).
+/// Without shared points every process evaluated every row: nothing to do.
+pub(super) fn complete_read_rows(
+    session: &SessionGuard,
+    shared: bool,
+    (rows, nf): (Range<usize>, usize),
+    read: &[usize],
+    r: &mut [f64],
+) -> Result<(), StepError> {
+    if !shared {
+        return Ok(());
+    }
+    r[..rows.start * nf].fill(0.0);
+    r[rows.end * nf..].fill(0.0);
+    let mut values: Vec<f64> = read.iter().map(|&d| r[d]).collect();
+    session.sum(&mut values)?;
+    for (&d, v) in read.iter().zip(values) {
+        r[d] = v;
+    }
+    Ok(())
+}
+
 impl<const D: usize> Step<'_, D> {
     /// MPM on several processes: the points shared out (at the first step: each process keeps those of
     /// its band; later: the points that left a band migrate), then the ghosts appended.
