@@ -56,7 +56,7 @@ fn main() {
         "PetscViewer(ASCIIGetStdout|Destroy)",
         "Vec(Create|CreateMPI|CreateSeq|SetSizes|SetBlockSize|SetFromOptions|SetUp|Destroy|Duplicate|Copy|Set|SetValues)",
         "Vec(AssemblyBegin|AssemblyEnd|GetArray|RestoreArray|GetArrayRead|RestoreArrayRead|GetLocalSize|GetSize)",
-        "Vec(GetOwnershipRange|Norm|AXPY|WAXPY|Scale|Dot|ScatterCreateToAll|ScatterBegin|ScatterEnd|ScatterDestroy)",
+        "Vec(GetOwnershipRange|Norm|AXPY|WAXPY|Scale|Dot|ScatterCreate|ScatterCreateToAll|ScatterBegin|ScatterEnd|ScatterDestroy)",
         "Mat(Create|SetSizes|SetType|SetBlockSize|SetFromOptions|SetUp|Destroy|SetPreallocationCOO|SetValuesCOO)",
         "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|SetOption)",
         "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation|SetValuesBlocked)",

@@ -5,8 +5,10 @@
 //! points in its cells and the grid nodes of its node rows (the block rows of the Jacobian it assembles).
 //! Every step, points that moved into another process's band migrate to it, and every process receives
 //! copies (ghosts) of the other processes' points whose support may reach its node rows, so that it can
-//! evaluate its rows completely. Points travel as records ([`Particles::pack`]) through a PETSc star
-//! forest (`PetscSF`, [`Session::exchange`](crate::petsc::Session::exchange)). Units: mm.
+//! evaluate its rows completely. The nodal sums of P2G are completed between neighbouring bands only
+//! ([`NodalWindows`]): each process reads its own node rows and those its points reach. Points and
+//! nodal sums travel as records ([`Particles::pack`]) through a PETSc star forest (`PetscSF`,
+//! [`Session::exchange`](crate::petsc::Session::exchange)). Units: mm.
 
 use crate::grid::{Grid, SLOWEST_AXIS};
 use crate::model::State;
@@ -200,6 +202,179 @@ impl Partition {
     }
 }
 
+impl Partition {
+    /// Node row of grid node `node` (a field copy's row is that of its grid node).
+    fn node_row(&self, node: usize) -> usize {
+        node % (self.row_nodes * (self.ny + 1)) / self.row_nodes
+    }
+
+    /// This process's node rows.
+    pub fn own_node_rows(&self) -> Range<usize> {
+        self.node_rows(self.rank)
+    }
+
+    /// The node rows the supports of the points `points` of `table` meet (empty if none).
+    pub fn rows_reached<const D: usize>(
+        &self,
+        table: &ShapeTable<D>,
+        points: Range<usize>,
+    ) -> Range<usize> {
+        let (lo, hi) =
+            points
+                .flat_map(|p| table.weights(p))
+                .fold((usize::MAX, 0), |(lo, hi), w| {
+                    let row = self.node_row(w.node as usize);
+                    (lo.min(row), hi.max(row + 1))
+                });
+        if lo < hi { lo..hi } else { 0..0 }
+    }
+
+    /// The windows of a step's nodal sums on every process, from this process's `touched` rows (those its
+    /// own points reach) and `read` rows (its own node rows and those its own points and ghosts reach,
+    /// which hold `touched`). Collective.
+    pub fn windows(
+        &self,
+        session: &SessionGuard,
+        touched: Range<usize>,
+        read: Range<usize>,
+    ) -> Result<NodalWindows, PetscError> {
+        let size = session.size();
+        let mut ends = vec![0.0; 4 * size];
+        let mine = [touched.start, touched.end, read.start, read.end];
+        for (k, v) in mine.into_iter().enumerate() {
+            ends[4 * self.rank + k] = v as f64;
+        }
+        session.sum(&mut ends)?;
+        let range = |r: usize, k: usize| ends[4 * r + k] as usize..ends[4 * r + k + 1] as usize;
+        Ok(NodalWindows {
+            rank: self.rank,
+            row_nodes: self.row_nodes,
+            touched: (0..size).map(|r| range(r, 0)).collect(),
+            read: (0..size).map(|r| range(r, 2)).collect(),
+        })
+    }
+
+    /// Gives every process the flags of the other processes' own nodes: on return `flags` (one per grid
+    /// node) holds on every node its owner's flag (this process's own nodes keep theirs). Sent packed,
+    /// 32 flags to a value. Collective.
+    pub fn share_owned_flags(
+        &self,
+        session: &SessionGuard,
+        flags: &mut [bool],
+    ) -> Result<(), PetscError> {
+        let size = session.size();
+        let nodes = |r: usize| {
+            let rows = self.node_rows(r);
+            rows.start * self.row_nodes..rows.end * self.row_nodes
+        };
+        let words = |r: usize| nodes(r).len().div_ceil(FLAGS_PER_VALUE);
+        let own: Vec<f64> = flags[nodes(self.rank)]
+            .chunks(FLAGS_PER_VALUE)
+            .map(|c| {
+                c.iter()
+                    .rev()
+                    .fold(0.0, |w, &f| 2.0 * w + f64::from(u8::from(f)))
+            })
+            .collect();
+        let counts: Vec<usize> = (0..size)
+            .map(|r| if r == self.rank { 0 } else { own.len() })
+            .collect();
+        let send = own.repeat(size - 1);
+        let received = session.exchange(1, &counts, &send)?;
+        let mut at = 0;
+        for r in (0..size).filter(|&r| r != self.rank) {
+            let theirs = &received[at..at + words(r)];
+            at += words(r);
+            for (chunk, &w) in flags[nodes(r)].chunks_mut(FLAGS_PER_VALUE).zip(theirs) {
+                let mut bits = w as u64;
+                for f in chunk {
+                    *f = bits & 1 == 1;
+                    bits >>= 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Flags packed into one value of [`Partition::share_owned_flags`] (exact in a double's mantissa).
+const FLAGS_PER_VALUE: usize = 32;
+
+/// The node rows of a step's nodal sums on every process (`docs/theory.md`, "Processes"): the rows each
+/// process's own points reach (where its partial sums may be nonzero) and the rows it reads (where it
+/// needs them complete). A process sends a neighbour its partial sums on the rows that neighbour reads,
+/// so no process ever sends or receives the whole grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodalWindows {
+    rank: usize,
+    /// Nodes per node row.
+    row_nodes: usize,
+    /// Per process: the node rows its own points reach.
+    touched: Vec<Range<usize>>,
+    /// Per process: the node rows it reads.
+    read: Vec<Range<usize>>,
+}
+
+impl NodalWindows {
+    /// The grid nodes this process reads (and holds complete after [`NodalWindows::sum`]).
+    pub fn read_nodes(&self) -> Range<usize> {
+        let rows = &self.read[self.rank];
+        rows.start * self.row_nodes..rows.end * self.row_nodes
+    }
+
+    /// Sums `values` (`width` per grid node: this process's partial sums over its own points) over the
+    /// processes on the nodes this process reads, each node's partial sums added in process order from
+    /// zero, so that every process reading a node gets the same bits. Collective.
+    pub fn sum(
+        &self,
+        session: &SessionGuard,
+        width: usize,
+        values: &mut [f64],
+    ) -> Result<(), PetscError> {
+        let span = |rows: &Range<usize>| {
+            rows.start * self.row_nodes * width..rows.end * self.row_nodes * width
+        };
+        let (mine, read) = (&self.touched[self.rank], &self.read[self.rank]);
+        let mut counts = vec![0; self.read.len()];
+        let mut send = Vec::new();
+        for (r, theirs) in self
+            .read
+            .iter()
+            .enumerate()
+            .filter(|&(r, _)| r != self.rank)
+        {
+            let rows = meet(mine, theirs);
+            counts[r] = rows.len() * self.row_nodes;
+            send.extend_from_slice(&values[span(&rows)]);
+        }
+        let received = session.exchange(width, &counts, &send)?;
+        let own = values[span(read)].to_vec();
+        values[span(read)].fill(0.0);
+        let mut at = 0;
+        for (r, touched) in self.touched.iter().enumerate() {
+            let rows = meet(touched, read);
+            let n = span(&rows).len();
+            let part = if r == self.rank {
+                let from = span(&rows).start - span(read).start;
+                &own[from..from + n]
+            } else {
+                at += n;
+                &received[at - n..at]
+            };
+            for (v, p) in values[span(&rows)].iter_mut().zip(part) {
+                *v += p;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The rows in both `a` and `b` (empty if they do not meet).
+fn meet(a: &Range<usize>, b: &Range<usize>) -> Range<usize> {
+    let start = a.start.max(b.start);
+    start..a.end.min(b.end).max(start)
+}
+
 /// Cell row of height `y` (mm) on a grid of `ny` rows of height `h` from `y0`, clamped to the grid.
 fn cell_row(y0: f64, h: f64, ny: usize, y: f64) -> usize {
     (((y - y0) / h).floor().max(0.0) as usize).min(ny - 1)
@@ -366,6 +541,35 @@ mod tests {
         // Empty rows never leave a band empty.
         let few = Partition::from_counts(0, 4, &g, &[0.0; 30]).expect("bands");
         assert!(few.cuts.windows(2).all(|w| w[0] < w[1]), "{:?}", few.cuts);
+    }
+
+    #[test]
+    fn rows_reached_are_the_node_rows_of_the_supports() {
+        let g = grid();
+        let part = Partition::from_counts(1, 3, &g, &[1.0; 30]).expect("bands");
+        assert_eq!(part.own_node_rows(), 10..20);
+        let mut ps = Particles::new();
+        ps.push(
+            Vector2::new(0.5, -4.0 + 10.5),
+            0.25,
+            1e-9,
+            Matrix2::identity() * 0.25,
+            0,
+        );
+        ps.push(
+            Vector2::new(3.5, -4.0 + 25.5),
+            0.25,
+            1e-9,
+            Matrix2::identity() * 0.25,
+            0,
+        );
+        let mut table = ShapeTable::new();
+        table.compute(ShapeKind::Linear, &g, &ps).expect("table");
+        assert_eq!(part.rows_reached(&table, 0..1), 10..12);
+        assert_eq!(part.rows_reached(&table, 0..2), 10..27);
+        assert!(part.rows_reached(&table, 0..0).is_empty());
+        assert_eq!(meet(&(2..5), &(4..9)), 4..5);
+        assert!(meet(&(2..5), &(6..9)).is_empty());
     }
 
     #[test]

@@ -43,7 +43,8 @@ pub mod file {
 /// Columns of `history.csv`: [`history::LEADING`], then per constraint set, rigid body and load the
 /// columns of [`history::reaction_columns`], per pinned device [`history::rotation_column`], then
 /// [`history::CONTACT_SOLVES`] (if there is any set), [`history::TRAILING`], in CT runs
-/// [`history::CRACK`] and, with path following, [`history::PATH`].
+/// [`history::CRACK`], on several processes [`history::BYTES`] and, with path following,
+/// [`history::PATH`].
 pub mod history {
     /// Step number.
     pub const STEP: &str = "step";
@@ -120,6 +121,16 @@ pub mod history {
     pub const PATH_OPENING: &str = "path_opening";
     /// Path following: the step's prescribed motion over its nominal one (< 0 on a snap-back).
     pub const PATH_RATIO: &str = "path_ratio";
+
+    /// Several processes: the bytes (B) the process that sent most sent in the step through the
+    /// program's own exchanges (points, nodal sums, residual rows, gathers of the unknowns; PETSc's own
+    /// traffic not counted).
+    pub const BYTES_SENT: &str = "bytes_sent";
+    /// Several processes: of [`BYTES_SENT`], the largest process's bytes in the gathers of the unknowns
+    /// for the residual and Jacobian evaluations.
+    pub const BYTES_UNKNOWNS: &str = "bytes_unknowns";
+    /// The traffic columns after the crack columns (runs on several processes).
+    pub const BYTES: [&str; 2] = [BYTES_SENT, BYTES_UNKNOWNS];
 
     /// The path-following columns, last (runs with `[path]`).
     pub const PATH: [&str; 3] = [PATH_LAMBDA, PATH_OPENING, PATH_RATIO];

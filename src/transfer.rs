@@ -236,14 +236,17 @@ pub fn particles_to_grid<const D: usize>(
         grid,
         relative_tolerance,
         state,
-        |_| Ok(()),
+        (|_: &mut [f64]| Ok(()), Ok),
     )
 }
 
 /// P2G as [`particles_to_grid`] for a process holding part of the points: only the first `counted`
 /// points contribute (the others are copies of other processes' points), and the nodal sums
-/// `[m, m v, m a]` per node (`1 + 2 D` values) pass through `reduce` (the sum over the processes) before
-/// the activity test and the divisions, so that every process gets the same grid state.
+/// `[m, m v, m a]` per node (`1 + 2 D` values) pass through `reduce` (the sum over the processes, on the
+/// nodes a process reads) before the activity test and the divisions, so that every process gets the
+/// same grid state on the nodes it reads; `largest` turns
+/// this process's largest nodal mass (t) into the largest over the processes (the identity where
+/// `reduce` leaves every process the whole grid).
 pub fn particles_to_grid_shared<const D: usize>(
     table: &ShapeTable<D>,
     particles: &Particles<D>,
@@ -251,7 +254,10 @@ pub fn particles_to_grid_shared<const D: usize>(
     grid: &Grid<D>,
     relative_tolerance: f64,
     state: &mut GridState<D>,
-    reduce: impl FnOnce(&mut [f64]) -> Result<(), String>,
+    (reduce, largest): (
+        impl FnOnce(&mut [f64]) -> Result<(), String>,
+        impl FnOnce(f64) -> Result<f64, String>,
+    ),
 ) -> Result<(), TransferError> {
     if table.kind().is_none() {
         return Err(TransferError::NoShapeTable);
@@ -270,6 +276,7 @@ pub fn particles_to_grid_shared<const D: usize>(
         .sums
         .chunks_exact(width)
         .fold(0.0_f64, |mx, s| mx.max(s[0]));
+    let max_mass = largest(max_mass).map_err(TransferError::Reduce)?;
     let threshold = relative_tolerance * max_mass;
     state.mass.resize(nodes, 0.0);
     state.velocity.resize(nodes, SVector::zeros());

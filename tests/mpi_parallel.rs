@@ -487,3 +487,34 @@ fn a_plate_is_cut_across_its_height_and_matches_serial() {
     }
     std::fs::remove_dir_all(&base).ok();
 }
+
+/// The nodal sums (P2G, the `eta_bar` projection) travel between neighbouring processes only, on the
+/// rows their points reach: widening the empty margin of the CT demo's grid from 3 to 20 cells (5,032
+/// more nodes, no more points) adds next to nothing to the bytes a process sends per step, where a sum
+/// over the whole grid would add the margin's nodal values (6 per node, 241 kB per step) to every
+/// process.
+#[test]
+fn nodal_sums_do_not_grow_with_the_grid() {
+    let dir = std::env::temp_dir().join(format!("mpm-bytes-{}", std::process::id()));
+    let last_step_bytes = |margin: usize| {
+        let out = dir.join(format!("m{margin}"));
+        let set = format!("grid.margin_cells={margin}");
+        ct_demo(2, 3, &out, &["--set", &set]);
+        let h = history(&out);
+        let sent = h
+            .get("bytes_sent")
+            .expect("a bytes_sent column on 2 processes");
+        // The last step (the first also carries the initial acceleration's sums).
+        *sent.last().expect("3 steps")
+    };
+    let (small, wide) = (last_step_bytes(3), last_step_bytes(20));
+    let _ = std::fs::remove_dir_all(&dir);
+    let nodes = |cells: usize| ((cells + 1) * (cells + 1)) as f64;
+    // The demo's specimen spans 50 cells of 4 mm: 56 cells with 3 on each side, 90 with 20.
+    let margin_sums = (nodes(90) - nodes(56)) * 6.0 * 8.0;
+    assert!(
+        wide - small < 0.25 * margin_sums,
+        "bytes per step {small} with a 3-cell margin, {wide} with 20: the margin's {margin_sums} B \
+         of nodal sums travel"
+    );
+}

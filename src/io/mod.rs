@@ -506,6 +506,10 @@ impl RunOutput {
         if tip {
             columns.extend(history::CRACK.map(String::from));
         }
+        let bytes = self.rows.iter().any(|r| !r.bytes_sent.is_empty());
+        if bytes {
+            columns.extend(history::BYTES.map(String::from));
+        }
         let path = self.rows.iter().any(|r| r.path.is_some());
         if path {
             columns.extend(history::PATH.map(String::from));
@@ -575,6 +579,11 @@ impl RunOutput {
             );
             if tip {
                 cracks::write_front(&mut s, r.crack.as_ref());
+            }
+            if bytes {
+                let largest = |b: &[u64]| b.iter().copied().max().unwrap_or(0);
+                let (sent, unknowns) = (largest(&r.bytes_sent), largest(&r.bytes_unknowns));
+                let _ = write!(s, ",{sent},{unknowns}");
             }
             if let (true, Some(p)) = (path, &r.path) {
                 let _ = write!(s, ",{:.9e},{:.9e},{:.9e}", p.lambda, p.opening, p.ratio);

@@ -23,9 +23,10 @@ pub use options::{
     unused_options,
 };
 pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo, Tolerances};
-pub use vector::{GatherAll, Vector};
+pub use vector::{GatherAll, GatherRange, Vector};
 
 use std::ffi::{CStr, CString, c_char, c_int, c_void};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
 /// PETSc's index type (32-bit in Debian's `petsc-dev`).
@@ -118,6 +119,23 @@ pub struct Session {
 
 static SESSION: OnceLock<std::result::Result<Mutex<Session>, PetscError>> = OnceLock::new();
 
+/// Bytes this process has sent through the program's own exchanges ([`Session::bytes_sent`]).
+static BYTES_SENT: AtomicU64 = AtomicU64::new(0);
+
+/// Of [`BYTES_SENT`], the bytes of the [`GatherRange`] gathers ([`Session::bytes_gathered`]).
+static BYTES_GATHERED: AtomicU64 = AtomicU64::new(0);
+
+/// Counts `bytes` (B) as sent by this process ([`Session::bytes_sent`]).
+fn count_sent(bytes: usize) {
+    BYTES_SENT.fetch_add(bytes as u64, Ordering::Relaxed);
+}
+
+/// Counts `bytes` (B) as sent by this process in a [`GatherRange`] gather.
+fn count_gathered(bytes: usize) {
+    count_sent(bytes);
+    BYTES_GATHERED.fetch_add(bytes as u64, Ordering::Relaxed);
+}
+
 /// Exclusive access to PETSc for the current thread; PETSc objects are created and used under it.
 pub type SessionGuard = MutexGuard<'static, Session>;
 
@@ -150,12 +168,29 @@ impl Session {
         unsafe { sys::mpmc_world_size() as usize }
     }
 
+    /// Bytes (B) this process has sent since PETSc started through the program's own exchanges: the
+    /// records of [`Session::exchange`] for other processes, the buffers of [`Session::sum`],
+    /// [`Session::min`] and [`Session::any`] (once per process: a reduction tree sends about its buffer
+    /// from each process) and the entries of distributed vectors that [`GatherAll`] and [`GatherRange`]
+    /// deliver to other processes. PETSc's own traffic (its Krylov solvers, preconditioners and matrix
+    /// products) is not counted. On one process nothing is sent: 0.
+    pub fn bytes_sent(&self) -> u64 {
+        BYTES_SENT.load(Ordering::Relaxed)
+    }
+
+    /// Of [`Session::bytes_sent`], the bytes (B) this process has sent in the gathers of ranges of
+    /// distributed vectors ([`GatherRange`]: the unknowns a process reads at an evaluation).
+    pub fn bytes_gathered(&self) -> u64 {
+        BYTES_GATHERED.load(Ordering::Relaxed)
+    }
+
     /// True on every process if `flag` is true on any (collective: every process must call it; one
     /// process: `flag`).
     pub fn any(&self, flag: bool) -> bool {
         if self.size() == 1 {
             return flag;
         }
+        count_sent(std::mem::size_of::<i32>());
         // SAFETY: as above; an MPI_Allreduce over the world communicator.
         unsafe { sys::mpmc_world_any(i32::from(flag)) != 0 }
     }
@@ -194,6 +229,7 @@ impl Session {
             return Ok(());
         }
         let n = to_petsc_int(values.len(), what)?;
+        count_sent(std::mem::size_of_val(values));
         // SAFETY: the buffer holds n doubles; `op` reduces and broadcasts over the world communicator.
         check(unsafe { op(values.as_mut_ptr(), n) }, call)
     }
@@ -221,6 +257,8 @@ impl Session {
             .map(|&c| to_petsc_int(c, "records to send"))
             .collect::<Result<Vec<_>>>()?;
         let width_p = to_petsc_int(width, "record width")?;
+        let elsewhere = total - counts[self.rank()] as usize;
+        count_sent(elsewhere * width * std::mem::size_of::<f64>());
         let (mut n, mut recv): (PetscInt, *mut f64) = (0, std::ptr::null_mut());
         // SAFETY: counts has one entry per process and send the records they count; the shim allocates
         // `recv` with PetscMalloc (n * width values), copied out and freed below.

@@ -1,8 +1,10 @@
 //! PETSc `Vec` (called `PetscVec` in the bindings): distributed vectors with a block size.
 
 use super::{
-    PetscError, PetscInt, Result, SessionGuard, check, create, ownership_range, sys, to_petsc_int,
+    PetscError, PetscInt, Result, SessionGuard, check, count_gathered, count_sent, create,
+    ownership_range, sys, to_petsc_int,
 };
+use std::ops::Range;
 
 /// A PETSc vector. Owned vectors are destroyed on drop; borrowed ones (handed to SNES callbacks) are not.
 pub struct Vector {
@@ -241,11 +243,16 @@ impl Vector {
 pub struct GatherAll {
     scatter: sys::VecScatter,
     all: Vector,
+    /// Bytes this process sends per gather: its entries, to every other process.
+    sent: usize,
 }
 
 impl GatherAll {
     /// The gather for vectors laid out like `like`.
     pub fn new(like: &Vector) -> Result<Self> {
+        // SAFETY: PETSc is initialised while a vector exists.
+        let others = unsafe { sys::mpmc_world_size() } as usize - 1;
+        let sent = like.ownership_range()?.len() * others * std::mem::size_of::<f64>();
         let mut scatter: sys::VecScatter = std::ptr::null_mut();
         let mut all: sys::PetscVec = std::ptr::null_mut();
         // SAFETY: creates a sequential vector of the global size and a scatter into it, both owned here.
@@ -259,23 +266,127 @@ impl GatherAll {
                 raw: all,
                 owned: true,
             },
+            sent,
         })
     }
 
     /// Every entry of `x` (laid out as the vector this gather was made for), in global order.
     pub fn gather(&self, x: &Vector) -> Result<Vec<f64>> {
-        let forward = sys::ScatterMode_SCATTER_FORWARD;
-        let insert = sys::InsertMode_INSERT_VALUES;
-        // SAFETY: the scatter maps vectors of x's layout into `all`.
-        check(
-            unsafe { sys::VecScatterBegin(self.scatter, x.raw, self.all.raw, insert, forward) },
-            "VecScatterBegin",
-        )?;
-        check(
-            unsafe { sys::VecScatterEnd(self.scatter, x.raw, self.all.raw, insert, forward) },
-            "VecScatterEnd",
-        )?;
+        scatter_forward(self.scatter, x, &self.all)?;
+        count_sent(self.sent);
         self.all.read(|s| s.to_vec())
+    }
+}
+
+/// Runs `scatter` forward from `x` into `to`, inserting.
+fn scatter_forward(scatter: sys::VecScatter, x: &Vector, to: &Vector) -> Result<()> {
+    let forward = sys::ScatterMode_SCATTER_FORWARD;
+    let insert = sys::InsertMode_INSERT_VALUES;
+    // SAFETY: the caller's scatter maps vectors of x's layout into `to`.
+    check(
+        unsafe { sys::VecScatterBegin(scatter, x.raw, to.raw, insert, forward) },
+        "VecScatterBegin",
+    )?;
+    check(
+        unsafe { sys::VecScatterEnd(scatter, x.raw, to.raw, insert, forward) },
+        "VecScatterEnd",
+    )
+}
+
+/// A reusable gather of one contiguous range of the entries of distributed vectors of one layout onto
+/// this process (`VecScatterCreate` from a stride index set, built once, then one scatter per
+/// [`GatherRange::gather_into`]): the unknowns a process reads, its own and those of the neighbouring
+/// processes' rows next to them, rather than all ([`GatherAll`]).
+pub struct GatherRange {
+    scatter: sys::VecScatter,
+    local: Vector,
+    range: Range<usize>,
+    /// Bytes this process sends per gather: its entries in the other processes' ranges.
+    sent: usize,
+}
+
+impl GatherRange {
+    /// The gather of the global entries `range` for vectors laid out like `like` (collective: every
+    /// process passes its own range).
+    pub fn new(session: &SessionGuard, like: &Vector, range: Range<usize>) -> Result<Self> {
+        let sent = sent_to_others(session, &like.ownership_range()?, &range)?;
+        let n = to_petsc_int(range.len(), "VecScatterCreate")?;
+        let first = to_petsc_int(range.start, "ISCreateStride")?;
+        let mut local: sys::PetscVec = std::ptr::null_mut();
+        // SAFETY: out-parameter; the sequential vector is owned below.
+        check(
+            unsafe { sys::VecCreateSeq(sys::mpmc_comm_self(), n, &mut local) },
+            "VecCreateSeq",
+        )?;
+        let local = Vector {
+            raw: local,
+            owned: true,
+        };
+        let (mut from, mut to): (sys::IS, sys::IS) = (std::ptr::null_mut(), std::ptr::null_mut());
+        let mut scatter: sys::VecScatter = std::ptr::null_mut();
+        // SAFETY: two stride index sets on this process (destroyed below) and a scatter from `like`'s
+        // layout into `local`, owned by the result.
+        let made = unsafe {
+            let self_comm = sys::mpmc_comm_self();
+            let mut code = sys::ISCreateStride(self_comm, n, first, 1, &mut from);
+            if code == 0 {
+                code = sys::ISCreateStride(self_comm, n, 0, 1, &mut to);
+            }
+            if code == 0 {
+                code = sys::VecScatterCreate(like.raw, from, local.raw, to, &mut scatter);
+            }
+            sys::ISDestroy(&mut from);
+            sys::ISDestroy(&mut to);
+            code
+        };
+        check(made, "VecScatterCreate")?;
+        Ok(Self {
+            scatter,
+            local,
+            range,
+            sent,
+        })
+    }
+
+    /// The global entries this gather delivers.
+    pub fn range(&self) -> Range<usize> {
+        self.range.clone()
+    }
+
+    /// Writes the entries `range` of `x` (laid out as the vector this gather was made for) into
+    /// `out[range]` (`out` indexed by global entry; the other entries are left as they are).
+    pub fn gather_into(&self, x: &Vector, out: &mut [f64]) -> Result<()> {
+        scatter_forward(self.scatter, x, &self.local)?;
+        count_gathered(self.sent);
+        self.local
+            .read(|s| out[self.range.clone()].copy_from_slice(s))
+    }
+}
+
+/// Entries (as bytes) of this process's `own` range that lie in the other processes' gathered
+/// ranges, from every process's `wanted` range (collective: the ranges are summed over the processes).
+fn sent_to_others(
+    session: &SessionGuard,
+    own: &Range<usize>,
+    wanted: &Range<usize>,
+) -> Result<usize> {
+    let (rank, size) = (session.rank(), session.size());
+    let mut ranges = vec![0.0; 2 * size];
+    ranges[2 * rank] = wanted.start as f64;
+    ranges[2 * rank + 1] = wanted.end as f64;
+    session.sum(&mut ranges)?;
+    let overlap = |r: usize| {
+        let (lo, hi) = (ranges[2 * r] as usize, ranges[2 * r + 1] as usize);
+        hi.min(own.end).saturating_sub(lo.max(own.start))
+    };
+    let entries: usize = (0..size).filter(|&r| r != rank).map(overlap).sum();
+    Ok(entries * std::mem::size_of::<f64>())
+}
+
+impl Drop for GatherRange {
+    fn drop(&mut self) {
+        // SAFETY: created in `new`, destroyed once.
+        unsafe { sys::VecScatterDestroy(&mut self.scatter) };
     }
 }
 

@@ -381,6 +381,26 @@ impl<const D: usize> Step<'_, D> {
         Ok(devices)
     }
 
+    /// The candidate contact nodes of every device at the start of the step (grid node indices; the
+    /// nodes [`Step::contact_devices`] starts from).
+    pub(super) fn device_nodes(&self) -> Vec<usize> {
+        let mut index = vec![usize::MAX; self.model.field_nodes()];
+        let mut all = Vec::new();
+        for (k, rb) in self.model.params.rigid.iter().enumerate() {
+            let Some(c) = &rb.contact else { continue };
+            let face = Face::of(
+                contact::rotation(self.state.counters.rotations[k]) * c.normal,
+                &self.state.rigid[k],
+            );
+            let nodes = self.face_nodes(&face, rb.field as usize, |_| Vector2::zeros(), &mut index);
+            for c in nodes {
+                index[c.node] = usize::MAX;
+                all.push(c.node);
+            }
+        }
+        all
+    }
+
     /// The candidate contact nodes of a device's `face` in velocity field `field`, each with the device's
     /// increment `motion(x_I)` and its place in `index` (grid node -> position in the list).
     fn face_nodes(

@@ -30,7 +30,7 @@ impl<const D: usize> Step<'_, D> {
             path::scale_increments(&mut plan.set_du, p.ratio);
         }
         let out = self.outcome(&plan, &solved.phys);
-        let work = self.work(&plan, &out);
+        let work = self.work(session, &plan, &out)?;
         let counted = self.own_point_count();
         let committed = self.move_points(session, &plan, &out, counted)?;
         self.move_rigid_bodies(&plan, &out);
@@ -129,19 +129,33 @@ impl<const D: usize> Step<'_, D> {
     /// Work of the step (N mm; in 2D per mm thickness): of the body force (b . du weighted by nodal
     /// mass) and of the constraints (trapezoidal in the set's reaction; every node of a set moves by the
     /// same prescribed du).
-    fn work(&self, plan: &StepPlan<D>, out: &Outcome<D>) -> f64 {
+    /// Collective: with the points shared out each process counts the body force on its own nodes.
+    fn work(
+        &self,
+        session: &SessionGuard,
+        plan: &StepPlan<D>,
+        out: &Outcome<D>,
+    ) -> Result<f64, StepError> {
         let mut work = 0.0;
         let bf = self.model.params.body_force * plan.loading.load_factor;
+        let owned = self.owned_nodes();
         for &node in self.work.dofs.active_nodes() {
             let node = node as usize;
-            work += self.work.grid_state.mass[node] * bf.dot(&out.du_nodes[node]);
+            if owned.contains(&node) {
+                work += self.work.grid_state.mass[node] * bf.dot(&out.du_nodes[node]);
+            }
+        }
+        if self.state.distributed {
+            let mut sum = [work];
+            session.sum(&mut sum)?;
+            work = sum[0];
         }
         for (k, (r, du)) in out.reactions.iter().zip(&out.displacements).enumerate() {
             for c in 0..D {
                 work += 0.5 * (r[c] + self.state.counters.last_reactions[k][c]) * du[c];
             }
         }
-        work
+        Ok(work)
     }
 
     /// G2P of the solution onto the points (eroded points keep their deformation), the FEM mode's nodal
@@ -339,6 +353,8 @@ impl<const D: usize> Step<'_, D> {
             contact_solves: solved.contact_solves,
             migrated: self.work.moved[0],
             ghosts: self.work.moved[1],
+            bytes_sent: Vec::new(),
+            bytes_unknowns: Vec::new(),
             path: None,
         }
     }

@@ -16,10 +16,10 @@ use crate::grid::Grid;
 use crate::material::Material;
 use crate::model::{EnergyBooks, InitialAcceleration, Model, ModelError, Setup, State};
 use crate::particles::Particles;
-use crate::partition::{self, Partition};
+use crate::partition::{self, NodalWindows, Partition};
 use crate::petsc::{
-    self, BlockCsr, CallbackError, GatherAll, IndexSet, LogEvent, Matrix, NonlinearProblem,
-    PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
+    self, BlockCsr, CallbackError, GatherAll, GatherRange, IndexSet, LogEvent, Matrix,
+    NonlinearProblem, PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
 };
 use crate::shape::{ShapeError, ShapeTable};
 use crate::space::{from_xy, rotation_xy, xy};
@@ -43,7 +43,7 @@ use contacts::ContactSet;
 pub use input::StepData;
 pub use path::PathPoint;
 use prepare::{Loading, StepPlan};
-use processes::{agree, agreed, complete_rows};
+use processes::{agree, agreed, complete_read_rows, complete_rows, largest};
 use report::Failure;
 pub use report::{StepError, StepReport};
 use solve::Solved;
@@ -96,6 +96,9 @@ pub struct Workspace<const D: usize = 2> {
     own_points: usize,
     /// Points migrated and ghosts received at the start of the step, summed over the processes.
     moved: [usize; 2],
+    /// MPM on several processes: the node rows of the step's nodal sums on every process (P2G and the
+    /// `eta_bar` projection are summed over neighbouring processes only).
+    windows: Option<NodalWindows>,
 }
 
 impl<const D: usize> Workspace<D> {
@@ -144,12 +147,15 @@ pub fn advance<const D: usize>(
     workspace: &mut Workspace<D>,
     session: &SessionGuard,
 ) -> Result<StepReport, StepError> {
-    Step {
+    let before = [session.bytes_sent(), session.bytes_gathered()];
+    let mut report = Step {
         model,
         state,
         work: workspace,
     }
-    .advance(session)
+    .advance(session)?;
+    [report.bytes_sent, report.bytes_unknowns] = processes::bytes_per_process(session, before)?;
+    Ok(report)
 }
 
 /// One step in progress: the model, the state it advances and the workspace it uses.

@@ -95,8 +95,10 @@ impl<const D: usize> Step<'_, D> {
             .begin_assembly(self.model, &self.state.particles, &plan.loading);
         let new_pattern = self.linear_system(session, prefix)?;
         let xs = self.first_guess(&plan, &eta_bar);
+        let window = self.unknowns_window(session);
         let sys = self.work.system.as_mut().expect("linear system just built");
         sys.owned.scatter(&xs, &mut sys.x)?;
+        sys.owned.set_window(session, &sys.x, window)?;
         Ok(StepPlan {
             new_pattern,
             ..plan
@@ -152,6 +154,7 @@ impl<const D: usize> Step<'_, D> {
         self.project_to_grid(session)?;
         let set_values = self.constraint_values(value);
         let sets = self.constrain(&set_values)?;
+        self.complete_beyond_windows(session, &sets)?;
         // Loads: the resultant at t spread over the active nodes of each segment.
         let (nodal_force, load_nodes) = self.nodal_loads(t)?;
         let eta_bar = self.nodal_eta_bar(session)?;
@@ -293,6 +296,11 @@ impl<const D: usize> Step<'_, D> {
                 model.params.fields[body[p] as usize] as usize
             });
         }
+        self.work.windows = match (&self.work.partition, shared) {
+            (Some(part), true) => Some(self.nodal_windows(session, part)?),
+            _ => None,
+        };
+        let windows = self.work.windows.as_ref();
         transfer::particles_to_grid_shared(
             &self.work.table,
             ps,
@@ -300,11 +308,21 @@ impl<const D: usize> Step<'_, D> {
             &model.params.grid,
             model.params.mass_tolerance,
             &mut self.work.grid_state,
-            |sums| match shared {
-                true => session.sum(sums).map_err(|e| e.to_string()),
-                false => Ok(()),
-            },
+            (
+                |sums: &mut [f64]| match windows {
+                    Some(w) => w.sum(session, 1 + 2 * D, sums).map_err(|e| e.to_string()),
+                    None => Ok(()),
+                },
+                |max| match windows {
+                    Some(_) => largest(session, max).map_err(|e| e.to_string()),
+                    None => Ok(max),
+                },
+            ),
         )?;
+        if let (Some(part), Some(_)) = (&self.work.partition, windows) {
+            // The active nodes beyond the rows read: their owners'.
+            part.share_owned_flags(session, &mut self.work.grid_state.active)?;
+        }
         if let Some((v, a)) = &self.state.fem_nodal {
             // FEM: the nodal state carries over (the same nodes are active in every step).
             self.work.grid_state.velocity.copy_from_slice(v);
@@ -463,11 +481,15 @@ impl<const D: usize> Step<'_, D> {
                 eb[w.node as usize] += w.value * p.mass[q] * p.eta_bar[q];
             }
         }
-        if self.state.distributed {
-            session.sum(&mut eb)?;
+        if let Some(w) = &self.work.windows {
+            w.sum(session, 1, &mut eb)?;
         }
         for &node in self.work.dofs.active_nodes() {
-            eb[node as usize] /= self.work.grid_state.mass[node as usize];
+            let m = self.work.grid_state.mass[node as usize];
+            // Without mass on this process: an active node beyond the rows it reads.
+            if m > 0.0 {
+                eb[node as usize] /= m;
+            }
         }
         Ok(eb)
     }

@@ -59,6 +59,65 @@ pub(super) fn complete_rows(
     Ok(())
 }
 
+/// The largest of `value` over the processes (collective).
+pub(super) fn largest(session: &SessionGuard, value: f64) -> Result<f64, petsc::PetscError> {
+    let mut v = [-value];
+    session.min(&mut v)?;
+    Ok(-v[0])
+}
+
+/// The bytes (B) every process sent in a step through the program's own exchanges, and of them in the
+/// gathers of the unknowns for the evaluations ([`SessionGuard::bytes_sent`],
+/// [`SessionGuard::bytes_gathered`]), one per process, from this process's counts `before` the step
+/// (collective; empty on one process).
+pub(super) fn bytes_per_process(
+    session: &SessionGuard,
+    before: [u64; 2],
+) -> Result<[Vec<u64>; 2], StepError> {
+    let size = session.size();
+    if size == 1 {
+        return Ok([Vec::new(), Vec::new()]);
+    }
+    let now = [session.bytes_sent(), session.bytes_gathered()];
+    let mut counts = vec![0.0; 2 * size];
+    for k in 0..2 {
+        counts[k * size + session.rank()] = (now[k] - before[k]) as f64;
+    }
+    session.sum(&mut counts)?;
+    let of = |k: usize| {
+        counts[k * size..(k + 1) * size]
+            .iter()
+            .map(|&b| b as u64)
+            .collect()
+    };
+    Ok([of(0), of(1)])
+}
+
+/// Completes the physical residual `r` after a solve where the step reads it beyond this process's
+/// own block rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they
+/// are zeroed and only the unknowns `read` ([`solve`]'s constrained and contact rows) are summed over
+/// the processes (each from its owner, the others adding zeros: the same bits on every process).
+/// Without shared points every process evaluated every row: nothing to do.
+pub(super) fn complete_read_rows(
+    session: &SessionGuard,
+    shared: bool,
+    (rows, nf): (Range<usize>, usize),
+    read: &[usize],
+    r: &mut [f64],
+) -> Result<(), StepError> {
+    if !shared {
+        return Ok(());
+    }
+    r[..rows.start * nf].fill(0.0);
+    r[rows.end * nf..].fill(0.0);
+    let mut values: Vec<f64> = read.iter().map(|&d| r[d]).collect();
+    session.sum(&mut values)?;
+    for (&d, v) in read.iter().zip(values) {
+        r[d] = v;
+    }
+    Ok(())
+}
+
 impl<const D: usize> Step<'_, D> {
     /// MPM on several processes: the points shared out (at the first step: each process keeps those of
     /// its band; later: the points that left a band migrate), then the ghosts appended.
@@ -131,5 +190,85 @@ impl<const D: usize> Step<'_, D> {
                 n * rank / size..n * (rank + 1) / size
             }
         }
+    }
+
+    /// The unknowns (indices in [`DofMap`] order) this process reads at an evaluation: those of the
+    /// active nodes from the lowest to the highest node in the support of its points (its own and the
+    /// ghosts; all points where they are not shared out) and of its own block rows, a contiguous range
+    /// because the nodes are numbered row by row.
+    pub(super) fn unknowns_window(&self, session: &SessionGuard) -> Range<usize> {
+        let table = &self.work.table;
+        let (lo, hi) = (0..table.len())
+            .flat_map(|p| table.weights(p))
+            .fold((u32::MAX, 0), |(lo, hi), w| {
+                (lo.min(w.node), hi.max(w.node))
+            });
+        let rows = self.own_rows(session);
+        let active = self.work.dofs.active_nodes();
+        let first = active.partition_point(|&a| a < lo).min(rows.start);
+        let last = active.partition_point(|&a| a <= hi).max(rows.end);
+        let nf = self.work.dofs.unknowns_per_node();
+        first * nf..last * nf
+    }
+
+    /// The node rows of the step's nodal sums on every process ([`Partition::windows`]): this process
+    /// touches the rows its own points reach and reads its own node rows and those its own points and
+    /// ghosts reach.
+    pub(super) fn nodal_windows(
+        &self,
+        session: &SessionGuard,
+        part: &Partition,
+    ) -> Result<NodalWindows, StepError> {
+        let table = &self.work.table;
+        let touched = part.rows_reached(table, 0..self.own_point_count());
+        let (reached, own) = (
+            part.rows_reached(table, 0..table.len()),
+            part.own_node_rows(),
+        );
+        let read = match reached.is_empty() {
+            true => own,
+            false => reached.start.min(own.start)..reached.end.max(own.end),
+        };
+        Ok(part.windows(session, touched, read)?)
+    }
+
+    /// With the nodal sums complete on the rows each process reads only: mass, velocity and
+    /// acceleration also on the nodes of the constraint sets `sets` and the devices' contact candidates
+    /// beyond them (their reactions, statuses and impacts are evaluated on every process), from their
+    /// owners (collective; nothing to do where every process holds the whole grid).
+    pub(super) fn complete_beyond_windows(
+        &mut self,
+        session: &SessionGuard,
+        sets: &[Vec<usize>],
+    ) -> Result<(), StepError> {
+        let (Some(part), Some(_)) = (&self.work.partition, &self.work.windows) else {
+            return Ok(());
+        };
+        let nf = self.work.dofs.unknowns_per_node();
+        let mut nodes: Vec<usize> = sets
+            .iter()
+            .flatten()
+            .map(|&d| self.work.dofs.node(d / nf))
+            .chain(self.device_nodes())
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        let (owned, gs) = (part.owned_nodes(), &mut self.work.grid_state);
+        let width = 1 + 2 * D;
+        let mut values = vec![0.0; nodes.len() * width];
+        for (v, &n) in values.chunks_exact_mut(width).zip(&nodes) {
+            if owned.contains(&n) {
+                v[0] = gs.mass[n];
+                v[1..1 + D].copy_from_slice(gs.velocity[n].as_slice());
+                v[1 + D..].copy_from_slice(gs.acceleration[n].as_slice());
+            }
+        }
+        session.sum(&mut values)?;
+        for (v, &n) in values.chunks_exact(width).zip(&nodes) {
+            gs.mass[n] = v[0];
+            gs.velocity[n] = SVector::from_column_slice(&v[1..1 + D]);
+            gs.acceleration[n] = SVector::from_column_slice(&v[1 + D..]);
+        }
+        Ok(())
     }
 }

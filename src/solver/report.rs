@@ -115,6 +115,16 @@ pub struct StepReport {
     /// See [`StepReport::migrated`].
     #[serde(default)]
     pub ghosts: usize,
+    /// MPM on several processes: bytes (B) each process sent in the step through the program's own
+    /// exchanges (points, nodal sums, residual rows, gathers of the unknowns; PETSc's own traffic in its
+    /// solvers is not counted: [`crate::petsc::Session::bytes_sent`]), one per process; empty on one
+    /// process.
+    #[serde(default)]
+    pub bytes_sent: Vec<u64>,
+    /// Of [`StepReport::bytes_sent`], the bytes of the gathers of the unknowns for the residual and
+    /// Jacobian evaluations, one per process.
+    #[serde(default)]
+    pub bytes_unknowns: Vec<u64>,
     /// Kinetic energy of the points at t = 0 (N mm; in 2D per mm thickness):
     /// `dissipated = W + E_0 - K - Psi`.
     #[serde(default)]

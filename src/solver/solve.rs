@@ -173,17 +173,38 @@ fn physical_residual<const D: usize>(
     assembler: &mut Assembler<D>,
     input: &StepInput<'_, D>,
     sys: &LinearSystem,
-    (session, shared): (&SessionGuard, bool),
+    (session, shared, read): (&SessionGuard, bool, &[usize]),
     phys: &mut [f64],
 ) -> Result<Vec<f64>, StepError> {
-    let xs = sys.owned.gather(&sys.x)?;
+    let xs = sys.owned.gather_all(&sys.x)?;
     let local = assembler
         .evaluate(input, &xs)
         .and_then(|()| assembler.residual(input, &xs, phys, true));
     agreed(session, shared, local.map_err(StepError::from))?;
     let nf = input.dofs.unknowns_per_node();
-    complete_rows(session, shared, sys.owned.rows.clone(), nf, phys)?;
+    complete_read_rows(session, shared, (sys.owned.rows.clone(), nf), read, phys)?;
     Ok(xs)
+}
+
+/// The unknowns whose rows of the physical residual every process reads after a solve: the constrained
+/// ones of `sets` (the reactions) and those of the devices' contact nodes (their forces and statuses);
+/// none unless the points are `shared` out.
+fn read_rows<const D: usize>(
+    shared: bool,
+    sets: &[Vec<usize>],
+    contacts: &[ContactSet<D>],
+    nf: usize,
+) -> Vec<usize> {
+    if !shared {
+        return Vec::new();
+    }
+    let devices = contacts.iter().filter_map(ContactSet::device);
+    let nodes = devices.flat_map(|d| d.contact.nodes.iter().map(|c| c.row));
+    sets.iter()
+        .flatten()
+        .copied()
+        .chain(nodes.flat_map(|a| a * nf..(a + 1) * nf))
+        .collect()
 }
 
 impl<const D: usize> Step<'_, D> {
@@ -211,6 +232,7 @@ impl<const D: usize> Step<'_, D> {
             contacts,
             loading,
             path,
+            sets,
             ..
         } = plan;
         let input = Self::step_input(
@@ -226,6 +248,8 @@ impl<const D: usize> Step<'_, D> {
         let in_contact = contacts.iter().any(ContactSet::in_play);
         let mut solves = Solves::default();
         let mut phys = vec![0.0; dofs.len()];
+        let read = read_rows(shared, sets, contacts, nf);
+        let procs = (session, shared, read.as_slice());
         // During the solves each process evaluates the points of its own rows; the physical residual
         // after each solve and the commit evaluate them all.
         let rows = system
@@ -274,7 +298,7 @@ impl<const D: usize> Step<'_, D> {
                 break;
             }
             // Physical residual: the force of the devices on the specimen at the contact nodes.
-            let mut xs = physical_residual(assembler, &input, sys, (session, shared), &mut phys)?;
+            let mut xs = physical_residual(assembler, &input, sys, procs, &mut phys)?;
             match settle(
                 contacts,
                 &mut solves,
@@ -296,7 +320,7 @@ impl<const D: usize> Step<'_, D> {
         // Converged: the physical residual (device forces, reactions) at the solution; the assembler keeps
         // the nodal increments of this evaluation for `finish`.
         let sys = system.as_ref().expect("prepared linear system");
-        physical_residual(assembler, &input, sys, (session, shared), &mut phys)?;
+        physical_residual(assembler, &input, sys, procs, &mut phys)?;
         Ok(Ok(Solved {
             info: solves.info.expect("at least one solve"),
             phys,

@@ -129,14 +129,24 @@ pub(super) struct OwnedRows {
     pub(super) cols: Vec<u32>,
     /// Unknowns per node.
     pub(super) nf: usize,
-    /// More than one process: the gather of all unknowns for every evaluation (built once with the
-    /// vector layout).
+    /// All unknowns of the step (over all processes).
+    pub(super) total: usize,
+    /// More than one process: the gather of all unknowns (built once with the vector layout), for the
+    /// physical residual after a solve.
     pub(super) gather: Option<GatherAll>,
+    /// More than one process: the gather of the unknowns this process reads at an evaluation
+    /// ([`Step::unknowns_window`]), rebuilt when the window moves ([`OwnedRows::set_window`]).
+    pub(super) window: Option<GatherRange>,
 }
 
 impl OwnedRows {
-    /// The block rows `rows` (from [`Step::own_rows`]) with their pattern.
-    pub(super) fn new<const D: usize>(asm: &Assembler<D>, rows: Range<usize>, nf: usize) -> Self {
+    /// The block rows `rows` (from [`Step::own_rows`]) with their pattern, of `total` unknowns.
+    pub(super) fn new<const D: usize>(
+        asm: &Assembler<D>,
+        rows: Range<usize>,
+        nf: usize,
+        total: usize,
+    ) -> Self {
         let (mut row_ptr, mut cols) = (Vec::new(), Vec::new());
         asm.block_rows_pattern(rows.clone(), &mut row_ptr, &mut cols);
         Self {
@@ -144,7 +154,9 @@ impl OwnedRows {
             row_ptr,
             cols,
             nf,
+            total,
             gather: None,
+            window: None,
         }
     }
 
@@ -163,12 +175,46 @@ impl OwnedRows {
         self.rows.start * self.nf..self.rows.end * self.nf
     }
 
-    /// All unknowns of the distributed vector `x`, in [`DofMap`] order, on every process.
+    /// The unknowns of the distributed vector `x` that this process reads at an evaluation, in a vector
+    /// of all unknowns in [`DofMap`] order: those of its window ([`OwnedRows::set_window`]), zeros
+    /// elsewhere; all of them without a window.
     pub(super) fn gather(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
+        match &self.window {
+            Some(w) => {
+                let mut all = vec![0.0; self.total];
+                w.gather_into(x, &mut all)?;
+                Ok(all)
+            }
+            None => self.gather_all(x),
+        }
+    }
+
+    /// All unknowns of the distributed vector `x`, in [`DofMap`] order, on every process.
+    pub(super) fn gather_all(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
         match &self.gather {
             Some(g) => g.gather(x),
             None => x.read(|v| v.to_vec()),
         }
+    }
+
+    /// On more than one process: the gather of the unknowns `window` (indices in [`DofMap`] order,
+    /// from [`Step::unknowns_window`]) for the evaluations of the step, built anew if any process's
+    /// window moved (collective).
+    pub(super) fn set_window(
+        &mut self,
+        session: &SessionGuard,
+        x: &Vector,
+        window: Range<usize>,
+    ) -> Result<(), petsc::PetscError> {
+        if session.size() == 1 {
+            return Ok(());
+        }
+        let same = self.window.as_ref().is_some_and(|w| w.range() == window);
+        if session.any(!same) {
+            self.window = None; // free the old scatter first
+            self.window = Some(GatherRange::new(session, x, window)?);
+        }
+        Ok(())
     }
 
     /// Writes this process's part of `all` (every unknown) into the distributed `x`.
@@ -234,7 +280,7 @@ impl LinearSystem {
         rows: Range<usize>,
     ) -> Result<Self, StepError> {
         let nf = dofs.unknowns_per_node();
-        let mut owned = OwnedRows::new(asm, rows, nf);
+        let mut owned = OwnedRows::new(asm, rows, nf, dofs.len());
         let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
         session.sum(&mut nonzeros)?;
         let n = owned.scalars().len();

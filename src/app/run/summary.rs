@@ -54,6 +54,34 @@ fn summary_steps(rows: &[StepReport], note: Option<&str>) {
             per_step(ghosts)
         );
     }
+    summary_bytes(rows);
+}
+
+/// The summary's row on the bytes the processes sent (runs on several processes): per process and step,
+/// the mean over the steps, and of them the gathers of the unknowns.
+fn summary_bytes(rows: &[StepReport]) {
+    let size = rows.iter().map(|r| r.bytes_sent.len()).max().unwrap_or(0);
+    if size == 0 {
+        return;
+    }
+    let mean = |of: fn(&StepReport) -> &[u64], p: usize| {
+        let total: u64 = rows.iter().filter_map(|r| of(r).get(p)).sum();
+        total as f64 / rows.len() as f64 / 1e3
+    };
+    let per: Vec<String> = (0..size)
+        .map(|p| {
+            format!(
+                "{:.1} ({:.1})",
+                mean(|r| &r.bytes_sent, p),
+                mean(|r| &r.bytes_unknowns, p)
+            )
+        })
+        .collect();
+    println!(
+        "| bytes sent per process and step | {} kB (in brackets: of them the gathers of the unknowns; \
+         the program's own exchanges, not PETSc's solver traffic) |",
+        per.join(", ")
+    );
 }
 
 /// The summary's rows on the costs: wall times (`wall` this process's) and peak memory.
