@@ -344,6 +344,7 @@ impl Seeded {
     /// bodies' points, the node boxes, the loads and the time integration.
     fn setup(self, cfg: &RunConfig, body_bounds: Bounds) -> Result<Setup, ScenarioError> {
         let frame = Frame::from_degrees(cfg.grid.rotation);
+        warn_far_rigid_body(cfg, body_bounds, &self.rigid_points);
         let grid = covering_grid(cfg, body_bounds, &self.rigid_points)?;
         let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
         let t = &cfg.time;
@@ -751,19 +752,13 @@ impl Seeder {
     }
 }
 
-/// The grid that covers the points of the bodies (within `(blo, bhi)`, mm: the plane ones and, in the
-/// plane, those of space) and of the rigid bodies with `grid.margin_cells` (at least one) empty cells
-/// around them.
-fn covering_grid(
-    cfg: &RunConfig,
-    (blo, bhi): Bounds,
-    rigid_points: &[Particles],
-) -> Result<Grid, ScenarioError> {
+/// Warns when a rigid body far from the bodies (within `(blo, bhi)`, mm) makes the covering grid more than
+/// 16 times the cells the bodies alone need (the unknowns and the memory grow with it). Called once per
+/// set-up, by [`Seeded::setup`], whatever grids were built before it (the bands are cut on the same grid).
+fn warn_far_rigid_body(cfg: &RunConfig, (blo, bhi): Bounds, rigid_points: &[Particles]) {
     let (rlo, rhi) = bounds(rigid_points.iter().flat_map(|r| r.x.iter().copied()));
     let (lo, hi) = (blo.inf(&rlo), bhi.sup(&rhi));
     let (h, margin) = (cfg.grid.cell_size, cfg.grid.margin_cells.max(1));
-    // A rigid body far from the bodies makes the grid cover the space between: say so when it grows the
-    // grid more than 16-fold (the unknowns and the memory grow with it).
     let cells = |lo: Vector2<f64>, hi: Vector2<f64>| {
         ((hi - lo) / h).map(|e| e.ceil().max(1.0) as usize + 2 * margin)
     };
@@ -778,6 +773,19 @@ fn covering_grid(
             own.y
         );
     }
+}
+
+/// The grid that covers the points of the bodies (within `(blo, bhi)`, mm: the plane ones and, in the
+/// plane, those of space) and of the rigid bodies with `grid.margin_cells` (at least one) empty cells
+/// around them.
+fn covering_grid(
+    cfg: &RunConfig,
+    (blo, bhi): Bounds,
+    rigid_points: &[Particles],
+) -> Result<Grid, ScenarioError> {
+    let (rlo, rhi) = bounds(rigid_points.iter().flat_map(|r| r.x.iter().copied()));
+    let (lo, hi) = (blo.inf(&rlo), bhi.sup(&rhi));
+    let (h, margin) = (cfg.grid.cell_size, cfg.grid.margin_cells.max(1));
     Grid::covering(lo, hi, h, margin).map_err(|e| {
         // The margin or the cell size, whichever makes the most of the grid's cells.
         let body_cells = ((hi - lo) / h).max();

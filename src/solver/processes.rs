@@ -53,10 +53,15 @@ pub(super) fn complete_rows(
     if !shared {
         return Ok(());
     }
-    r[..rows.start * nf].fill(0.0);
-    r[rows.end * nf..].fill(0.0);
+    zero_foreign_rows(rows, nf, r);
     session.sum(r)?;
     Ok(())
+}
+
+/// Zeroes the partial rows of `r` outside this process's own block rows `rows` (`nf` unknowns per row).
+fn zero_foreign_rows(rows: Range<usize>, nf: usize, r: &mut [f64]) {
+    r[..rows.start * nf].fill(0.0);
+    r[rows.end * nf..].fill(0.0);
 }
 
 /// The largest of `value` over the processes (collective).
@@ -108,8 +113,7 @@ pub(super) fn complete_read_rows(
     if !shared {
         return Ok(());
     }
-    r[..rows.start * nf].fill(0.0);
-    r[rows.end * nf..].fill(0.0);
+    zero_foreign_rows(rows, nf, r);
     let mut values: Vec<f64> = read.iter().map(|&d| r[d]).collect();
     session.sum(&mut values)?;
     for (&d, v) in read.iter().zip(values) {
