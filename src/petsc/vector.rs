@@ -94,6 +94,12 @@ impl Vector {
         Ok(r)
     }
 
+    /// Copies the entries of `x` into `self` (same layout).
+    pub fn copy_from(&mut self, x: &Vector) -> Result<()> {
+        // SAFETY: both valid, same layout (checked by PETSc).
+        check(unsafe { sys::VecCopy(x.raw, self.raw) }, "VecCopy")
+    }
+
     /// `self += alpha * x`.
     pub fn axpy(&mut self, alpha: f64, x: &Vector) -> Result<()> {
         // SAFETY: both valid, same layout (checked by PETSc).

@@ -283,11 +283,9 @@ impl Bordering {
     /// `dk(t) = (g - t c.a) / (c.b)` ([`Search`]), so that the constraint holds exactly for every `t`;
     /// the full step is `x0 + a + dk b` as the plain bordered Newton takes it. Returns `dk(t)`.
     fn place(&mut self, x: &mut Vector, s: &Search, t: f64) -> Result<f64, PetscError> {
-        x.set_all(0.0)?;
-        x.axpy(1.0, &self.x0)?;
+        x.copy_from(&self.x0)?;
         if t == 1.0 {
-            self.rhs.set_all(0.0)?;
-            self.rhs.axpy(1.0, &self.a)?;
+            self.rhs.copy_from(&self.a)?;
             self.rhs.axpy(s.dk, &self.b)?;
             x.axpy(1.0, &self.rhs)?;
             return Ok(s.dk);
@@ -314,8 +312,7 @@ impl Bordering {
         (path, s, norm0): (&mut PathStep, &Search, f64),
         domain: &mut Vec<String>,
     ) -> Result<Result<f64, Outcome>, PetscError> {
-        self.x0.set_all(0.0)?;
-        self.x0.axpy(1.0, x)?;
+        self.x0.copy_from(x)?;
         let phi0 = norm0 * norm0;
         let (mut t, mut best) = (1.0f64, None::<(f64, f64)>);
         loop {
@@ -354,8 +351,7 @@ impl Bordering {
                 }))
             }
             _ => {
-                x.set_all(0.0)?;
-                x.axpy(1.0, &self.x0)?;
+                x.copy_from(&self.x0)?;
                 let tried_domain = best.is_none() && !domain.is_empty();
                 Ok(Err(if tried_domain { DOMAIN } else { LINE_SEARCH }))
             }
@@ -424,15 +420,15 @@ fn bordered_newton<const D: usize>(
         x0: x.duplicate()?,
     };
     let mut guess = x.duplicate()?;
-    guess.axpy(1.0, x)?;
+    guess.copy_from(x)?;
     let ratio = path.ratio;
     let plain = iterate(snes, problem, (x, jac), (path, &mut v), false)?;
-    let rescuable = matches!(plain.reason, -5 | -1) && plain.iterations > 0;
+    // DIVERGED_MAX_IT or DIVERGED_FUNCTION_DOMAIN after at least one iteration.
+    let rescuable = (plain.reason == -5 || plain.reason == DOMAIN.0) && plain.iterations > 0;
     if !rescuable {
         return Ok(plain);
     }
-    x.set_all(0.0)?;
-    x.axpy(1.0, &guess)?;
+    x.copy_from(&guess)?;
     path.ratio = ratio;
     let mut searched = iterate(snes, problem, (x, jac), (path, &mut v), true)?;
     searched.iterations += plain.iterations;
