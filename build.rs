@@ -65,6 +65,7 @@ fn main() {
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix)",
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType)",
+        "PCMG(SetLevels|GetLevels|SetGalerkin|SetInterpolation)|MatSetBlockSizes",
         "SNES(Create|Destroy|SetFunction|SetJacobian|SetFromOptions|SetOptionsPrefix|Solve|GetIterationNumber)",
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",

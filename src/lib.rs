@@ -38,6 +38,7 @@ pub mod input;
 pub mod io;
 pub mod material;
 pub mod model;
+pub mod multigrid;
 pub mod particles;
 pub mod partition;
 pub mod petsc;

@@ -28,8 +28,8 @@ pub enum StepClass {
         /// The ratio `r`.
         ratio: f64,
     },
-    /// Dynamic, `r < 0.01`: GMRES with algebraic multigrid (displacements only) or a field split of
-    /// (u, eta_bar) with multigrid on u (gradient-enhanced models).
+    /// Dynamic, `r < 0.01`: GMRES with the geometric multigrid of the background grid (displacements
+    /// only) or a field split of (u, eta_bar) with algebraic multigrid on u (gradient-enhanced models).
     StiffnessDominated {
         /// The ratio `r`.
         ratio: f64,
@@ -59,13 +59,18 @@ const INERTIA: &str = "-ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
 const INERTIA_3D: &str = "-snes_lag_preconditioner 2 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
      -pc_type asm -pc_asm_overlap 1 -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
 
-/// GMRES with hypre's BoomerAMG (strength threshold 0.5 and one level of aggressive coarsening, the
-/// usual settings for 2D elasticity: about 11 iterations per Newton iteration, flat from 41k to 164k
-/// points on the cantilever benchmark), its hierarchy rebuilt at the first Newton iteration of a step and
-/// every third one (`-snes_lag_preconditioner 3`): the AMG set-up costs as much as several iterations here.
-const STIFFNESS_AMG: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 500 \
-     -pc_type hypre -pc_hypre_type boomeramg -pc_hypre_boomeramg_strong_threshold 0.5 \
-     -pc_hypre_boomeramg_agg_nl 1";
+/// GMRES with the geometric multigrid on the background grid (`src/multigrid.rs`: levels by coarsening
+/// the grid by 2 until a level has at most 2000 unknowns, Galerkin coarse operators, one symmetric SOR
+/// sweep before and after the coarse correction, LU on the coarsest level), the hierarchy's operators
+/// formed anew at the first Newton iteration of a step and every third one, and inexact Newton
+/// (Eisenstat-Walker forcing: GMRES is stopped early where Newton is still far from the solution). On the
+/// elastic cantilever it keeps about 6 Krylov iterations per Newton iteration from 10,240 to 163,840
+/// points where BoomerAMG (strength threshold 0.5, aggressive coarsening: the former default, one option
+/// set away, `docs/solvers.md`) needs 14-16, and the whole run is 0.83x BoomerAMG's time at 40,960 points
+/// (`docs/benchmarks.md`, "Geometric multigrid").
+const STIFFNESS_MG: &str = "-snes_lag_preconditioner 3 -snes_ksp_ew -ksp_type gmres -ksp_rtol 1e-6 \
+     -ksp_max_it 500 -pc_type mg -mg_levels_ksp_type richardson -mg_levels_ksp_max_it 1 \
+     -mg_levels_pc_type sor";
 
 /// GMRES preconditioned block by block (a multiplicative field split of the interleaved unknowns): the
 /// displacements by hypre's BoomerAMG (HMIS coarsening, extended+i interpolation, at most 4 weights per
@@ -149,7 +154,7 @@ pub fn main_options<const D: usize>(class: StepClass, gradient: bool) -> String 
         StepClass::InertiaDominated { .. } if D == 3 => INERTIA_3D,
         StepClass::InertiaDominated { .. } => INERTIA,
         StepClass::StiffnessDominated { .. } if gradient => STIFFNESS_FIELD_SPLIT,
-        StepClass::StiffnessDominated { .. } => STIFFNESS_AMG,
+        StepClass::StiffnessDominated { .. } => STIFFNESS_MG,
         StepClass::QuasiStatic => QUASI_STATIC,
     };
     format!("{NEWTON} {solver}")
@@ -210,7 +215,9 @@ pub fn describe<const D: usize>(class: StepClass, gradient: bool) -> String {
         StepClass::StiffnessDominated { .. } if gradient => {
             "GMRES + field split (BoomerAMG on the displacements, ILU(0) on eta_bar)"
         }
-        StepClass::StiffnessDominated { .. } => "GMRES + BoomerAMG",
+        StepClass::StiffnessDominated { .. } => {
+            "GMRES + geometric multigrid on the background grid, inexact Newton"
+        }
         StepClass::QuasiStatic => "MUMPS LU",
     };
     match class {
@@ -266,8 +273,11 @@ mod tests {
                 && plate.contains("-snes_lag_preconditioner 2"),
             "{plate}"
         );
-        let amg = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, false);
-        assert!(amg.contains("-pc_type hypre"), "{amg}");
+        let mg = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, false);
+        assert!(
+            mg.contains("-pc_type mg") && mg.contains("-snes_ksp_ew"),
+            "{mg}"
+        );
         // The coupled system: the solver's named splits, displacements by AMG, eta_bar by ILU.
         let split = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, true);
         for o in [

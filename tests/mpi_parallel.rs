@@ -518,3 +518,37 @@ fn nodal_sums_do_not_grow_with_the_grid() {
          of nodal sums travel"
     );
 }
+
+/// The geometric multigrid (`-pc_type mg`) on the coupled (u, eta_bar) system of the CT demo on 1 and 2
+/// processes (each process holds its own rows of every level's interpolation, the coarse nodes in the
+/// bands of its fine nodes) and on the 3D plate: the histories of the default solver within the solvers'
+/// tolerance.
+#[test]
+fn multigrid_on_the_coupled_system_in_2d_and_3d_and_on_two_processes_matches_the_default() {
+    let base = std::env::temp_dir().join(format!("mpmc-mpi-mg-{}", std::process::id()));
+    let mg = ["--set", "run.petsc_options=\"-pc_type mg\""];
+    let cases = [
+        ("configs/ct-demo.toml", 4, "loading_plate_fy", 2),
+        ("configs/ct-3d-demo.toml", 2, "loading_plate_fy", 1),
+    ];
+    for (k, (config, steps, column, ranks)) in cases.into_iter().enumerate() {
+        let reference = base.join(format!("default{k}"));
+        run(config, 1, steps, &reference, &[]);
+        let reference = history(&reference);
+        for p in 1..=ranks {
+            let dir = base.join(format!("mg{k}-{p}"));
+            run(config, p, steps, &dir, &mg);
+            let h = history(&dir);
+            for name in [column, "kinetic_energy", "stored_energy"] {
+                let (a, b) = (&reference[name], &h[name]);
+                assert!(a.iter().any(|v| *v != 0.0), "{name} must not vanish");
+                let d = rel_l2(a, b);
+                assert!(
+                    d <= 1e-6,
+                    "{config} with MG on {p} processes: {name} off by {d:e}"
+                );
+            }
+        }
+    }
+    std::fs::remove_dir_all(&base).ok();
+}

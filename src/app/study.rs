@@ -62,6 +62,11 @@ pub fn default_sets() -> Vec<OptionSet> {
         ),
         set("gmres-gamg", "-ksp_type gmres -ksp_rtol 1e-6 -pc_type gamg"),
         set(
+            "gmres-mg",
+            "-ksp_type gmres -ksp_rtol 1e-6 -pc_type mg -mg_levels_ksp_type richardson \
+             -mg_levels_ksp_max_it 1 -mg_levels_pc_type sor",
+        ),
+        set(
             "fieldsplit",
             "-ksp_type gmres -ksp_rtol 1e-6 -pc_type fieldsplit -pc_fieldsplit_type multiplicative \
              -fieldsplit_u_pc_type bjacobi -fieldsplit_u_sub_pc_type ilu -fieldsplit_eta_bar_pc_type bjacobi \

@@ -66,6 +66,47 @@ impl Matrix {
         Ok(m)
     }
 
+    /// A rectangular AIJ matrix of `local_rows` x `local_cols` on this process (row and column block size
+    /// `block_size`) with the entries `(rows[k], cols[k], values[k])` in global indices (repeats summed),
+    /// assembled: the interpolation between two levels of a multigrid. Its type is not taken from
+    /// `-mat_type`, which is meant for the Jacobian.
+    pub fn rectangular(
+        _s: &SessionGuard,
+        (local_rows, local_cols): (usize, usize),
+        block_size: usize,
+        rows: &[PetscInt],
+        cols: &[PetscInt],
+        values: &[f64],
+    ) -> Result<Self> {
+        let m = to_petsc_int(local_rows, "MatSetSizes")?;
+        let n = to_petsc_int(local_cols, "MatSetSizes")?;
+        let bs = to_petsc_int(block_size, "MatSetBlockSizes")?;
+        let decide = unsafe { sys::mpmc_petsc_decide() };
+        let raw = create(sys::MatCreate, "MatCreate")?;
+        let mut mat = Self {
+            raw,
+            owned: true,
+            coo_len: None,
+        };
+        // SAFETY: valid matrix; sizes and block sizes checked by PETSc.
+        check(
+            unsafe { sys::MatSetSizes(mat.raw, m, n, decide, decide) },
+            "MatSetSizes",
+        )?;
+        let t = super::cstring("aij")?;
+        check(
+            unsafe { sys::MatSetType(mat.raw, t.as_ptr()) },
+            "MatSetType",
+        )?;
+        check(
+            unsafe { sys::MatSetBlockSizes(mat.raw, bs, bs) },
+            "MatSetBlockSizes",
+        )?;
+        mat.set_pattern_coo(rows, cols)?;
+        mat.set_values_coo(values)?;
+        Ok(mat)
+    }
+
     /// Wraps a matrix PETSc owns (callbacks) without taking ownership.
     ///
     /// # Safety

@@ -7,6 +7,7 @@
 
 use super::{
     IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, Vector, check, create, cstring, sys,
+    to_petsc_int,
 };
 use std::ffi::{CStr, c_char, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -197,6 +198,46 @@ impl Snes {
             check(
                 unsafe { sys::PCFieldSplitSetIS(pc, c.as_ptr(), is.raw) },
                 "PCFieldSplitSetIS",
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The preconditioner's type as set so far (from the options database), e.g. `"mg"`, or `None`.
+    pub fn pc_type(&self) -> Result<Option<String>> {
+        let mut t: *const c_char = std::ptr::null();
+        // SAFETY: PETSc returns a pointer to its own type-name string (or null if unset).
+        check(unsafe { sys::PCGetType(self.pc()?, &mut t) }, "PCGetType")?;
+        Ok((!t.is_null()).then(|| {
+            // SAFETY: non-null NUL-terminated string owned by PETSc.
+            unsafe { CStr::from_ptr(t) }.to_string_lossy().into_owned()
+        }))
+    }
+
+    /// Makes the preconditioner (of type `mg`) a multigrid over `interpolations.len() + 1` levels:
+    /// `interpolations[l]` maps level `l + 1` to level `l`, level 0 being the Jacobian's (PETSc counts
+    /// the other way, the finest level last). The coarse operators are Galerkin products `P^T A P`
+    /// (MatPtAP), formed at every set-up of the preconditioner from the Jacobian. The smoothers and the
+    /// coarse solve keep PETSc's defaults and read `-mg_levels_*` and `-mg_coarse_*` (with the SNES
+    /// prefix) when the preconditioner is set up.
+    pub fn set_multigrid(&mut self, interpolations: &[Matrix]) -> Result<()> {
+        let pc = self.pc()?;
+        let levels = to_petsc_int(interpolations.len() + 1, "PCMGSetLevels")?;
+        // SAFETY: valid PC of type mg; no communicators given (all levels on the PC's).
+        check(
+            unsafe { sys::PCMGSetLevels(pc, levels, std::ptr::null_mut()) },
+            "PCMGSetLevels",
+        )?;
+        check(
+            unsafe { sys::PCMGSetGalerkin(pc, sys::PCMGGalerkinType_PC_MG_GALERKIN_BOTH) },
+            "PCMGSetGalerkin",
+        )?;
+        for (l, p) in interpolations.iter().enumerate() {
+            let level = levels - 1 - l as sys::PetscInt;
+            // SAFETY: valid PC and matrix; PETSc takes its own reference.
+            check(
+                unsafe { sys::PCMGSetInterpolation(pc, level, p.raw) },
+                "PCMGSetInterpolation",
             )?;
         }
         Ok(())

@@ -3,6 +3,7 @@
 //! to SNES and the rigid-body modes for algebraic multigrid.
 
 use super::*;
+use crate::multigrid::Hierarchy;
 
 /// The nonlinear problem of one step, handed to SNES.
 pub(super) struct StepProblem<'a, 'b, const D: usize> {
@@ -244,6 +245,9 @@ pub(super) struct LinearSystem {
     pub(super) lag: PetscInt,
     /// Nonzero entries of the whole Jacobian (over all processes).
     pub(super) nonzeros: usize,
+    /// With the geometric multigrid (`-pc_type mg`): the constrained unknowns its interpolation was
+    /// built for.
+    pub(super) multigrid: Option<Vec<bool>>,
 }
 
 impl LinearSystem {
@@ -257,6 +261,13 @@ impl LinearSystem {
         asm: &Assembler<D>,
     ) -> bool {
         if self.prefix.as_deref() != prefix || self.active != dofs.active_nodes() {
+            return false;
+        }
+        if self.multigrid.as_ref().is_some_and(|c| {
+            c.iter()
+                .enumerate()
+                .any(|(i, &c)| c != dofs.is_constrained(i))
+        }) {
             return false;
         }
         let (p, rows) = (asm.block_pattern(), self.owned.rows.clone());
@@ -329,6 +340,14 @@ impl LinearSystem {
             let is_eb = IndexSet::new(session, &eb)?;
             snes.set_fieldsplit(&[("u", &is_u), ("eta_bar", &is_eb)])?;
         }
+        let multigrid = if snes.pc_type()?.as_deref() == Some("mg") {
+            let levels = mg_levels(session, prefix)?;
+            let hierarchy = Hierarchy::build(grid, dofs, levels);
+            snes.set_multigrid(&interpolations(session, &hierarchy, owned.rows.clone())?)?;
+            Some(constrained(dofs))
+        } else {
+            None
+        };
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
@@ -341,8 +360,70 @@ impl LinearSystem {
             tolerances,
             lag,
             nonzeros: nonzeros[0] as usize,
+            multigrid,
         })
     }
+}
+
+/// The number of multigrid levels the options database asks for (`-pc_mg_levels` with the SNES prefix),
+/// or `None` for as many as [`Hierarchy::build`] makes.
+fn mg_levels(session: &SessionGuard, prefix: Option<&str>) -> Result<Option<usize>, StepError> {
+    let name = format!("{}pc_mg_levels", prefix.unwrap_or(""));
+    match petsc::option_string(session, &name)? {
+        None => Ok(None),
+        Some(v) => match v.parse::<usize>() {
+            Ok(n) if n >= 1 => Ok(Some(n)),
+            _ => Err(StepError::Setup(format!(
+                "-{name} {v}: the number of multigrid levels must be a whole number of at least 1"
+            ))),
+        },
+    }
+}
+
+/// Which unknowns are constrained (the multigrid's interpolation depends on them).
+fn constrained(dofs: &DofMap) -> Vec<bool> {
+    (0..dofs.len()).map(|i| dofs.is_constrained(i)).collect()
+}
+
+/// The interpolations of `hierarchy` as PETSc matrices, each process holding the rows of its own
+/// unknowns on the finer level (level 0: the block rows `rows`) and owning the columns of its coarse
+/// nodes ([`Hierarchy::owned_starts`]).
+fn interpolations<const D: usize>(
+    session: &SessionGuard,
+    hierarchy: &Hierarchy<D>,
+    rows: Range<usize>,
+) -> Result<Vec<Matrix>, StepError> {
+    let (rank, size) = (session.rank(), session.size());
+    let mut firsts = vec![0.0; size];
+    firsts[rank] = rows.start as f64;
+    session.sum(&mut firsts)?;
+    let mut starts: Vec<usize> = firsts.iter().map(|&f| f as usize).collect();
+    starts.push(hierarchy.levels[0].active.len());
+    let owned = hierarchy.owned_starts(&starts);
+    let nf = hierarchy.unknowns_per_node;
+    let mut mats = Vec::with_capacity(hierarchy.interpolations.len());
+    for (l, p) in hierarchy.interpolations.iter().enumerate() {
+        let (fine, coarse) = (&owned[l], &owned[l + 1]);
+        let own = fine[rank] * nf..fine[rank + 1] * nf;
+        let (mut i, mut j, mut w) = (Vec::new(), Vec::new(), Vec::new());
+        for r in own.clone() {
+            for (c, v) in p.row(r) {
+                i.push(r as PetscInt);
+                j.push(c as PetscInt);
+                w.push(v);
+            }
+        }
+        let local_cols = (coarse[rank + 1] - coarse[rank]) * nf;
+        mats.push(Matrix::rectangular(
+            session,
+            (own.len(), local_cols),
+            nf,
+            &i,
+            &j,
+            &w,
+        )?);
+    }
+    Ok(mats)
 }
 
 /// Rigid-body mode `k` of the displacement at `x` (mm): the translations along the axes (`k < D`), then
