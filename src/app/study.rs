@@ -88,7 +88,7 @@ const SET_PROGRAM_OPTIONS: &str = "--set KEY=VALUE, --steps N, --allow-large";
 /// and the values of common PETSc options are checked ([`crate::preflight::check_petsc_options`]); the
 /// overrides are checked against a configuration by [`check_sets`].
 pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let text = crate::input::read_text_input(path).map_err(|e| e.to_string())?;
     let mut sets: Vec<OptionSet> = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let at = format!("{}:{}", path.display(), i + 1);
@@ -301,7 +301,7 @@ pub fn run_one(
 
 /// The last state of a run's `crack.json`; `None` without one (no CT) or if it cannot be read.
 fn last_crack_state(path: &Path) -> Option<CrackState> {
-    let text = std::fs::read_to_string(path).ok()?;
+    let text = crate::input::read_text_input(path).ok()?;
     let mut json: serde_json::Value = serde_json::from_str(&text).ok()?;
     let states: Vec<CrackState> = serde_json::from_value(json["states"].take()).ok()?;
     states.into_iter().last()
@@ -360,7 +360,7 @@ fn read_result(
         crack: None,
         peak_reaction: None,
     };
-    let text = std::fs::read_to_string(csv).unwrap_or_default();
+    let text = crate::input::read_text_input(csv).unwrap_or_default();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header: Vec<&str> = lines
         .next()
