@@ -117,6 +117,8 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
         }
         let mut set = parse_set_line(rest).map_err(|e| format!("{at}: set `{name}`: {e}"))?;
         crate::preflight::check_petsc_options(&set.options).map_err(|e| format!("{at}: {e}"))?;
+        crate::preflight::check_options_files(set.options.split_whitespace())
+            .map_err(|e| format!("{at}: {e}"))?;
         set.name = name.into();
         set.line = i + 1;
         sets.push(set);
