@@ -49,7 +49,9 @@ enum Command {
         /// Output directory (default runs/study-<config name>).
         #[arg(long)]
         output: Option<PathBuf>,
-        /// Replace the results of an earlier study in the output directory.
+        /// Replace an earlier study in the output directory: its report and the runs in the sets'
+        /// directories (each identified as a run of this program by its run.json; a directory holding
+        /// other files is refused, never cleared). Without it a set directory holding a run is refused.
         #[arg(long)]
         overwrite: bool,
     },
