@@ -20,6 +20,9 @@ const LIMIT: Duration = Duration::from_secs(20);
 /// The limit as the errors state it.
 const STATED: &str = "an input must be a regular file of at most 64 MiB (67108864 bytes)";
 
+/// A refusal: the arguments, the environment, what the error line names.
+type Case<'a> = (Vec<&'a str>, Vec<(&'a str, &'a str)>, Vec<&'a str>);
+
 /// Makes the FIFO `path`.
 fn mkfifo(path: &Path) {
     let made = Command::new("mkfifo").arg(path).status();
@@ -41,8 +44,7 @@ fn configurations_sets_and_options_files_that_are_no_regular_files_are_refused_a
         .expect("a sparse file");
     let fifo = "fifo: is a FIFO (named pipe), not a regular file";
     let zero = "/dev/zero: is a character device, not a regular file";
-    // (arguments, environment, what the line names)
-    let cases: Vec<(Vec<&str>, Vec<(&str, &str)>, Vec<&str>)> = vec![
+    let cases: Vec<Case> = vec![
         (
             vec!["run", "fifo", "--output", "out"],
             vec![],
