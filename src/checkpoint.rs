@@ -180,23 +180,19 @@ impl Header {
 fn open(dir: &Path) -> Result<(hdf5_metno::File, Header, PathBuf), CheckpointError> {
     let path = dir.join(FILE);
     let shown = path.display().to_string();
-    match std::fs::metadata(&path) {
-        Ok(m) if m.is_file() => {}
-        Ok(m) => {
-            let kind = if m.is_dir() {
-                "a directory"
-            } else {
-                "not a regular file"
-            };
+    match crate::input::check_input_file(&path, crate::input::DATA_INPUT_MAX) {
+        Ok(_) => {}
+        Err(e) if e.is_missing() => return Err(CheckpointError::Missing { path: shown }),
+        Err(e) => {
             return Err(CheckpointError::Unusable {
                 path: shown,
                 detail: format!(
-                    "is {kind}, not a checkpoint file (a run writes checkpoint.h5 as a file): remove it, \
-                     or start the run without --resume"
+                    "{}; a run writes checkpoint.h5 as a file: remove it, or start the run without \
+                     --resume",
+                    e.reason()
                 ),
             });
         }
-        Err(_) => return Err(CheckpointError::Missing { path: shown }),
     }
     let corrupt = |detail: String| CheckpointError::Corrupt {
         path: shown.clone(),

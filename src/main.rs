@@ -12,9 +12,10 @@ use clap::{CommandFactory, Parser, Subcommand};
 use mpm_concrete::app::args::{launcher_rank, misplaced_program_option, split_args};
 use mpm_concrete::app::run::{self, RunFlags};
 use mpm_concrete::app::{
-    BadInput, FailedElsewhere, commands, compare, error_line, fit_material, material_driver,
+    BadInput, FailedElsewhere, bad, commands, compare, error_line, fit_material, material_driver,
     no_petsc_options, smoke,
 };
+use mpm_concrete::preflight;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -48,7 +49,9 @@ enum Command {
         /// Output directory (default runs/study-<config name>).
         #[arg(long)]
         output: Option<PathBuf>,
-        /// Replace the results of an earlier study in the output directory.
+        /// Replace an earlier study in the output directory: its report and the runs in the sets'
+        /// directories (each identified as a run of this program by its run.json; a directory holding
+        /// other files is refused, never cleared). Without it a set directory holding a run is refused.
         #[arg(long)]
         overwrite: bool,
     },
@@ -190,17 +193,20 @@ fn usage_error(e: clap::Error, own: &[String]) -> std::process::ExitCode {
 /// Runs the command `cli` names; `own_args` are the program's arguments, `petsc_args` PETSc's (starting with
 /// the program name).
 fn run(cli: Cli, own_args: &[String], petsc_args: &[String]) -> Result<()> {
+    // PETSc reads the options files of its arguments and of PETSC_OPTIONS when it starts: each is checked
+    // first (a FIFO would block PETSc's start, /dev/zero exhaust the memory).
+    preflight::check_options_files(petsc_args[1..].iter().map(String::as_str))
+        .map_err(|e| bad(format!("command line: {e}")))?;
+    if let Ok(env) = std::env::var("PETSC_OPTIONS") {
+        preflight::check_options_files(env.split_whitespace())
+            .map_err(|e| bad(format!("environment variable PETSC_OPTIONS: {e}")))?;
+    }
     match cli.command {
         Command::Crack { run_dir } => commands::crack(&run_dir, petsc_args),
         Command::MaterialDriver(args) => {
             no_petsc_options("material-driver", "", petsc_args)?;
-            let summary = material_driver::run_driver(&args).map_err(|e| {
-                if e.is_bad_input() {
-                    mpm_concrete::app::bad(e)
-                } else {
-                    e.into()
-                }
-            })?;
+            let summary = material_driver::run_driver(&args)
+                .map_err(|e| if e.is_bad_input() { bad(e) } else { e.into() })?;
             println!("{summary}");
             Ok(())
         }

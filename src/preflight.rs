@@ -5,6 +5,7 @@
 use crate::input::BadValue;
 use crate::scenario::{Plan, ScenarioError};
 use nalgebra::Vector2;
+use std::path::Path;
 
 /// What the value of a checked PETSc option must be.
 #[derive(Debug, Clone, Copy)]
@@ -141,6 +142,31 @@ pub fn check_petsc_options(options: &str) -> Result<(), OptionError> {
         if !ok {
             return Err(refused(Some(value)));
         }
+    }
+    Ok(())
+}
+
+/// The PETSc options whose value is a file PETSc reads at its start (`PetscInitialize`).
+const OPTIONS_FILES: [&str; 2] = ["-options_file", "-options_file_yaml"];
+
+/// Checks the files that `-options_file` and `-options_file_yaml` name among the PETSc options `options`
+/// (the command line's PETSc arguments, `PETSC_OPTIONS` or a study set's options) before PETSc reads
+/// them: each must be a regular file of at most [`crate::input::TEXT_INPUT_MAX`] bytes
+/// ([`crate::input::check_input_file`]), so that a FIFO cannot block PETSc's start and `/dev/zero` or a
+/// huge file cannot exhaust the memory. The error names the option, the file and the limit.
+pub fn check_options_files<'a>(options: impl IntoIterator<Item = &'a str>) -> Result<(), String> {
+    let mut tokens = options.into_iter();
+    while let Some(token) = tokens.next() {
+        if !OPTIONS_FILES.contains(&token) {
+            continue;
+        }
+        let Some(file) = tokens.next().filter(|f| !f.starts_with('-')) else {
+            return Err(format!(
+                "PETSc option {token} needs a value: the options file to read"
+            ));
+        };
+        crate::input::check_input_file(Path::new(file), crate::input::TEXT_INPUT_MAX)
+            .map_err(|e| format!("PETSc option {token} {e}"))?;
     }
     Ok(())
 }

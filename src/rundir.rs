@@ -5,6 +5,7 @@
 //! advisory lock ([`lock`], `flock` on the directory) for its life, so a second run into the same
 //! directory is refused while the first is running, also with `--overwrite` or `--resume`.
 
+use crate::input::InputProblem;
 use crate::io::{OutputError, write_atomic};
 use crate::schema::file;
 use std::collections::BTreeMap;
@@ -119,7 +120,7 @@ pub fn lock(dir: &Path) -> Result<DirLock, String> {
 
 /// The run that holds `dir`, as its run.json says.
 fn holder_of(dir: &Path) -> String {
-    let record: Option<RunRecord> = std::fs::read_to_string(dir.join(RUN_FILE))
+    let record: Option<RunRecord> = crate::input::read_text_input(&dir.join(RUN_FILE))
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok());
     match record {
@@ -167,9 +168,20 @@ pub fn inspect(dir: &Path) -> Result<Contents, String> {
         }
     }
     results.sort();
-    let record = std::fs::read_to_string(dir.join(RUN_FILE))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
+    // A run.json that is no regular file below the limit of inputs (a FIFO, a device) is refused, not
+    // read; one that is absent or no run record leaves the record unknown.
+    let record = match crate::input::read_text_input(&dir.join(RUN_FILE)) {
+        Ok(text) => serde_json::from_str(&text).ok(),
+        Err(e)
+            if matches!(
+                e.problem,
+                InputProblem::Missing | InputProblem::Unreadable(_)
+            ) =>
+        {
+            None
+        }
+        Err(e) => return Err(e.to_string()),
+    };
     Ok(Contents { results, record })
 }
 

@@ -145,7 +145,9 @@ fn extreme_values_odd_vectors_and_whole_tables_are_refused_before_anything_is_wr
     assert!(fifo.is_ok_and(|s| s.success()), "mkfifo");
     refused(
         &run(&dir, &["run", "fifo.toml", "--output", "out"]),
-        &["fifo.toml: cannot read: not a regular file"],
+        &[
+            "fifo.toml: is a FIFO (named pipe), not a regular file: an input must be a regular file of at most 64 MiB",
+        ],
     );
     let env = Command::new(binary::EXE)
         .current_dir(&dir)
@@ -316,7 +318,7 @@ fn resume_names_a_checkpoint_that_is_a_directory_and_ignores_a_garbage_record_al
                 "8",
             ],
         ),
-        &["d/checkpoint.h5: is a directory, not a checkpoint file"],
+        &["d/checkpoint.h5: is a directory, not a regular file"],
     );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -112,3 +112,92 @@ fn every_set_line_is_checked_before_the_first_run() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Names and contents of the files in `dir`.
+fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .expect("dir")
+        .map(|e| {
+            let p = e.expect("entry").path();
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read(&p).expect("read"))
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn a_study_replaces_no_run_it_did_not_start() {
+    let sets = "a: -ksp_type preonly -pc_type lu\nb: --set ct.loading_rate=2000\n";
+    let dir = scratch("study", "keep", &[("sets.txt", sets)]);
+    // A finished run of another configuration where the study would put set `b`.
+    let other = Command::new(EXE)
+        .current_dir(&dir)
+        .args([
+            "run",
+            "tiny.toml",
+            "--quiet",
+            "--steps",
+            "2",
+            "--output",
+            "out/b",
+        ])
+        .args(["--set", "ct.loading_rate=1000"])
+        .output()
+        .expect("start mpm-concrete");
+    succeeds(&other);
+    let before = files(&dir.join("out/b"));
+    let o = study(&dir, &["--sets", "sets.txt", "--output", "out"]);
+    refused(
+        &o,
+        &[
+            "out/b holds a run (config tiny.toml, finished at step 2 of 2)",
+            "--overwrite",
+        ],
+    );
+    assert_eq!(files(&dir.join("out/b")), before, "the run was changed");
+    assert!(!dir.join("out/a").exists() && !dir.join("out/study.md").exists());
+
+    // With --overwrite a directory that holds other files is refused, and left as it is, whatever the
+    // order of the sets; so are results without a run record.
+    std::fs::create_dir_all(dir.join("out/a")).expect("dir");
+    std::fs::write(dir.join("out/a/notes.txt"), "mine").expect("notes");
+    let o = study(
+        &dir,
+        &["--sets", "sets.txt", "--output", "out", "--overwrite"],
+    );
+    refused(
+        &o,
+        &["out/a: holds files that no run of this program writes (notes.txt)"],
+    );
+    std::fs::remove_file(dir.join("out/a/notes.txt")).expect("notes");
+    std::fs::write(dir.join("out/a/history.csv"), "step\n").expect("history");
+    let o = study(
+        &dir,
+        &["--sets", "sets.txt", "--output", "out", "--overwrite"],
+    );
+    refused(
+        &o,
+        &["out/a holds results (history.csv) without a run record"],
+    );
+    assert_eq!(files(&dir.join("out/b")), before, "the run was changed");
+    assert!(!dir.join("out/study.md").exists());
+
+    // With --overwrite the run in `b`, identified by its run.json, is replaced by the set's.
+    std::fs::remove_file(dir.join("out/a/history.csv")).expect("history");
+    let o = study(
+        &dir,
+        &["--sets", "sets.txt", "--output", "out", "--overwrite"],
+    );
+    succeeds(&o);
+    let config = std::fs::read_to_string(dir.join("out/b/config.toml")).expect("config");
+    assert!(config.contains("loading_rate = 2000"), "{config}");
+    let csv = std::fs::read_to_string(dir.join("out/study.csv")).expect("study.csv");
+    assert_eq!(
+        csv.lines().filter(|l| l.contains(",true,")).count(),
+        2,
+        "{csv}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -140,7 +140,14 @@ pub fn run(exe: &Path, cases: &[Case], petsc_options: &str, dir: &Path) -> Resul
             case.steps,
             case.config.display()
         );
-        let r = study::run_one(exe, &case.config, case.steps, &set, &dir.join(&case.name))?;
+        let r = study::run_one(
+            exe,
+            &case.config,
+            case.steps,
+            &set,
+            &dir.join(&case.name),
+            true,
+        )?;
         let c = CaseResult::from_run(case, &r);
         eprintln!(
             "bench: {}: {:.3} s/step ({} of {} steps)",

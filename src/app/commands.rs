@@ -131,8 +131,11 @@ pub fn study(
             study::REPORT
         )));
     }
+    // Every set's directory is checked before the first run: the study replaces no run it did not start.
+    let replace = study::check_set_dirs(&dir, &sets, overwrite).map_err(bad)?;
     let exe = std::env::current_exe().context("locating the mpm-concrete executable")?;
-    let results = study::run(&exe, config, steps, &sets, &dir).map_err(anyhow::Error::msg)?;
+    let results =
+        study::run(&exe, config, steps, &sets, &dir, &replace).map_err(anyhow::Error::msg)?;
     let failed = results.iter().filter(|r| !r.completed).count();
     println!("{}", std::fs::read_to_string(dir.join(study::REPORT))?);
     println!(

@@ -225,7 +225,7 @@ pub fn read_material_config(path: &Path) -> Result<MaterialConfig, DriverError> 
         path: path.display().to_string(),
         message,
     };
-    let text = crate::config::read_regular(path).map_err(|e| err(e.to_string()))?;
+    let text = crate::input::read_text_input(path).map_err(|e| err(e.reason()))?;
     let table: toml::Table = toml::from_str(&text).map_err(|e| err(one_line(&e, &text)))?;
     let section = match table.get("material") {
         Some(toml::Value::Table(t)) => t.clone(),

@@ -10,6 +10,7 @@
 use crate::crack::CrackState;
 use crate::io::write_atomic;
 use crate::plot::{LinePlot, Series};
+use crate::rundir;
 use crate::schema::{file, history};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -88,7 +89,7 @@ const SET_PROGRAM_OPTIONS: &str = "--set KEY=VALUE, --steps N, --allow-large";
 /// and the values of common PETSc options are checked ([`crate::preflight::check_petsc_options`]); the
 /// overrides are checked against a configuration by [`check_sets`].
 pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let text = crate::input::read_text_input(path).map_err(|e| e.to_string())?;
     let mut sets: Vec<OptionSet> = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let at = format!("{}:{}", path.display(), i + 1);
@@ -117,6 +118,8 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
         }
         let mut set = parse_set_line(rest).map_err(|e| format!("{at}: set `{name}`: {e}"))?;
         crate::preflight::check_petsc_options(&set.options).map_err(|e| format!("{at}: {e}"))?;
+        crate::preflight::check_options_files(set.options.split_whitespace())
+            .map_err(|e| format!("{at}: {e}"))?;
         set.name = name.into();
         set.line = i + 1;
         sets.push(set);
@@ -226,18 +229,19 @@ pub struct SetResult {
     pub peak_reaction: Option<(String, f64)>,
 }
 
-/// Runs every set for `steps` steps of `config`, results under `dir/<set name>` (replacing an earlier
-/// study's there).
+/// Runs every set for `steps` steps of `config`, results under `dir/<set name>`; `replace[i]` says that set
+/// `i`'s directory holds an earlier run that its run replaces ([`check_set_dirs`]).
 pub fn run(
     exe: &Path,
     config: &Path,
     steps: usize,
     sets: &[OptionSet],
     dir: &Path,
+    replace: &[bool],
 ) -> Result<Vec<SetResult>, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let mut results = Vec::new();
-    for set in sets {
+    for (set, &replace) in sets.iter().zip(replace) {
         let overrides: Vec<String> = set.overrides.iter().map(|o| format!("--set {o}")).collect();
         eprintln!(
             "study: {} ({} {})",
@@ -245,21 +249,117 @@ pub fn run(
             overrides.join(" "),
             set.options
         );
-        results.push(run_one(exe, config, steps, set, &dir.join(&set.name))?);
+        let out = dir.join(&set.name);
+        if replace {
+            eprintln!(
+                "study: --overwrite: the run of `{}` replaces the earlier run in {}",
+                set.name,
+                out.display()
+            );
+        }
+        results.push(run_one(exe, config, steps, set, &out, replace)?);
     }
     write_report(dir, config, steps, &results)?;
     Ok(results)
 }
 
+/// The files a study writes into a set's directory besides the run's own
+/// ([`rundir::is_program_file`]): PETSc's profile.
+const STUDY_FILES: [&str; 1] = ["log_view.txt"];
+
+/// Checks the directory `dir/<set name>` of every set before the first run, so that a study never
+/// replaces a run it did not start: a directory that another run is writing into, that holds files no
+/// run of this program writes, or that holds a run while `overwrite` is false is refused (the error
+/// names the directory and what to do); with `overwrite`, a run is replaced only when its run record
+/// (`run.json`) identifies it as a run of this program. Returns, per set, whether its run replaces an
+/// earlier run (`run --overwrite`, which removes only the program's files).
+pub fn check_set_dirs(
+    dir: &Path,
+    sets: &[OptionSet],
+    overwrite: bool,
+) -> Result<Vec<bool>, String> {
+    sets.iter()
+        .map(|set| check_set_dir(&dir.join(&set.name), overwrite))
+        .collect()
+}
+
+/// The check of [`check_set_dirs`] for one set's directory `out`.
+fn check_set_dir(out: &Path, overwrite: bool) -> Result<bool, String> {
+    // A file in the way and a run.json that is no regular file are refused here.
+    let contents = rundir::inspect(out)?;
+    if !out.is_dir() {
+        return Ok(false);
+    }
+    // A run writing into the directory now is refused, also with --overwrite.
+    drop(rundir::lock(out)?);
+    let mut foreign = Vec::new();
+    for entry in std::fs::read_dir(out).map_err(|e| format!("{}: {e}", out.display()))? {
+        let entry = entry.map_err(|e| format!("{}: {e}", out.display()))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let ours = rundir::is_program_file(&name) || STUDY_FILES.contains(&name.as_str());
+        if !ours || !entry.path().is_file() {
+            foreign.push(name);
+        }
+    }
+    foreign.sort();
+    let listed = |names: &[String]| {
+        let more = names.len().saturating_sub(3);
+        let shown = names[..names.len().min(3)].join(", ");
+        if more > 0 {
+            format!("{shown} and {more} more")
+        } else {
+            shown
+        }
+    };
+    if !foreign.is_empty() {
+        return Err(format!(
+            "{}: holds files that no run of this program writes ({}): a study writes each set's run into \
+             its own directory and replaces only run directories: move them, or give another --output",
+            out.display(),
+            listed(&foreign)
+        ));
+    }
+    if contents.results.is_empty() {
+        return Ok(false);
+    }
+    match (&contents.record, overwrite) {
+        (Some(r), false) => {
+            let (done, of) = (r.steps_done, r.steps_requested);
+            let state = match r.status.as_str() {
+                // No run holds the directory (its lock is free): the run was killed.
+                "running" => {
+                    format!("ended without closing its record (killed?) after step {done} of {of}")
+                }
+                status => format!("{status} at step {done} of {of}"),
+            };
+            Err(format!(
+                "{} holds a run (config {}, {state}): give the study --overwrite to replace the runs in \
+                 its sets' directories, or another --output",
+                out.display(),
+                r.config_file,
+            ))
+        }
+        (None, _) => Err(format!(
+            "{} holds results ({}) without a run record (run.json) that identifies the run: the study \
+             does not replace them, also with --overwrite: move them, or give another --output",
+            out.display(),
+            listed(&contents.results)
+        )),
+        (Some(_), true) => Ok(true),
+    }
+}
+
 /// Runs `config` for `steps` steps with the option set as its own `mpm-concrete run` process, results
-/// and PETSc's `-log_view` profile (`log_view.txt`) in `out` (replacing an earlier run's there); reads
-/// back its history and summary.
+/// and PETSc's `-log_view` profile (`log_view.txt`) in `out` (with `replace`, the run replaces an earlier
+/// run there: `run --overwrite`; without, the run refuses a directory that holds one); reads back its
+/// history and summary.
 pub fn run_one(
     exe: &Path,
     config: &Path,
     steps: usize,
     set: &OptionSet,
     out: &Path,
+    replace: bool,
 ) -> Result<SetResult, String> {
     let log = out.join("log_view.txt");
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
@@ -268,13 +368,9 @@ pub fn run_one(
     let output = Command::new(exe)
         .arg("run")
         .arg(config)
-        .args([
-            "--steps",
-            &steps.to_string(),
-            "--quiet",
-            "--overwrite",
-            "--output",
-        ])
+        .args(["--steps", &steps.to_string(), "--quiet"])
+        .args(replace.then_some("--overwrite"))
+        .arg("--output")
         .arg(out)
         .args(set.overrides.iter().flat_map(|o| ["--set", o.as_str()]))
         .args(set.allow_large.then_some("--allow-large"))
@@ -301,7 +397,7 @@ pub fn run_one(
 
 /// The last state of a run's `crack.json`; `None` without one (no CT) or if it cannot be read.
 fn last_crack_state(path: &Path) -> Option<CrackState> {
-    let text = std::fs::read_to_string(path).ok()?;
+    let text = crate::input::read_text_input(path).ok()?;
     let mut json: serde_json::Value = serde_json::from_str(&text).ok()?;
     let states: Vec<CrackState> = serde_json::from_value(json["states"].take()).ok()?;
     states.into_iter().last()
@@ -360,7 +456,7 @@ fn read_result(
         crack: None,
         peak_reaction: None,
     };
-    let text = std::fs::read_to_string(csv).unwrap_or_default();
+    let text = crate::input::read_text_input(csv).unwrap_or_default();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header: Vec<&str> = lines
         .next()

@@ -43,14 +43,10 @@ use std::path::{Path, PathBuf};
 /// A configuration error: file, field and what is allowed.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{file}: cannot read: {source}")]
-    Read {
-        /// File name.
-        file: String,
-        /// I/O error.
-        source: std::io::Error,
-    },
+    /// The file is no regular file below the limit of inputs, or could not be read
+    /// ([`crate::input::read_text_input`]).
+    #[error("{0}")]
+    Read(#[from] crate::input::InputError),
     /// TOML syntax or schema error (serde names the field and the expected type).
     #[error("{file}: {message}")]
     Parse {
@@ -387,18 +383,6 @@ pub struct Materials {
     pub bodies: Vec<Material>,
 }
 
-/// The text of the file `path`, which must be a regular file (or a directory, refused by the read): a FIFO,
-/// socket or device would block the program or be read as an endless stream.
-pub fn read_regular(path: &Path) -> std::io::Result<String> {
-    let meta = std::fs::metadata(path)?;
-    if !meta.is_file() && !meta.is_dir() {
-        return Err(std::io::Error::other(
-            "not a regular file (a FIFO, socket or device): give the configuration as a file",
-        ));
-    }
-    std::fs::read_to_string(path)
-}
-
 /// How errors name a configuration file read with `overrides`: `configs/x.toml (with --set a=1)`.
 pub fn source_label(file: &str, overrides: &[String]) -> String {
     if overrides.is_empty() {
@@ -455,12 +439,8 @@ fn table_named(text: &str, upto: usize) -> Option<String> {
 impl RunConfig {
     /// Reads and validates a configuration file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
-        let file = path.display().to_string();
-        let text = read_regular(path).map_err(|source| ConfigError::Read {
-            file: file.clone(),
-            source,
-        })?;
-        Self::from_str_named(&text, &file)
+        let text = crate::input::read_text_input(path)?;
+        Self::from_str_named(&text, &path.display().to_string())
     }
 
     /// Reads a configuration file, applies `key=value` overrides (dotted keys into tables, values in TOML
@@ -470,10 +450,7 @@ impl RunConfig {
     /// the same configuration.
     pub fn load(path: &Path, overrides: &[String]) -> Result<(Self, String), ConfigError> {
         let file = path.display().to_string();
-        let text = read_regular(path).map_err(|source| ConfigError::Read {
-            file: file.clone(),
-            source,
-        })?;
+        let text = crate::input::read_text_input(path)?;
         let parse_err = |file: &str, message: String| ConfigError::Parse {
             file: file.to_owned(),
             message,

@@ -186,7 +186,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         message,
     };
     let config_path = dir.join(file::CONFIG);
-    let text = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
+    let text = crate::input::read_text_input(&config_path).map_err(refused_input)?;
     let cfg = crate::config::RunConfig::from_str_named(&text, &config_path.display().to_string())
         .map_err(|e| run_err(&config_path, e.to_string()))?;
     let Some(ct) = &cfg.ct else {
@@ -204,9 +204,12 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         section_z: cfg.extrusion.as_ref().map(|e| e.section_z),
         frame: Frame::from_degrees(cfg.grid.rotation),
     };
-    let old_json = std::fs::read_to_string(dir.join(file::CRACK))
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+    // The old crack.json may be absent or hold no states; one that is no regular file is refused.
+    let old_json = match crate::input::read_text_input(&dir.join(file::CRACK)) {
+        Ok(t) => serde_json::from_str::<serde_json::Value>(&t).ok(),
+        Err(e) if e.is_missing() => None,
+        Err(e) => return Err(refused_input(e)),
+    };
     let old: Vec<CrackState> = old_json
         .as_ref()
         .and_then(|v| serde_json::from_value(v["states"].clone()).ok())
@@ -258,6 +261,14 @@ struct Measure {
     section_z: Option<Option<f64>>,
     /// The specimen's frame on the grid (`grid.rotation`): the crack is measured in the specimen's.
     frame: Frame,
+}
+
+/// An input file of the run directory refused by [`crate::input::check_input_file`].
+fn refused_input(e: crate::input::InputError) -> OutputError {
+    OutputError::Run {
+        message: e.reason(),
+        path: e.path,
+    }
 }
 
 /// A snapshot that HDF5 cannot read (not an HDF5 file, a missing dataset or attribute) is corrupt: the
@@ -320,6 +331,7 @@ fn verified(
 /// layer), measured as `how` says; the values it reads are verified first ([`verified`]).
 fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
     let h5 = |e: hdf5_metno::Error| unreadable(path, &e);
+    crate::input::check_input_file(path, crate::input::DATA_INPUT_MAX).map_err(refused_input)?;
     let file = hdf5_metno::File::open(path).map_err(h5)?;
     let time: f64 = file
         .attr("time_s")

@@ -45,6 +45,35 @@ pub fn run(cwd: &Path, args: &[&str]) -> Output {
         .expect("start mpm-concrete")
 }
 
+/// Runs the program in `cwd` with the environment variables `env`, killed after `limit` if it has not
+/// ended by then (a read that blocks or never ends fails the test instead of hanging it).
+pub fn run_within(
+    cwd: &Path,
+    args: &[&str],
+    env: &[(&str, &str)],
+    limit: std::time::Duration,
+) -> Output {
+    let mut child = Command::new(EXE)
+        .current_dir(cwd)
+        .args(args)
+        .envs(env.iter().copied())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start mpm-concrete");
+    let start = std::time::Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        if start.elapsed() > limit {
+            child.kill().ok();
+            child.wait().ok();
+            panic!("{args:?} ({env:?}) did not end within {limit:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().expect("output")
+}
+
 /// A CT specimen of 360 points (10 x 10 cells of 4 mm), 1 us steps, a few ms per step.
 pub const TINY: &str = r#"
 [run]

@@ -60,8 +60,7 @@ impl Csv {
 
     /// Reads and parses the file at `path`.
     pub(super) fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| bad(format!("{}: cannot read: {e}", path.display())))?;
+        let text = crate::input::read_text_input(path).map_err(|e| bad(e.to_string()))?;
         Self::parse(&text, &path.display().to_string())
     }
 

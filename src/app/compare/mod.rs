@@ -167,8 +167,7 @@ fn read_references(references: &[PathBuf]) -> Result<Vec<Reference>> {
     references
         .iter()
         .map(|p| {
-            let text = std::fs::read_to_string(p)
-                .map_err(|e| bad(format!("{}: cannot read: {e}", p.display())))?;
+            let text = crate::input::read_text_input(p).map_err(|e| bad(e.to_string()))?;
             parse_reference(&text, &p.display().to_string())
         })
         .collect()

@@ -97,6 +97,8 @@ fn list_snapshots(dir: &Path) -> Result<Vec<SnapshotFile>> {
             continue;
         }
         let path = entry.path();
+        crate::input::check_input_file(&path, crate::input::DATA_INPUT_MAX)
+            .map_err(|e| bad(e.to_string()))?;
         let file = hdf5_metno::File::open(&path).map_err(h5_err(&path, "open"))?;
         let time: f64 = file
             .attr("time_s")

@@ -3,6 +3,7 @@
 
 use crate::app::bad;
 use crate::checkpoint;
+use crate::input::InputProblem;
 use crate::rundir::{self, RunIdentity};
 use anyhow::Result;
 use std::path::Path;
@@ -143,31 +144,31 @@ pub(super) fn check_resume(
 }
 
 /// The run record `dir/run.json` of a run to resume is advisory: the run continues from the checkpoint,
-/// which its checksums verify, and writes a new record. A record that is no run record is noted and
-/// ignored; one that is not a file would make that write fail after the work, so it is refused.
+/// which its checksums verify, and writes a new record. A record that is no run record (or cannot be
+/// read) is noted and ignored; one that is not a regular file below the limit of inputs would block the
+/// read or make the rewrite fail after the work, so it is refused.
 fn check_record(dir: &Path) -> Result<()> {
     let path = dir.join(crate::rundir::RUN_FILE);
-    match std::fs::metadata(&path) {
-        Ok(m) if !m.is_file() => Err(bad(format!(
-            "{}: is not a file: the run record a resumed run rewrites (remove it)",
-            path.display()
-        ))),
-        Ok(_) => {
-            let read = std::fs::read_to_string(&path).map_err(|e| e.to_string());
-            let parsed = read.and_then(|t| {
-                serde_json::from_str::<crate::rundir::RunRecord>(&t).map_err(|e| e.to_string())
-            });
-            if let Err(e) = parsed {
-                eprintln!(
-                    "note: {}: not a run record ({e}); ignored: the run continues from the checkpoint, \
-                     which its checksums verify, and writes a new run.json",
-                    path.display()
-                );
-            }
-            Ok(())
+    let parsed = match crate::input::read_text_input(&path) {
+        Ok(text) => {
+            serde_json::from_str::<crate::rundir::RunRecord>(&text).map_err(|e| e.to_string())
         }
-        Err(_) => Ok(()),
+        Err(e) if e.is_missing() => return Ok(()),
+        Err(e) if matches!(e.problem, InputProblem::Unreadable(_)) => Err(e.reason()),
+        Err(e) => {
+            return Err(bad(format!(
+                "{e}: the run record a resumed run rewrites (remove it)"
+            )));
+        }
+    };
+    if let Err(e) = parsed {
+        eprintln!(
+            "note: {}: not a run record ({e}); ignored: the run continues from the checkpoint, \
+             which its checksums verify, and writes a new run.json",
+            path.display()
+        );
     }
+    Ok(())
 }
 
 #[cfg(test)]
