@@ -86,11 +86,17 @@ pub mod history {
     /// Kinetic energy lost at the inelastic impacts of closed contact constraints (N mm per mm
     /// thickness).
     pub const CONTACT_LOSS: &str = "contact_loss";
+    /// Kinetic energy the grid transfer took out: the points' kinetic energy less the grid's after P2G
+    /// minus the same after G2P, summed over the steps (N mm per mm thickness; `model::EnergyBooks::transfer`).
+    pub const TRANSFER_LOSS: &str = "transfer_loss";
     /// `dissipated_energy - damage_dissipation - erosion_energy - contact_loss`: what the grid transfer and
     /// the time integration took out (N mm per mm thickness).
     pub const ENERGY_REMAINDER: &str = "energy_remainder";
     /// [`ENERGY_REMAINDER`] as a fraction of [`EXTERNAL_WORK`] (0 while there is no work).
     pub const REMAINDER_FRACTION: &str = "remainder_fraction";
+    /// `energy_remainder - transfer_loss`: what the time integration on the grid and the solver
+    /// tolerances took out (N mm per mm thickness).
+    pub const INTEGRATION_REMAINDER: &str = "integration_remainder";
     /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve of the converged
     /// attempt, and the total of the step with its failed attempts.
     pub const WALL_SETUP: &str = "wall_setup";
@@ -159,7 +165,7 @@ pub mod history {
     ];
 
     /// The columns after the reactions.
-    pub const TRAILING: [&str; 14] = [
+    pub const TRAILING: [&str; 16] = [
         KINETIC_ENERGY,
         STORED_ENERGY,
         EXTERNAL_WORK,
@@ -167,8 +173,10 @@ pub mod history {
         DAMAGE_DISSIPATION,
         EROSION_ENERGY,
         CONTACT_LOSS,
+        TRANSFER_LOSS,
         ENERGY_REMAINDER,
         REMAINDER_FRACTION,
+        INTEGRATION_REMAINDER,
         WALL_SETUP,
         WALL_ASSEMBLY,
         WALL_SOLVE,

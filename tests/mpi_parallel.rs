@@ -205,6 +205,7 @@ fn run_on_two_and_three_processes_matches_serial() {
             "external_work",
             "dissipated_energy",
             "contact_loss",
+            "transfer_loss",
         ] {
             let (a, b) = (&serial[name], &parallel[name]);
             assert!(a.iter().any(|v| *v != 0.0), "{name} must not vanish");

@@ -557,7 +557,7 @@ impl RunOutput {
             };
             let _ = write!(
                 s,
-                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.6e}",
+                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.6e},{:.9e}",
                 r.kinetic_energy,
                 r.stored_energy,
                 r.external_work,
@@ -565,8 +565,10 @@ impl RunOutput {
                 b.damage,
                 b.erosion,
                 b.contact,
+                b.transfer,
                 remainder,
-                fraction
+                fraction,
+                remainder - b.transfer
             );
             let _ = write!(
                 s,

@@ -32,6 +32,8 @@ impl<const D: usize> Step<'_, D> {
         let out = self.outcome(&plan, &solved.phys);
         let work = self.work(session, &plan, &out)?;
         let counted = self.own_point_count();
+        let grid_kinetic = self.grid_kinetic_energies(&plan, &out);
+        let points_kinetic = self.kinetic_energy(counted);
         let committed = self.move_points(session, &plan, &out, counted)?;
         self.move_rigid_bodies(&plan, &out);
         let st = &mut *self.state;
@@ -44,8 +46,18 @@ impl<const D: usize> Step<'_, D> {
         st.counters.external_work += work;
         st.counters.time = plan.t_new;
         st.counters.step += 1;
-        let mut energies = [self.kinetic_energy(counted), committed.stored];
-        let mut books = [committed.dissipated, committed.eroding, out.contact_loss];
+        let kinetic = self.kinetic_energy(counted);
+        let transfer = match grid_kinetic {
+            Some([start, end]) => (points_kinetic - start) - (kinetic - end),
+            None => 0.0,
+        };
+        let mut energies = [kinetic, committed.stored];
+        let mut books = [
+            committed.dissipated,
+            committed.eroding,
+            out.contact_loss,
+            transfer,
+        ];
         if self.state.distributed {
             session.sum(&mut energies)?;
             session.sum(&mut books)?;
@@ -56,6 +68,7 @@ impl<const D: usize> Step<'_, D> {
         b.erosion += b.eroding;
         b.eroding = books[1];
         b.contact += books[2];
+        b.transfer += books[3];
         let mut report = self.report(&plan, solved, &out, energies, t0);
         report.path = self.path_point(session, plan.path.as_ref())?;
         Ok(report)
@@ -124,6 +137,29 @@ impl<const D: usize> Step<'_, D> {
             acc_nodes,
             contact_loss,
         }
+    }
+
+    /// The grid's kinetic energy `sum_I m_I/2 |v_I|^2` over this process's active nodes at the start of
+    /// the step (the P2G velocities) and at its end (the Newmark velocities `v_I + dt ((1 - gamma) a_I +
+    /// gamma a_I^n+1)` with the impacts' corrections; N mm, in 2D per mm thickness); `None` where the grid
+    /// does not reset (FEM mode) or without inertia.
+    fn grid_kinetic_energies(&self, plan: &StepPlan<D>, out: &Outcome<D>) -> Option<[f64; 2]> {
+        let nm = plan.loading.newmark?;
+        if self.state.fem_nodal.is_some() {
+            return None;
+        }
+        let (gs, owned) = (&self.work.grid_state, self.owned_nodes());
+        let mut k = [0.0; 2];
+        for &node in self.work.dofs.active_nodes() {
+            let node = node as usize;
+            if owned.contains(&node) {
+                let (m, v, a) = (gs.mass[node], gs.velocity[node], gs.acceleration[node]);
+                let v_new = v + nm.dt * ((1.0 - nm.gamma) * a + nm.gamma * out.acc_nodes[node]);
+                k[0] += 0.5 * m * v.norm_squared();
+                k[1] += 0.5 * m * v_new.norm_squared();
+            }
+        }
+        Some(k)
     }
 
     /// Work of the step (N mm; in 2D per mm thickness): of the body force (b . du weighted by nodal
