@@ -30,7 +30,8 @@ pub struct Case {
 
 /// The standard cases, configuration paths relative to the repository root: the paper-size CT at
 /// 4.3 m/s (155,600 points, microplane with gradient enhancement, 3 unknowns per node), the elastic
-/// cantilever at 40,960 and 163,840 points (stiffness-dominated steps), and the CT demo (9,780 points).
+/// cantilever at 10,240, 40,960 and 163,840 points (stiffness-dominated steps: whether the cost per
+/// unknown stays flat as the grid grows), and the CT demo (9,780 points).
 pub fn default_cases() -> Vec<Case> {
     let case = |name: &str, config: &str, steps| Case {
         name: name.into(),
@@ -39,6 +40,7 @@ pub fn default_cases() -> Vec<Case> {
     };
     vec![
         case("ct-paper-4.3mps", "configs/ct-paper-4.3mps.toml", 20),
+        case("cantilever-10k", "configs/bench/cantilever-10k.toml", 10),
         case("cantilever-41k", "configs/bench/cantilever-41k.toml", 10),
         case("cantilever-164k", "configs/bench/cantilever-164k.toml", 5),
         case("ct-demo", "configs/ct-demo.toml", 50),
@@ -186,13 +188,13 @@ pub fn markdown(r: &Report) -> String {
     );
     md.push_str(
         "| case | steps | unknowns | Newton/step | linear/Newton | set-up (s/step) | assembly (s/step) | \
-         linear solve (s/step) | total (s/step) | peak MB | new patterns | retries |\n",
+         linear solve (s/step) | total (s/step) | us/unknown/step | peak MB | new patterns | retries |\n",
     );
-    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for c in &r.cases {
         let _ = writeln!(
             md,
-            "| {}{} | {} | {:.0} | {:.2} | {:.1} | {:.3} | {:.3} | {:.3} | **{:.3}** | {:.0} | {} | {} |",
+            "| {}{} | {} | {:.0} | {:.2} | {:.1} | {:.3} | {:.3} | {:.3} | **{:.3}** | {:.2} | {:.0} | {} | {} |",
             c.name,
             c.error
                 .as_ref()
@@ -206,6 +208,7 @@ pub fn markdown(r: &Report) -> String {
             c.assembly_s_per_step,
             c.solve_s_per_step,
             c.total_s_per_step,
+            1e6 * c.total_s_per_step / c.unknowns.max(1.0),
             c.peak_mb,
             c.new_patterns,
             c.retries
