@@ -691,8 +691,8 @@ impl RunConfig {
         Ok(())
     }
 
-    /// What a set-up turned inside the grid (`grid.rotation` != 0) cannot have: a plate (the turn is
-    /// about z, the extrusion is not turned), node boxes and nodal loads (they select grid nodes along
+    /// What a set-up turned inside the grid (`grid.rotation` != 0) cannot have: finite elements (they
+    /// are the grid's cells), a plate (the turn is about z, the extrusion is not turned), node boxes and nodal loads (they select grid nodes along
     /// the grid's axes), a rigid body with one component free and the other prescribed (a motion along
     /// one specimen axis is along no grid axis).
     fn check_rotation(&self, c: Check) -> Result<(), ConfigError> {
@@ -707,6 +707,11 @@ impl RunConfig {
                 &format!("0 with {what} (a turned set-up is plane, with [ct] specimens, [[body]] and [[rigid_body]] sections whose x and y motions are both free or both prescribed)"),
             ))
         };
+        if self.shape.method == crate::model::Method::Fem {
+            return refuse(
+                "shape.method = \"fem\" (the elements are the grid's cells, along its axes)",
+            );
+        }
         if self.extrusion.is_some() {
             return refuse("[extrusion]");
         }
