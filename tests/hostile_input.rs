@@ -466,3 +466,23 @@ fn a_gauge_point_off_the_body_and_finite_elements_on_a_turned_grid_are_refused()
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn resume_takes_a_default_spelled_out() {
+    let dir = scratch("hostile", "echo", &[]);
+    let args = ["run", "tiny.toml", "--quiet", "--output", "d"];
+    succeeds(&run(&dir, &[&args[..], &["--steps", "2"]].concat()));
+    // grid.rotation = 0 is the default: the same physics as the run's.
+    let same = ["--steps", "4", "--resume", "--set", "grid.rotation=0"];
+    succeeds(&run(&dir, &[&args[..], &same].concat()));
+    assert_eq!(record(&dir.join("d")).steps_done, 4);
+    let other = ["--steps", "6", "--resume", "--set", "ct.loading_rate=4000"];
+    refused(
+        &run(&dir, &[&args[..], &other].concat()),
+        &[
+            "other physics",
+            "ct.loading_rate: 4300.0 in the checkpoint, 4000.0 now",
+        ],
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

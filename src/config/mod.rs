@@ -392,6 +392,49 @@ pub fn source_label(file: &str, overrides: &[String]) -> String {
     format!("{file} (with {})", sets.join(" "))
 }
 
+/// Whether the key `key` (dotted: `grid.rotation`, `body[0].density`) of the configuration text `config`
+/// holds the value the configuration takes without it, i.e. a default spelled out: the text with and
+/// without the key reads as the same settings. False when the key is not there or a text does not read.
+pub fn holds_default(config: &str, key: &str) -> bool {
+    let Ok(mut table) = toml::from_str::<toml::Table>(config) else {
+        return false;
+    };
+    if !remove_key(&mut table, key) {
+        return false;
+    }
+    let settings = |text: &str| {
+        toml::from_str::<RunConfig>(text)
+            .ok()
+            .map(|c| format!("{c:?}"))
+    };
+    let without = toml::to_string(&table).ok();
+    match (settings(config), without.as_deref().and_then(settings)) {
+        (Some(with), Some(without)) => with == without,
+        _ => false,
+    }
+}
+
+/// Removes the dotted key `key` (`body[0].density`: entry 0 of the array of tables `body`) from
+/// `table`; false when it is not there.
+fn remove_key(table: &mut toml::Table, key: &str) -> bool {
+    let (path, last) = key.rsplit_once('.').unwrap_or(("", key));
+    let mut t = table;
+    for part in path.split('.').filter(|p| !p.is_empty()) {
+        let entry = match part.strip_suffix(']').and_then(|r| r.split_once('[')) {
+            Some((name, i)) => i
+                .parse::<usize>()
+                .ok()
+                .and_then(|i| t.get_mut(name)?.as_array_mut()?.get_mut(i)),
+            None => t.get_mut(part),
+        };
+        match entry.and_then(|v| v.as_table_mut()) {
+            Some(next) => t = next,
+            None => return false,
+        }
+    }
+    t.remove(last).is_some()
+}
+
 /// A TOML error on one line: the parser's message, the table it is in and, with `position`, the line and
 /// column in `text`.
 fn toml_message(e: &toml::de::Error, text: &str, position: bool) -> String {
