@@ -3,7 +3,7 @@
 //! with too many nodes, a body that holds no point, options
 //! named as the user typed them, whole tables replaced by `--set`, corrupt or locked run directories for
 //! `crack` and `--resume`, `material-driver`'s output and configuration, clap's usage errors, a path
-//! gauge point off the body and finite elements on a turned grid. Each is
+//! gauge point off the body, finite elements on a turned grid and a 100 KB `--set` value. Each is
 //! refused with exit code 2 and one line (two for a usage error: the error and where the help is), and
 //! nothing is written.
 //!
@@ -468,7 +468,7 @@ fn a_gauge_point_off_the_body_and_finite_elements_on_a_turned_grid_are_refused()
 }
 
 #[test]
-fn resume_takes_a_default_spelled_out() {
+fn resume_takes_a_default_spelled_out_and_errors_cut_a_huge_set_value() {
     let dir = scratch("hostile", "echo", &[]);
     let args = ["run", "tiny.toml", "--quiet", "--output", "d"];
     succeeds(&run(&dir, &[&args[..], &["--steps", "2"]].concat()));
@@ -484,5 +484,15 @@ fn resume_takes_a_default_spelled_out() {
             "ct.loading_rate: 4300.0 in the checkpoint, 4000.0 now",
         ],
     );
+    // A 100 KB value is shown by its first 80 characters and its length.
+    let digits = format!("grid.cell_size={}", "1".repeat(100_000));
+    let ones = vec!["1"; 30_000].join(",");
+    let vector = format!("body_force=[{ones}]");
+    for set in [&digits, &vector] {
+        let o = run(&dir, &["run", "tiny.toml", "--output", "e", "--set", set]);
+        let line = refused(&o, &[&format!("... ({} bytes)", set.len())]);
+        assert!(line.len() < 600, "{} bytes: {}", line.len(), &line[..600]);
+    }
+    assert!(!dir.join("e").exists());
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -35,7 +35,7 @@ pub use control::{
 };
 pub use ct::{CtSection, LoadIntroduction, NotchTip};
 
-use crate::input::BadValue;
+use crate::input::{BadValue, echoed};
 use crate::material::{Material, MaterialError};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -56,13 +56,13 @@ pub enum ConfigError {
         message: String,
     },
     /// A value out of its range.
-    #[error("{file}: field `{field}` = {value}: {allowed}")]
+    #[error("{file}: field `{field}` = {}: {allowed}", echoed(value))]
     Invalid {
         /// File name.
         file: String,
         /// Dotted field name.
         field: String,
-        /// Offending value.
+        /// Offending value (an error line shows its first [`crate::input::ECHO_MAX`] characters).
         value: String,
         /// What is allowed.
         allowed: String,
@@ -388,7 +388,10 @@ pub fn source_label(file: &str, overrides: &[String]) -> String {
     if overrides.is_empty() {
         return file.to_owned();
     }
-    let sets: Vec<String> = overrides.iter().map(|o| format!("--set {o}")).collect();
+    let sets: Vec<String> = overrides
+        .iter()
+        .map(|o| format!("--set {}", echoed(o)))
+        .collect();
     format!("{file} (with {})", sets.join(" "))
 }
 
@@ -438,7 +441,9 @@ fn remove_key(table: &mut toml::Table, key: &str) -> bool {
 /// A TOML error on one line: the parser's message, the table it is in and, with `position`, the line and
 /// column in `text`.
 fn toml_message(e: &toml::de::Error, text: &str, position: bool) -> String {
-    let mut message = e.message().trim().replace('\n', " ");
+    // The parser quotes the value it refused, which may be a huge --set value: cut it.
+    let quoted: Vec<String> = e.message().trim().split('"').map(echoed).collect();
+    let mut message = quoted.join("\"").replace('\n', " ");
     if let Some(start) = e.span().map(|span| span.start) {
         // The table is the last header up to the end of the error's line (a missing field's span is the
         // header of the table that misses it).
@@ -509,10 +514,11 @@ impl RunConfig {
         let mut table: toml::Table =
             toml::from_str(&text).map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
         for o in overrides {
+            let set = echoed(o);
             let (key, value) = o.split_once('=').ok_or_else(|| {
                 parse_err(
                     &file,
-                    format!("--set {o}: expected key=value (e.g. grid.cell_size=2.5)"),
+                    format!("--set {set}: expected key=value (e.g. grid.cell_size=2.5)"),
                 )
             })?;
             let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
@@ -522,20 +528,20 @@ impl RunConfig {
             let keys: Vec<&str> = key.trim().split('.').collect();
             let mut t = &mut table;
             for k in &keys[..keys.len() - 1] {
-                t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {o}: {e}")))?;
+                t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {set}: {e}")))?;
             }
             let last = keys[keys.len() - 1];
             if let Some((name, _)) = last.strip_suffix(']').and_then(|r| r.split_once('[')) {
                 return Err(parse_err(
                     &file,
                     format!(
-                        "--set {o}: `{last}` is an entry of [[{name}]]: --set names a key inside it, \
+                        "--set {set}: `{last}` is an entry of [[{name}]]: --set names a key inside it, \
                          e.g. --set {last}.name=..."
                     ),
                 ));
             }
             if let Some(e) = replaces_table(t.get(last), keys.len() == 1, key.trim(), &value) {
-                return Err(parse_err(&file, format!("--set {o}: {e}")));
+                return Err(parse_err(&file, format!("--set {set}: {e}")));
             }
             t.insert(last.to_string(), value);
         }
