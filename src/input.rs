@@ -54,6 +54,20 @@ pub fn shown(v: f64) -> String {
     }
 }
 
+/// The most characters of a value given by the user (a `--set key=value`, a study set) that an error
+/// line repeats.
+pub const ECHO_MAX: usize = 80;
+
+/// `text` as an error line repeats it: whole up to [`ECHO_MAX`] characters, else its first
+/// [`ECHO_MAX`] characters and its length (`grid.cell_size=11111... (100016 bytes)`), so that a huge
+/// value does not flood the terminal.
+pub fn echoed(text: &str) -> String {
+    match text.char_indices().nth(ECHO_MAX) {
+        None => text.to_owned(),
+        Some((end, _)) => format!("{}... ({} bytes)", &text[..end], text.len()),
+    }
+}
+
 /// The largest text input the program reads: 64 MiB (67,108,864 bytes). Configurations, run records
 /// (`run.json`), crack records (`crack.json`), study set files and PETSc options files are a few KB; a
 /// run's `history.csv` and reference CSV files about half a KB per step (some 100,000 steps fit).

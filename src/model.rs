@@ -809,8 +809,8 @@ const KEY: &str = "path";
 impl<const D: usize> Gauge<D> {
     /// The gauge of `control` on the points `particles` at t = 0 with the run's `params`: the material
     /// point nearest each of `from` and `to` (the lower index on a tie). Refused: a dynamic run, applied
-    /// loads, a moving set with a rise time or in contact, no moving set, one point for both ends, a zero
-    /// direction or an increment that is not > 0.
+    /// loads, a moving set with a rise time or in contact, no moving set, an end outside the bodies
+    /// ([`gauge_point`]), one point for both ends, a zero direction or an increment that is not > 0.
     pub fn new(
         control: &PathControl<D>,
         params: &Parameters<D>,
@@ -844,21 +844,9 @@ impl<const D: usize> Gauge<D> {
                 "an opening per step > 0 and below 1000 (mm)",
             ));
         }
-        let nearest = |target: &SVector<f64, D>| {
-            (0..particles.len()).min_by(|&p, &q| {
-                let (dp, dq) = (
-                    (particles.x[p] - target).norm_squared(),
-                    (particles.x[q] - target).norm_squared(),
-                );
-                dp.total_cmp(&dq).then(p.cmp(&q))
-            })
-        };
-        let (Some(a), Some(b)) = (nearest(&control.from), nearest(&control.to)) else {
-            return Err(bad(
-                "no material points".into(),
-                "a run with material points",
-            ));
-        };
+        let h = params.grid.cell_size();
+        let a = gauge_point("path.from", &control.from, particles, h)?;
+        let b = gauge_point("path.to", &control.to, particles, h)?;
         if a == b {
             return Err(bad(
                 format!(
@@ -878,6 +866,40 @@ impl<const D: usize> Gauge<D> {
             reference,
         })
     }
+}
+
+/// The material point nearest `target` (mm; the lower index on a tie), the end `key` of a gauge on a
+/// grid of cell size `h` (mm). Refused when that point is more than one cell away: a point in a body or
+/// on its boundary has a material point within half a point spacing per axis (at most `h / 2`, so
+/// `sqrt(D) h / 2 < h`), and a point farther off would silently measure another place of the body.
+fn gauge_point<const D: usize>(
+    key: &str,
+    target: &SVector<f64, D>,
+    particles: &Particles<D>,
+    h: f64,
+) -> Result<usize, BadValue> {
+    let distance = |p: usize| (particles.x[p] - target).norm();
+    let nearest = (0..particles.len())
+        .min_by(|&p, &q| distance(p).total_cmp(&distance(q)).then(p.cmp(&q)))
+        .ok_or_else(|| BadValue::new(KEY, "no material points", "a run with material points"))?;
+    let d = distance(nearest);
+    if d <= h {
+        return Ok(nearest);
+    }
+    let at: Vec<String> = particles.x[nearest]
+        .iter()
+        .map(|v| format!("{v:.3}"))
+        .collect();
+    Err(BadValue::new(
+        key,
+        format!("{:?} mm", target.as_slice()),
+        format!(
+            "a point in a body or within one cell (grid.cell_size = {h} mm) of a material point (the \
+             nearest is {d:.3} mm away at ({})): the opening is measured between the material points \
+             nearest `from` and `to`",
+            at.join(", ")
+        ),
+    ))
 }
 
 /// The first moving component of the constraint sets (boxes, then rigid bodies): (set, component,

@@ -263,8 +263,14 @@ impl RunIdentity {
         flatten("", &toml::Value::Table(physics_table(&self.config)), &mut a);
         flatten("", &toml::Value::Table(physics_table(&now.config)), &mut b);
         let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+        // A default spelled out on one side only (`--set grid.rotation=0`) changes nothing.
+        let spelled_out = |k: &str| match (a.contains_key(k), b.contains_key(k)) {
+            (true, false) => crate::config::holds_default(&self.config, k),
+            (false, true) => crate::config::holds_default(&now.config, k),
+            _ => false,
+        };
         keys.into_iter()
-            .filter(|k| a.get(*k) != b.get(*k))
+            .filter(|k| a.get(*k) != b.get(*k) && !spelled_out(k))
             .map(|k| {
                 let show = |v: Option<&String>| v.cloned().unwrap_or_else(|| "absent".into());
                 format!(

@@ -2,7 +2,8 @@
 //! values, vectors of the wrong length, a self-crossing polygon, a grid coarser than the bodies, a grid
 //! with too many nodes, a body that holds no point, options
 //! named as the user typed them, whole tables replaced by `--set`, corrupt or locked run directories for
-//! `crack` and `--resume`, `material-driver`'s output and configuration, and clap's usage errors. Each is
+//! `crack` and `--resume`, `material-driver`'s output and configuration, clap's usage errors, a path
+//! gauge point off the body, finite elements on a turned grid and a 100 KB `--set` value. Each is
 //! refused with exit code 2 and one line (two for a usage error: the error and where the help is), and
 //! nothing is written.
 //!
@@ -372,5 +373,126 @@ fn material_driver_and_usage_errors_are_short() {
         );
         assert!(lines[1].contains(help), "{err}");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A 10 x 4 mm block on 1 mm cells, held at x = 0 and pulled at x = 10 under path following of the
+/// elongation between the points nearest [2, 2] and [8, 2] (`tests/path_following.rs`).
+const PATH_BLOCK: &str = r#"
+[run]
+name = "path-block"
+steps = 1
+[time]
+dt = 1.0
+quasi_static = true
+[grid]
+cell_size = 1.0
+[[body]]
+name = "block"
+density = 1e-9
+geometry = { include = [{ type = "rect", min = [0.0, 0.0], max = [10.0, 4.0] }] }
+material = { model = "svk", youngs_modulus = 1000.0, poisson_ratio = 0.2 }
+[[constraint]]
+name = "held"
+min = [-1.0, -1.0]
+max = [0.0, 5.0]
+x = "fixed"
+y = "fixed"
+[[constraint]]
+name = "pulled"
+min = [10.0, -1.0]
+max = [11.0, 5.0]
+x = { velocity = 1e-3 }
+[path]
+from = [2.0, 2.0]
+to = [8.0, 2.0]
+increment = 1e-3
+"#;
+
+#[test]
+fn a_gauge_point_off_the_body_and_finite_elements_on_a_turned_grid_are_refused() {
+    let dir = scratch("hostile", "gauge", &[("path.toml", PATH_BLOCK)]);
+    // The gauge's ends may lie on the body's edge (its nearest points are half a spacing inside) ...
+    succeeds(&run(
+        &dir,
+        &[
+            "run",
+            "path.toml",
+            "--quiet",
+            "--output",
+            "edge",
+            "--set",
+            "path.to=[10.0,4.0]",
+        ],
+    ));
+    // ... but not 500 mm off it: the nearest points would be measured silently. Finite elements are
+    // the grid's cells and cannot be turned (a CT in contact is turned otherwise).
+    let cases: Vec<(&str, Vec<&str>, Vec<&str>)> = vec![
+        (
+            "path.toml",
+            vec!["--set", "path.to=[500.0,2.0]"],
+            vec![
+                "path.toml",
+                "`path.to` = [500.0, 2.0] mm",
+                "within one cell (grid.cell_size = 1 mm) of a material point",
+                "490.250 mm away at (9.750, 1.750)",
+            ],
+        ),
+        (
+            "path.toml",
+            vec!["--set", "path.from=[2.0,-3.0]"],
+            vec!["`path.from` = [2.0, -3.0] mm", "a point in a body"],
+        ),
+        (
+            "tiny.toml",
+            vec![
+                "--set",
+                "shape.method=\"fem\"",
+                "--set",
+                "shape.kind=\"linear\"",
+                "--set",
+                "ct.load_introduction=\"contact\"",
+                "--set",
+                "grid.rotation=30",
+            ],
+            vec!["`grid.rotation` = 30", "0 with shape.method = \"fem\""],
+        ),
+    ];
+    for (config, extra, needles) in &cases {
+        let mut args = vec!["run", config, "--quiet", "--output", "out"];
+        args.extend(extra);
+        refused(&run(&dir, &args), needles);
+        assert!(!dir.join("out").exists(), "{args:?}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn resume_takes_a_default_spelled_out_and_errors_cut_a_huge_set_value() {
+    let dir = scratch("hostile", "echo", &[]);
+    let args = ["run", "tiny.toml", "--quiet", "--output", "d"];
+    succeeds(&run(&dir, &[&args[..], &["--steps", "2"]].concat()));
+    // grid.rotation = 0 is the default: the same physics as the run's.
+    let same = ["--steps", "4", "--resume", "--set", "grid.rotation=0"];
+    succeeds(&run(&dir, &[&args[..], &same].concat()));
+    assert_eq!(record(&dir.join("d")).steps_done, 4);
+    let other = ["--steps", "6", "--resume", "--set", "ct.loading_rate=4000"];
+    refused(
+        &run(&dir, &[&args[..], &other].concat()),
+        &[
+            "other physics",
+            "ct.loading_rate: 4300.0 in the checkpoint, 4000.0 now",
+        ],
+    );
+    // A 100 KB value is shown by its first 80 characters and its length.
+    let digits = format!("grid.cell_size={}", "1".repeat(100_000));
+    let ones = vec!["1"; 30_000].join(",");
+    let vector = format!("body_force=[{ones}]");
+    for set in [&digits, &vector] {
+        let o = run(&dir, &["run", "tiny.toml", "--output", "e", "--set", set]);
+        let line = refused(&o, &[&format!("... ({} bytes)", set.len())]);
+        assert!(line.len() < 600, "{} bytes: {}", line.len(), &line[..600]);
+    }
+    assert!(!dir.join("e").exists());
     std::fs::remove_dir_all(&dir).ok();
 }

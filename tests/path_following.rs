@@ -246,6 +246,8 @@ fn bad_path_tables_are_refused_naming_the_key() {
     refused(block(same), "path.direction", "nonzero");
     let one_point = "[path]\nfrom = [2.25, 2.25]\nto = [2.3, 2.25]\nincrement = 1e-3\n";
     refused(block(one_point), "path", "nearest material points differ");
+    let off = "[path]\nfrom = [2.0, 2.0]\nto = [500.0, 2.0]\nincrement = 1e-3\n";
+    refused(block(off), "path.to", "within one cell");
     let rise = block(PATH).replace(
         "x = { velocity = 1e-3 }",
         "x = { velocity = 1e-3 }\nrise_time = 1.0",

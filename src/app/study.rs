@@ -168,7 +168,8 @@ fn parse_set_line(rest: &str) -> Result<OptionSet, String> {
     }
     if let Some(bad) = set.overrides.iter().find(|o| !o.contains('=')) {
         return Err(format!(
-            "--set {bad}: expected key=value (e.g. grid.cell_size=2.5)"
+            "--set {}: expected key=value (e.g. grid.cell_size=2.5)",
+            crate::input::echoed(bad)
         ));
     }
     set.options = tokens.collect::<Vec<_>>().join(" ");

@@ -35,7 +35,7 @@ pub use control::{
 };
 pub use ct::{CtSection, LoadIntroduction, NotchTip};
 
-use crate::input::BadValue;
+use crate::input::{BadValue, echoed};
 use crate::material::{Material, MaterialError};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -56,13 +56,13 @@ pub enum ConfigError {
         message: String,
     },
     /// A value out of its range.
-    #[error("{file}: field `{field}` = {value}: {allowed}")]
+    #[error("{file}: field `{field}` = {}: {allowed}", echoed(value))]
     Invalid {
         /// File name.
         file: String,
         /// Dotted field name.
         field: String,
-        /// Offending value.
+        /// Offending value (an error line shows its first [`crate::input::ECHO_MAX`] characters).
         value: String,
         /// What is allowed.
         allowed: String,
@@ -388,14 +388,62 @@ pub fn source_label(file: &str, overrides: &[String]) -> String {
     if overrides.is_empty() {
         return file.to_owned();
     }
-    let sets: Vec<String> = overrides.iter().map(|o| format!("--set {o}")).collect();
+    let sets: Vec<String> = overrides
+        .iter()
+        .map(|o| format!("--set {}", echoed(o)))
+        .collect();
     format!("{file} (with {})", sets.join(" "))
+}
+
+/// Whether the key `key` (dotted: `grid.rotation`, `body[0].density`) of the configuration text `config`
+/// holds the value the configuration takes without it, i.e. a default spelled out: the text with and
+/// without the key reads as the same settings. False when the key is not there or a text does not read.
+pub fn holds_default(config: &str, key: &str) -> bool {
+    let Ok(mut table) = toml::from_str::<toml::Table>(config) else {
+        return false;
+    };
+    if !remove_key(&mut table, key) {
+        return false;
+    }
+    let settings = |text: &str| {
+        toml::from_str::<RunConfig>(text)
+            .ok()
+            .map(|c| format!("{c:?}"))
+    };
+    let without = toml::to_string(&table).ok();
+    match (settings(config), without.as_deref().and_then(settings)) {
+        (Some(with), Some(without)) => with == without,
+        _ => false,
+    }
+}
+
+/// Removes the dotted key `key` (`body[0].density`: entry 0 of the array of tables `body`) from
+/// `table`; false when it is not there.
+fn remove_key(table: &mut toml::Table, key: &str) -> bool {
+    let (path, last) = key.rsplit_once('.').unwrap_or(("", key));
+    let mut t = table;
+    for part in path.split('.').filter(|p| !p.is_empty()) {
+        let entry = match part.strip_suffix(']').and_then(|r| r.split_once('[')) {
+            Some((name, i)) => i
+                .parse::<usize>()
+                .ok()
+                .and_then(|i| t.get_mut(name)?.as_array_mut()?.get_mut(i)),
+            None => t.get_mut(part),
+        };
+        match entry.and_then(|v| v.as_table_mut()) {
+            Some(next) => t = next,
+            None => return false,
+        }
+    }
+    t.remove(last).is_some()
 }
 
 /// A TOML error on one line: the parser's message, the table it is in and, with `position`, the line and
 /// column in `text`.
 fn toml_message(e: &toml::de::Error, text: &str, position: bool) -> String {
-    let mut message = e.message().trim().replace('\n', " ");
+    // The parser quotes the value it refused, which may be a huge --set value: cut it.
+    let quoted: Vec<String> = e.message().trim().split('"').map(echoed).collect();
+    let mut message = quoted.join("\"").replace('\n', " ");
     if let Some(start) = e.span().map(|span| span.start) {
         // The table is the last header up to the end of the error's line (a missing field's span is the
         // header of the table that misses it).
@@ -466,10 +514,11 @@ impl RunConfig {
         let mut table: toml::Table =
             toml::from_str(&text).map_err(|e| parse_err(&file, toml_message(&e, &text, true)))?;
         for o in overrides {
+            let set = echoed(o);
             let (key, value) = o.split_once('=').ok_or_else(|| {
                 parse_err(
                     &file,
-                    format!("--set {o}: expected key=value (e.g. grid.cell_size=2.5)"),
+                    format!("--set {set}: expected key=value (e.g. grid.cell_size=2.5)"),
                 )
             })?;
             let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
@@ -479,20 +528,20 @@ impl RunConfig {
             let keys: Vec<&str> = key.trim().split('.').collect();
             let mut t = &mut table;
             for k in &keys[..keys.len() - 1] {
-                t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {o}: {e}")))?;
+                t = descend(t, k).map_err(|e| parse_err(&file, format!("--set {set}: {e}")))?;
             }
             let last = keys[keys.len() - 1];
             if let Some((name, _)) = last.strip_suffix(']').and_then(|r| r.split_once('[')) {
                 return Err(parse_err(
                     &file,
                     format!(
-                        "--set {o}: `{last}` is an entry of [[{name}]]: --set names a key inside it, \
+                        "--set {set}: `{last}` is an entry of [[{name}]]: --set names a key inside it, \
                          e.g. --set {last}.name=..."
                     ),
                 ));
             }
             if let Some(e) = replaces_table(t.get(last), keys.len() == 1, key.trim(), &value) {
-                return Err(parse_err(&file, format!("--set {o}: {e}")));
+                return Err(parse_err(&file, format!("--set {set}: {e}")));
             }
             t.insert(last.to_string(), value);
         }
@@ -691,8 +740,8 @@ impl RunConfig {
         Ok(())
     }
 
-    /// What a set-up turned inside the grid (`grid.rotation` != 0) cannot have: a plate (the turn is
-    /// about z, the extrusion is not turned), node boxes and nodal loads (they select grid nodes along
+    /// What a set-up turned inside the grid (`grid.rotation` != 0) cannot have: finite elements (they
+    /// are the grid's cells), a plate (the turn is about z, the extrusion is not turned), node boxes and nodal loads (they select grid nodes along
     /// the grid's axes), a rigid body with one component free and the other prescribed (a motion along
     /// one specimen axis is along no grid axis).
     fn check_rotation(&self, c: Check) -> Result<(), ConfigError> {
@@ -707,6 +756,11 @@ impl RunConfig {
                 &format!("0 with {what} (a turned set-up is plane, with [ct] specimens, [[body]] and [[rigid_body]] sections whose x and y motions are both free or both prescribed)"),
             ))
         };
+        if self.shape.method == crate::model::Method::Fem {
+            return refuse(
+                "shape.method = \"fem\" (the elements are the grid's cells, along its axes)",
+            );
+        }
         if self.extrusion.is_some() {
             return refuse("[extrusion]");
         }
