@@ -412,7 +412,8 @@ fn rewrite(file: &Path, name: &str, value: Option<f64>, shift: f64) {
 /// `crack RUN` refuses, naming the file, a snapshot that is in range but not the run's own as written: its
 /// damage or positions rewritten, one of another run, one copied under another step's name, and a snapshot
 /// run.json lists that is missing; crack.json is not rewritten. The untouched run passes, and so does a run
-/// written before snapshots carried their identity (no attributes, no list in run.json).
+/// resumed with more steps and a run written before snapshots carried their identity (no attributes, no
+/// list in run.json).
 #[test]
 fn crack_refuses_snapshots_that_are_not_the_runs_own() {
     let dir = scratch("faults", "crack-identity", &[]);
@@ -506,15 +507,37 @@ fn crack_refuses_snapshots_that_are_not_the_runs_own() {
     );
     std::fs::write(&last, kept).expect("restore");
     succeeds(&run(&dir, &["crack", "d"]));
+    // A resumed run with more steps is another run identity: the snapshots written before the resumption
+    // are listed with the identity of the run that wrote them, and pass.
+    let resumed = [
+        "run",
+        "tiny.toml",
+        "--quiet",
+        "--output",
+        "d",
+        "--resume",
+        "--steps",
+        "6",
+    ];
+    succeeds(&run(&dir, &resumed));
+    let runs: Vec<Option<String>> = record(&d)
+        .snapshots
+        .expect("list")
+        .into_iter()
+        .map(|s| s.run)
+        .collect();
+    assert_eq!(runs.len(), 4);
+    assert!(runs[0] == runs[2] && runs[2] != runs[3], "{runs:?}");
+    succeeds(&run(&dir, &["crack", "d"]));
     // A run of an earlier version: no list in run.json, no identity in the snapshots.
     let mut old = record(&d);
-    old.snapshots = None;
+    let written = old.snapshots.take().expect("list");
     std::fs::write(
         d.join("run.json"),
         serde_json::to_string(&old).expect("json"),
     )
     .expect("write");
-    for s in &listed {
+    for s in written {
         let f = hdf5_metno::File::open_rw(d.join(&s.file)).expect("open the snapshot");
         f.delete_attr("run_id").expect("delete run_id");
         f.delete_attr("fields_crc32").expect("delete fields_crc32");
