@@ -370,6 +370,24 @@ pub struct RunRecord {
     /// The process that holds the directory while the run is running ([`lock`]).
     #[serde(default)]
     pub holder: Option<Holder>,
+    /// The snapshots `fields_NNNNNN.h5` written so far, as written; absent in the records of runs written
+    /// before snapshots carried their identity (whose snapshots are read unverified).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub snapshots: Option<Vec<SnapshotRecord>>,
+}
+
+/// A snapshot as it was written, in run.json and (run id, step, checksum) in the file's attributes.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SnapshotRecord {
+    /// File name in the run directory.
+    pub file: String,
+    /// Step of the snapshot.
+    pub step: usize,
+    /// The [`RunIdentity::id`] of the run that wrote it (absent: written by an earlier version of the
+    /// program, before a resumption).
+    pub run: Option<String>,
+    /// CRC-32 of its point fields as written (see [`crate::io::fields_checksum`]; absent as `run`).
+    pub checksum: Option<String>,
 }
 
 impl RunRecord {

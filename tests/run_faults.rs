@@ -5,7 +5,7 @@
 //! * Ctrl-C on several processes stops them all at the same step with a complete checkpoint of it;
 //! * a write that fails (a file-size limit standing in for a full disk) leaves a resumable state and a
 //!   run.json that says "failed";
-//! * `crack` refuses corrupt snapshots.
+//! * `crack` refuses corrupt snapshots, and snapshots that are not the run's own as written.
 //!
 //! Every child process runs under `timeout`, so a hang fails the test instead of blocking it.
 
@@ -396,6 +396,152 @@ fn crack_refuses_corrupt_snapshots_and_keeps_crack_json() {
         );
     }
     std::fs::write(&snapshot, &good).expect("restore");
+    succeeds(&run(&dir, &["crack", "d"]));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Sets every value of the dataset `name` of the snapshot `file` to `value` plus `shift`.
+fn rewrite(file: &Path, name: &str, value: Option<f64>, shift: f64) {
+    let f = hdf5_metno::File::open_rw(file).expect("open the snapshot");
+    let ds = f.dataset(name).expect("dataset");
+    let values: Vec<f64> = ds.read_raw().expect("read");
+    let values: Vec<f64> = values.iter().map(|v| value.unwrap_or(*v) + shift).collect();
+    ds.write_raw(&values).expect("write");
+}
+
+/// `crack RUN` refuses, naming the file, a snapshot that is in range but not the run's own as written: its
+/// damage or positions rewritten, one of another run, one copied under another step's name, and a snapshot
+/// run.json lists that is missing; crack.json is not rewritten. The untouched run passes, and so does a run
+/// resumed with more steps and a run written before snapshots carried their identity (no attributes, no
+/// list in run.json).
+#[test]
+fn crack_refuses_snapshots_that_are_not_the_runs_own() {
+    let dir = scratch("faults", "crack-identity", &[]);
+    succeeds(&run(
+        &dir,
+        &["run", "tiny.toml", "--quiet", "--output", "d"],
+    ));
+    let other = [
+        "run",
+        "tiny.toml",
+        "--quiet",
+        "--output",
+        "e",
+        "--steps",
+        "6",
+    ];
+    succeeds(&run(&dir, &other));
+    let d = dir.join("d");
+    let listed = record(&d).snapshots.expect("run.json lists the snapshots");
+    let steps: Vec<(&str, usize)> = listed.iter().map(|s| (s.file.as_str(), s.step)).collect();
+    assert_eq!(
+        steps,
+        [
+            ("fields_000000.h5", 0),
+            ("fields_000002.h5", 2),
+            ("fields_000004.h5", 4)
+        ]
+    );
+    assert!(
+        listed
+            .iter()
+            .all(|s| s.run.is_some() && s.checksum.is_some())
+    );
+    succeeds(&run(&dir, &["crack", "d"]));
+    let crack_json = std::fs::read(d.join("crack.json")).expect("crack.json");
+    let snapshot = d.join("fields_000002.h5");
+    let good = std::fs::read(&snapshot).expect("snapshot");
+    let changed = "its point fields changed after writing";
+    let faults: [(&str, &dyn Fn(), &str); 5] = [
+        (
+            "damage 1",
+            &|| rewrite(&snapshot, "damage", Some(1.0), 0.0),
+            changed,
+        ),
+        // (The tiny run has no damage yet: setting it to 0 would change nothing.)
+        (
+            "damage 0.5",
+            &|| rewrite(&snapshot, "damage", Some(0.5), 0.0),
+            changed,
+        ),
+        (
+            "shifted",
+            &|| rewrite(&snapshot, "position", None, 1e6),
+            changed,
+        ),
+        (
+            "another run's",
+            &|| {
+                std::fs::copy(dir.join("e/fields_000002.h5"), &snapshot).expect("copy");
+            },
+            "written by another run",
+        ),
+        (
+            "another step's",
+            &|| {
+                std::fs::copy(d.join("fields_000004.h5"), &snapshot).expect("copy");
+            },
+            "holds step 4, its name says step 2",
+        ),
+    ];
+    for (what, fault, shown) in faults {
+        std::fs::write(&snapshot, &good).expect("restore");
+        fault();
+        let line = refused(&run(&dir, &["crack", "d"]), &["d/fields_000002.h5", shown]);
+        assert!(line.contains("not this run's snapshot"), "{what}: {line}");
+        assert_eq!(
+            std::fs::read(d.join("crack.json")).expect("crack.json"),
+            crack_json
+        );
+    }
+    std::fs::write(&snapshot, &good).expect("restore");
+    let last = d.join("fields_000004.h5");
+    let kept = std::fs::read(&last).expect("last snapshot");
+    std::fs::remove_file(&last).expect("delete the last snapshot");
+    refused(
+        &run(&dir, &["crack", "d"]),
+        &[
+            "d/fields_000004.h5",
+            "missing: run.json lists it as the snapshot of step 4",
+        ],
+    );
+    std::fs::write(&last, kept).expect("restore");
+    succeeds(&run(&dir, &["crack", "d"]));
+    // A resumed run with more steps is another run identity: the snapshots written before the resumption
+    // are listed with the identity of the run that wrote them, and pass.
+    let resumed = [
+        "run",
+        "tiny.toml",
+        "--quiet",
+        "--output",
+        "d",
+        "--resume",
+        "--steps",
+        "6",
+    ];
+    succeeds(&run(&dir, &resumed));
+    let runs: Vec<Option<String>> = record(&d)
+        .snapshots
+        .expect("list")
+        .into_iter()
+        .map(|s| s.run)
+        .collect();
+    assert_eq!(runs.len(), 4);
+    assert!(runs[0] == runs[2] && runs[2] != runs[3], "{runs:?}");
+    succeeds(&run(&dir, &["crack", "d"]));
+    // A run of an earlier version: no list in run.json, no identity in the snapshots.
+    let mut old = record(&d);
+    let written = old.snapshots.take().expect("list");
+    std::fs::write(
+        d.join("run.json"),
+        serde_json::to_string(&old).expect("json"),
+    )
+    .expect("write");
+    for s in written {
+        let f = hdf5_metno::File::open_rw(d.join(&s.file)).expect("open the snapshot");
+        f.delete_attr("run_id").expect("delete run_id");
+        f.delete_attr("fields_crc32").expect("delete fields_crc32");
+    }
     succeeds(&run(&dir, &["crack", "d"]));
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -574,14 +574,16 @@ fn open_output<'a, const D: usize>(
             crate::crack::rayleigh_speed(concrete.bulk, concrete.shear, ct.density),
         );
     }
-    let record = new_record(invocation, prepared);
-    if root {
-        record.write(dir)?;
-    }
+    out.set_run_id(&prepared.identity.id);
     if let Some(header) = &prepared.resume_from {
         header
             .restore_records(&mut out)
             .context("restoring the output's records from the checkpoint")?;
+    }
+    let mut record = new_record(invocation, prepared);
+    record.snapshots = Some(out.snapshot_records());
+    if root {
+        record.write(dir)?;
     }
     Ok(Records {
         _lock: lock,
@@ -617,6 +619,7 @@ fn new_record(invocation: &Invocation, prepared: &Prepared) -> RunRecord {
         reduced_steps: 0,
         note: None,
         holder: Some(Holder::this_process()),
+        snapshots: None,
     }
 }
 

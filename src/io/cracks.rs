@@ -1,6 +1,7 @@
 //! The crack's records of a run: crack.json, the crack plots, the section layer of a plate whose points
 //! the crack is measured on, and the re-measurement of a finished run from its snapshots.
 
+use super::provenance::Provenance;
 use super::{OutputError, file, io_err, write_atomic};
 use crate::crack::{self, CrackCriteria, CrackState, Front};
 use crate::plot::LinePlot;
@@ -218,6 +219,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
     let speeds = old_json.map_or(serde_json::Value::Null, |v| {
         v["tip_speed_every_step"].clone()
     });
+    let provenance = Provenance::of(dir)?;
     let mut states = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io_err(dir))? {
         let path = entry.map_err(io_err(dir))?.path();
@@ -225,7 +227,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         if !name.is_some_and(|n| n.starts_with(file::FIELDS.0) && n.ends_with(file::FIELDS.1)) {
             continue;
         }
-        let mut state = measure_snapshot(&path, &how)?;
+        let mut state = measure_snapshot(&path, &how, &provenance)?;
         let time = state.time;
         if let Some(o) = old
             .iter()
@@ -273,7 +275,7 @@ fn refused_input(e: crate::input::InputError) -> OutputError {
 
 /// A snapshot that HDF5 cannot read (not an HDF5 file, a missing dataset or attribute) is corrupt: the
 /// error of the snapshot at `path`, as a bad input.
-fn unreadable(path: &Path, e: &hdf5_metno::Error) -> OutputError {
+pub(super) fn unreadable(path: &Path, e: &hdf5_metno::Error) -> OutputError {
     let detail = e.to_string().replace('\n', " ");
     OutputError::Run {
         path: path.display().to_string(),
@@ -328,11 +330,17 @@ fn verified(
 }
 
 /// The crack state of the snapshot `path` (its time, damage and positions; for a plate on the section
-/// layer), measured as `how` says; the values it reads are verified first ([`verified`]).
-fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputError> {
+/// layer), measured as `how` says; the snapshot's identity is checked first, the values it reads are
+/// verified ([`verified`]) and then its checksum ([`Provenance`]).
+fn measure_snapshot(
+    path: &Path,
+    how: &Measure,
+    provenance: &Provenance,
+) -> Result<CrackState, OutputError> {
     let h5 = |e: hdf5_metno::Error| unreadable(path, &e);
     crate::input::check_input_file(path, crate::input::DATA_INPUT_MAX).map_err(refused_input)?;
     let file = hdf5_metno::File::open(path).map_err(h5)?;
+    provenance.check_identity(&file, path)?;
     let time: f64 = file
         .attr("time_s")
         .and_then(|a| a.read_scalar())
@@ -388,6 +396,7 @@ fn measure_snapshot(path: &Path, how: &Measure) -> Result<CrackState, OutputErro
             })
             .count();
     }
+    provenance.check_checksum(&file, path)?;
     Ok(state)
 }
 

@@ -11,6 +11,7 @@
 //!   with `crack_length.png` and `band_width.png` drawn from them.
 
 mod cracks;
+mod provenance;
 
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::model::{Model, State};
@@ -297,12 +298,39 @@ fn xdmf(snapshots: &[Snapshot], n: usize) -> String {
     s
 }
 
-/// One written snapshot (for the XDMF index).
+/// One written snapshot (for the XDMF index and run.json's list of snapshots).
 #[derive(serde::Serialize, serde::Deserialize)]
 struct Snapshot {
     step: usize,
     time: f64,
     file: String,
+    /// The run's identity ([`crate::rundir::RunIdentity::id`]) in the file (absent in the checkpoints
+    /// of earlier versions).
+    #[serde(default)]
+    run: Option<String>,
+    /// [`fields_checksum`] of the file's point fields (absent as `run`).
+    #[serde(default)]
+    checksum: Option<String>,
+}
+
+/// The attribute of a snapshot holding the identity of the run that wrote it.
+pub const RUN_ID_ATTR: &str = "run_id";
+/// The attribute of a snapshot holding [`fields_checksum`] of its point fields as written.
+pub const CHECKSUM_ATTR: &str = "fields_crc32";
+
+/// CRC-32 (8 hex digits) of a snapshot's point fields: the bytes (little-endian) of `connectivity`,
+/// then of the datasets of [`FIELDS`] in that order, `fields`.
+pub fn fields_checksum(connectivity: &[i64], fields: &[&[f64]]) -> String {
+    let mut h = crc32fast::Hasher::new();
+    for c in connectivity {
+        h.update(&c.to_le_bytes());
+    }
+    for values in fields {
+        for v in *values {
+            h.update(&v.to_le_bytes());
+        }
+    }
+    format!("{:08x}", h.finalize())
 }
 
 /// The output directory of a run.
@@ -311,6 +339,8 @@ pub struct RunOutput {
     title: String,
     /// The configuration text (TOML), stored in every snapshot file.
     config_text: String,
+    /// The run's identity ([`crate::rundir::RunIdentity::id`]), stored in every snapshot file.
+    run_id: Option<String>,
     rows: Vec<StepReport>,
     snapshots: Vec<Snapshot>,
     /// Positions at t = 0 as x, y, z (z = 0 in 2D), for the displacement field (mm).
@@ -362,6 +392,7 @@ impl RunOutput {
             dir: dir.to_owned(),
             title: title.to_owned(),
             config_text: config_text.to_owned(),
+            run_id: None,
             rows: Vec::new(),
             snapshots: Vec::new(),
             initial_position: Vec::new(),
@@ -374,6 +405,24 @@ impl RunOutput {
             section_z: None,
             frame: Frame::IDENTITY,
         }
+    }
+
+    /// The identity of the run ([`crate::rundir::RunIdentity::id`]) that its snapshots carry.
+    pub fn set_run_id(&mut self, id: &str) {
+        self.run_id = Some(id.to_owned());
+    }
+
+    /// The snapshots recorded so far, for run.json.
+    pub fn snapshot_records(&self) -> Vec<crate::rundir::SnapshotRecord> {
+        self.snapshots
+            .iter()
+            .map(|s| crate::rundir::SnapshotRecord {
+                file: s.file.clone(),
+                step: s.step,
+                run: s.run.clone(),
+                checksum: s.checksum.clone(),
+            })
+            .collect()
     }
 
     /// A set-up turned inside the grid by `frame`: report its results in the specimen's frame.
@@ -614,6 +663,8 @@ impl RunOutput {
             step: state.counters.step,
             time: state.counters.time,
             file: file::numbered(file::FIELDS, state.counters.step),
+            run: self.run_id.clone(),
+            checksum: Some(self.checksum(state)),
         });
         let Some((tip, criteria)) = &self.crack else {
             return;
@@ -707,6 +758,10 @@ impl RunOutput {
         f.new_attr::<u64>()
             .create("step")?
             .write_scalar(&(state.counters.step as u64))?;
+        if let Some(id) = &self.run_id {
+            put_text(&f, RUN_ID_ATTR, id)?;
+        }
+        put_text(&f, CHECKSUM_ATTR, &self.checksum(state))?;
         let connectivity: Vec<i64> = (0..n as i64).collect();
         let ds = f
             .new_dataset_builder()
@@ -731,6 +786,14 @@ impl RunOutput {
         // A write that fails on the way to the disk (full, or above the file-size limit) is reported here:
         // dropping the file would close it silently, truncated.
         f.flush()
+    }
+
+    /// [`fields_checksum`] of the snapshot of `state`.
+    fn checksum<const D: usize>(&self, state: &State<D>) -> String {
+        let connectivity: Vec<i64> = (0..state.particles.len() as i64).collect();
+        let values = self.point_values(state);
+        let fields: Vec<&[f64]> = values.iter().map(Vec::as_slice).collect();
+        fields_checksum(&connectivity, &fields)
     }
 
     /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0

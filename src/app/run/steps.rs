@@ -77,6 +77,7 @@ impl Records<'_> {
         self.checkpoint = Some(state.counters.step);
         self.out.write_snapshot(state)?;
         self.out.force_plots()?;
+        self.record.snapshots = Some(self.out.snapshot_records());
         self.record.steps_done = state.counters.step;
         self.record.time_reached = state.counters.time;
         self.record.write(self.dir)?;
