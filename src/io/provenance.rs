@@ -54,12 +54,18 @@ impl Provenance {
         Ok(Self { record })
     }
 
-    /// The entry of run.json for the snapshot named `name`.
-    fn listed(&self, name: &str) -> Option<&SnapshotRecord> {
-        self.record
+    /// The file name of the snapshot at `path` and its entry in run.json, if listed.
+    fn listed(&self, path: &Path) -> (String, Option<&SnapshotRecord>) {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let entry = self
+            .record
             .as_ref()
             .and_then(|r| r.snapshots.as_ref())
-            .and_then(|list| list.iter().find(|s| s.file == name))
+            .and_then(|list| list.iter().find(|s| s.file == name));
+        (name, entry)
     }
 
     /// Checks the identity of the snapshot `file` at `path`: the run that wrote it (as run.json lists it,
@@ -69,11 +75,7 @@ impl Provenance {
         file: &hdf5_metno::File,
         path: &Path,
     ) -> Result<(), OutputError> {
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let listed = self.listed(&name);
+        let (name, listed) = self.listed(path);
         let expected = listed.and_then(|s| s.run.clone()).or_else(|| {
             self.record
                 .as_ref()
@@ -127,12 +129,8 @@ impl Provenance {
         file: &hdf5_metno::File,
         path: &Path,
     ) -> Result<(), OutputError> {
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
         let in_file = text_attr(file, CHECKSUM_ATTR);
-        let in_record = self.listed(&name).and_then(|s| s.checksum.clone());
+        let in_record = self.listed(path).1.and_then(|s| s.checksum.clone());
         if in_file.is_none() && in_record.is_none() {
             return Ok(());
         }
