@@ -331,7 +331,15 @@ impl Matrix {
             // (set_block_pattern built the structure from it); it is restored below.
             check(unsafe { get(self.raw, &mut a) }, "MatSeq*GetArray")?;
             fill(unsafe { std::slice::from_raw_parts_mut(a, nnz) }, layout);
-            return check(unsafe { restore(self.raw, &mut a) }, "MatSeq*RestoreArray");
+            check(unsafe { restore(self.raw, &mut a) }, "MatSeq*RestoreArray")?;
+            // MatSeqAIJRestoreArray marks the values changed; MatSeqBAIJRestoreArray does not, so
+            // without an assembly the preconditioner would never be rebuilt for the new values (ILU
+            // silently lagged across Newton iterations and steps) and the cached inverse of the block
+            // diagonal (point-block Jacobi, SOR) would stay stale.
+            return match layout {
+                BlockLayout::Blocks => self.assemble(),
+                BlockLayout::Rows => Ok(()),
+            };
         }
         let mut values = vec![0.0; nnz];
         fill(&mut values, BlockLayout::Rows);
