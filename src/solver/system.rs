@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::multigrid::Hierarchy;
+use crate::solver_defaults;
 
 /// The nonlinear problem of one step, handed to SNES.
 pub(super) struct StepProblem<'a, 'b, const D: usize> {
@@ -306,11 +307,14 @@ impl LinearSystem {
                 owned.scalars().start
             )));
         }
-        // AIJ with the block size set (inode kernels). `-mat_type baij` makes ILU, triangular solves and
-        // products 1.4-1.8x faster at the paper's size, but its block ILU(0) (no pivot shift) failed in 3
-        // of 1000 steps of the half-resolution CT at 4.3 m/s where point ILU(0) with a nonzero shift passes
-        // (docs/benchmarks.md); GAMG and the field split need AIJ anyway.
-        let mut jac = Matrix::new(session, n, nf)?;
+        let mut snes = Snes::new(session, prefix)?;
+        snes.set_from_options()?;
+        // The storage that suits the preconditioner (`-mat_type` overrides it).
+        let pc = snes.pc_type()?;
+        let sub_pc =
+            petsc::option_string(session, &format!("{}sub_pc_type", prefix.unwrap_or("")))?;
+        let kind = solver_defaults::matrix_type(session.size(), pc.as_deref(), sub_pc.as_deref());
+        let mut jac = Matrix::with_type(session, n, nf, kind)?;
         jac.set_block_pattern(&owned.pattern())?;
         // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
         // 6 in 3D) for algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
@@ -329,8 +333,6 @@ impl LinearSystem {
             })?;
         }
         jac.set_near_null_space(&mut modes)?;
-        let mut snes = Snes::new(session, prefix)?;
-        snes.set_from_options()?;
         if let Some(e) = dofs.layout().eta_bar() {
             // Field index sets for `-pc_type fieldsplit` (names: `-fieldsplit_u_*`, `-fieldsplit_eta_bar_*`).
             let (u, eb): (Vec<i32>, Vec<i32>) = (0..n)
