@@ -511,6 +511,15 @@ fn check_first_step(
         Err(e @ StepError::Setup(_)) => {
             return Err(bad(format!("{file}: {e}; nothing was written")));
         }
+        // Process 0 reports it.
+        Err(StepError::Interrupted { .. }) if session.rank() != 0 => {
+            return Err(crate::app::FailedElsewhere.into());
+        }
+        Err(StepError::Interrupted { .. }) => {
+            return Err(anyhow::anyhow!(
+                "interrupted in the first step, before anything was written"
+            ));
+        }
         Err(_) => {}
     }
     Ok(())

@@ -135,9 +135,9 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// Makes the steps watch `interrupt`: once a request is older than [`FINISH_WITHIN`], the step in
-    /// progress is abandoned at its next residual or Jacobian evaluation ([`StepError::Interrupted`],
-    /// nothing committed). While a step is watched, every evaluation costs one reduction over the
-    /// processes, which agree on the evaluation where they all abandon it.
+    /// progress is abandoned at its next residual or Jacobian evaluation or linear-solver iteration
+    /// ([`StepError::Interrupted`], nothing committed). While a step is watched, each of them costs one
+    /// reduction over the processes, which agree on the one where they all abandon the step.
     pub fn watch(&mut self, interrupt: Arc<Interrupt>) {
         self.workspace.interrupt = Some(interrupt);
     }

@@ -64,9 +64,9 @@ impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
         }
     }
 
-    /// Before an evaluation: whether the step is to be abandoned on its interrupt, agreed by every
-    /// process (one reduction while an interrupt is watched; SNES calls the evaluations on all processes
-    /// in the same order, so they all leave at the same one). Once abandoned, every evaluation fails with
+    /// Before an evaluation and at each iteration of the linear solver: whether the step is to be
+    /// abandoned on its interrupt, agreed by every process (one reduction while an interrupt is watched;
+    /// SNES calls them on all processes in the same order, so they all leave at the same one). Once abandoned, every evaluation fails with
     /// a fatal error, which ends the solve at once; the caller tells it from a failure by
     /// [`StepProblem::abandoned`].
     fn abandon(&mut self) -> Result<(), CallbackError> {
@@ -109,6 +109,11 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         self.assembly_time += t.elapsed().as_secs_f64();
         self.residuals += 1;
         result
+    }
+
+    /// Between evaluations a linear solve may take long: its iterations check the interrupt too.
+    fn linear_iteration(&mut self) -> Result<(), CallbackError> {
+        self.abandon()
     }
 
     fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
