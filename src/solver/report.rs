@@ -54,7 +54,9 @@ pub enum StepError {
     /// The step was abandoned on an interrupt ([`Interrupt`]) before it converged, on every process at
     /// the same evaluation: nothing was committed, the state is that of the last finished step. Not a
     /// failure of the step: it is not retried.
-    #[error("step {step} at t = {time:e} s was abandoned on an interrupt; nothing of it was committed")]
+    #[error(
+        "step {step} at t = {time:e} s was abandoned on an interrupt; nothing of it was committed"
+    )]
     Interrupted {
         /// Step number.
         step: usize,
