@@ -74,18 +74,19 @@ impl Records<'_> {
         state: Option<&State<D>>,
     ) -> Result<()> {
         let written = match state {
-            Some(state) => self
-                .write_checkpoint(state)
-                .and_then(|()| self.write_snapshot(state)),
+            Some(state) => {
+                self.out.note_snapshot(state);
+                self.write_checkpoint(state)
+                    .and_then(|()| self.write_snapshot(state))
+            }
             None => Ok(()),
         };
         agreed(session, written)
     }
 
-    /// The first writes of [`Records::keep`] on process 0: the checkpoint, which lists the snapshot of
-    /// its step (a resumed run writes the snapshot's files if they are missing).
+    /// The checkpoint of `state` on process 0 (a resumed run writes the snapshot of its step if its files
+    /// are missing).
     fn write_checkpoint<const D: usize>(&mut self, state: &State<D>) -> Result<()> {
-        self.out.note_snapshot(state);
         checkpoint::save(self.dir, state, &self.out, self.identity)?;
         self.checkpoint = Some(state.counters.step);
         Ok(())
@@ -242,11 +243,11 @@ impl Steps<'_> {
         }
     }
 
-    /// The end of an interrupted run (`abandoned`: the step that was abandoned unfinished, if any): the
-    /// last finished step is saved, the most urgent first, since an MPI launcher kills the processes
-    /// about a second after it forwarded the signal: its checkpoint (unless the directory holds it
-    /// already), run.json closed as `interrupted`, then its snapshot (a resumed run writes a missing
-    /// one); process 0's error says how to continue. Collective.
+    /// The end of an interrupted run (`abandoned`: the step that was abandoned unfinished, if any), in
+    /// the second or so that an MPI launcher leaves the processes after it forwarded the signal: the
+    /// checkpoint of the last finished step (unless the directory holds it already), then run.json
+    /// closed as `interrupted`; the step's snapshot is left to the resumed run, which writes a missing
+    /// one. Process 0's error says how to continue. Collective.
     fn interrupt<const D: usize>(
         &self,
         records: &mut Records,
@@ -255,18 +256,15 @@ impl Steps<'_> {
     ) -> anyhow::Error {
         self.bar.abandon();
         let (session, done) = (self.session, sim.state.counters.step);
-        let fresh = session.any(records.root && records.checkpoint != Some(done));
-        let mut whole = None;
-        if fresh {
-            let checkpoint = gather(session, sim).and_then(|w| {
-                let written = match w.as_deref() {
+        if session.any(records.root && records.checkpoint != Some(done)) {
+            let saved = gather(session, sim).and_then(|whole| {
+                let written = match whole.as_deref() {
                     Some(state) => records.write_checkpoint(state),
                     None => Ok(()),
                 };
-                whole = w;
                 agreed(session, written)
             });
-            if let Err(e) = checkpoint {
+            if let Err(e) = saved {
                 return records.abandon(session, sim, e, self.hint);
             }
         }
@@ -276,15 +274,6 @@ impl Steps<'_> {
         };
         if let Err(e) = records.finish(session, sim, "interrupted", Some(why.clone())) {
             return e;
-        }
-        if fresh {
-            let written = match whole.as_deref() {
-                Some(state) => records.write_snapshot(state),
-                None => Ok(()),
-            };
-            if let Err(e) = agreed(session, written) {
-                return records.abandon(session, sim, e, self.hint);
-            }
         }
         if !records.root {
             return FailedElsewhere.into();
