@@ -407,7 +407,7 @@ fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
     assert_eq!(resumed.len(), uninterrupted.len());
     // The resumed run builds PETSc's objects and shares out the points anew, so GMRES (relative
     // tolerance 1e-6) stops at other iterates: the solver's statistics differ, the results agree to
-    // the solvers' tolerances (measured: 4e-9 relative to each column's largest value).
+    // the solvers' tolerances (bound: 1e-6 of each column's largest value).
     let solver = [
         "newton_its",
         "linear_its",
@@ -420,6 +420,14 @@ fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
     let compared = |name: &str| {
         !(name.starts_with("wall_") || name.starts_with("bytes_") || solver.contains(&name))
     };
+    // Forces are measured against the largest of them (a support's tangential force is round-off).
+    let force = |name: &str| ["_fx", "_fy", "_fz"].iter().any(|c| name.ends_with(c));
+    let largest_force = uninterrupted
+        .iter()
+        .flatten()
+        .filter(|(name, _)| force(name))
+        .filter_map(|(_, v)| v.parse::<f64>().ok())
+        .fold(0.0_f64, |m, x| m.max(x.abs()));
     for (k, (name, _)) in uninterrupted[0].iter().enumerate() {
         if !compared(name) {
             continue;
@@ -436,7 +444,10 @@ fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
         };
         match (numbers(&a), numbers(&b)) {
             (Ok(a), Ok(b)) => {
-                let scale = b.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+                let mut scale = b.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+                if force(name) {
+                    scale = largest_force;
+                }
                 let diff = a
                     .iter()
                     .zip(&b)
