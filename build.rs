@@ -63,7 +63,7 @@ fn main() {
         "MatSeq(AIJ|BAIJ)(SetPreallocationCSR|GetArray|RestoreArray)",
         "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray",
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
-        "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix)",
+        "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix|MonitorSet)",
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType)",
         "PCMG(SetLevels|GetLevels|SetGalerkin|SetInterpolation)|MatSetBlockSizes",
         "SNES(Create|Destroy|SetFunction|SetJacobian|SetFromOptions|SetOptionsPrefix|Solve|GetIterationNumber)",

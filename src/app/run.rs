@@ -23,14 +23,13 @@ use crate::preflight;
 use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
 use crate::scenario::{self, Plan, RunSetup};
 use crate::schema::file;
-use crate::solver::{Simulation, StepError, StepReport};
+use crate::solver::{Interrupt, Simulation, StepError, StepReport};
 use crate::solver_defaults::{self, FALLBACK_PREFIX};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use resume::{check_resume, command_line, refusal, resume_command};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use steps::{Records, Steps, agreed};
 use summary::summary;
 
@@ -256,6 +255,7 @@ fn simulate<const D: usize>(
     let built = (root || sim.state.distributed).then(|| sim.state.clone());
     let resumed = resume(&prepared, &mut sim, root)?;
     let interrupted = on_signal(root)?;
+    sim.watch(interrupted.clone());
     let counts = points_per_process(session, &sim.state)?;
     if root {
         announce(session, cfg, &sim, (&counts, &prepared.dir));
@@ -358,20 +358,22 @@ fn resume<const D: usize>(
 }
 
 /// Notes SIGINT (Ctrl-C), SIGTERM (what an MPI launcher sends the processes on Ctrl-C) and SIGHUP: the
-/// run finishes the current step, which every process agrees on before the next, saves it and stops. The
-/// first signal is acknowledged on process 0 (`root`).
-fn on_signal(root: bool) -> Result<Arc<AtomicBool>> {
-    let interrupted = Arc::new(AtomicBool::new(false));
-    let flag = interrupted.clone();
+/// run finishes the current step if it ends within [`crate::solver::FINISH_WITHIN`], else abandons it
+/// (every process at the same evaluation), saves the last finished step and stops. The first signal is
+/// acknowledged on process 0 (`root`).
+fn on_signal(root: bool) -> Result<Arc<Interrupt>> {
+    let interrupt = Arc::new(Interrupt::new());
+    let noted = interrupt.clone();
     ctrlc::set_handler(move || {
-        if !flag.swap(true, Ordering::SeqCst) && root {
+        if noted.request() && root {
             eprintln!(
-                "signal received: stopping after this step, which is saved with a checkpoint"
+                "signal received: stopping; the last finished step is saved with a checkpoint \
+                 (a step that does not end at once is abandoned)"
             );
         }
     })
     .context("installing the signal handler")?;
-    Ok(interrupted)
+    Ok(interrupt)
 }
 
 /// The simulation of `setup` (of the file `file`) with its solver defaults applied, and the defaults'
@@ -508,6 +510,15 @@ fn check_first_step(
         }
         Err(e @ StepError::Setup(_)) => {
             return Err(bad(format!("{file}: {e}; nothing was written")));
+        }
+        // Process 0 reports it.
+        Err(StepError::Interrupted { .. }) if session.rank() != 0 => {
+            return Err(crate::app::FailedElsewhere.into());
+        }
+        Err(StepError::Interrupted { .. }) => {
+            return Err(anyhow::anyhow!(
+                "interrupted in the first step, before anything was written"
+            ));
         }
         Err(_) => {}
     }

@@ -9,6 +9,7 @@ use super::{
     IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, Vector, check, create, cstring, sys,
     to_petsc_int,
 };
+use std::cell::Cell;
 use std::ffi::{CStr, c_char, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
@@ -28,6 +29,11 @@ pub trait NonlinearProblem {
     fn residual(&mut self, x: &Vector, f: &mut Vector) -> std::result::Result<(), CallbackError>;
     /// Assembles dR/dx at `x` into `jac` (the preconditioning matrix).
     fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> std::result::Result<(), CallbackError>;
+    /// Called at every iteration of the linear solver of a [`Snes::solve`], on every process at the same
+    /// iteration: an error (of either kind) ends the solve at once, as a fatal one. Nothing by default.
+    fn linear_iteration(&mut self) -> std::result::Result<(), CallbackError> {
+        Ok(())
+    }
 }
 
 /// Statistics of one [`Snes::solve`].
@@ -75,6 +81,9 @@ pub struct Snes {
     raw: sys::SNES,
     residual: Option<Vector>,
     configured: bool,
+    /// The context of the solve in progress (null between solves) for the linear solver's monitor,
+    /// which is registered once with this box's address ([`linear_monitor_cb`]).
+    monitored: Option<Box<Cell<*mut c_void>>>,
 }
 
 struct Context<'a> {
@@ -96,6 +105,7 @@ impl Snes {
             raw,
             residual: None,
             configured: false,
+            monitored: None,
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -327,11 +337,19 @@ impl Snes {
                     self.set_from_options()
                 }
             })
+            .and_then(|()| self.monitor_linear_solver())
             .and_then(|()| {
-                check(
+                if let Some(slot) = &self.monitored {
+                    slot.set(ctx_ptr);
+                }
+                let solved = check(
                     sys::SNESSolve(self.raw, std::ptr::null_mut(), x.raw),
                     "SNESSolve",
-                )
+                );
+                if let Some(slot) = &self.monitored {
+                    slot.set(std::ptr::null_mut());
+                }
+                solved
             })
         };
         if let Err(mut e) = result {
@@ -341,6 +359,25 @@ impl Snes {
             return Err(e);
         }
         self.info(ctx.domain)
+    }
+
+    /// Registers [`linear_monitor_cb`] with the linear solver, once (PETSc keeps a monitor for the life
+    /// of the KSP, and registering one per solve would pile them up).
+    fn monitor_linear_solver(&mut self) -> Result<()> {
+        if self.monitored.is_some() {
+            return Ok(());
+        }
+        let slot = Box::new(Cell::new(std::ptr::null_mut::<c_void>()));
+        let slot_ptr = std::ptr::from_ref::<Cell<*mut c_void>>(&slot)
+            .cast_mut()
+            .cast::<c_void>();
+        // SAFETY: valid KSP; the box outlives the SNES and its KSP (dropped after SNESDestroy).
+        check(
+            unsafe { sys::KSPMonitorSet(self.ksp()?, Some(linear_monitor_cb), slot_ptr, None) },
+            "KSPMonitorSet",
+        )?;
+        self.monitored = Some(slot);
+        Ok(())
     }
 
     fn info(&self, domain_errors: Vec<String>) -> Result<SolveInfo> {
@@ -431,6 +468,38 @@ unsafe fn guarded(
         Err(p) => {
             ctx.fatal = Some(format!(
                 "panic in a SNES callback: {}",
+                panic_message(p.as_ref())
+            ));
+            ERR_USER
+        }
+    }
+}
+
+/// The linear solver's monitor: [`NonlinearProblem::linear_iteration`] of the solve in progress, whose
+/// context `slot` (a `Cell` of [`Snes`]) holds (nothing between solves).
+unsafe extern "C" fn linear_monitor_cb(
+    _ksp: sys::KSP,
+    _iteration: sys::PetscInt,
+    _norm: sys::PetscReal,
+    slot: *mut c_void,
+) -> sys::PetscErrorCode {
+    // SAFETY: `slot` is the box registered by `monitor_linear_solver`, alive as long as the KSP.
+    let ctx = unsafe { &*slot.cast::<Cell<*mut c_void>>() }.get();
+    if ctx.is_null() {
+        return 0;
+    }
+    // SAFETY: set only during SNESSolve, to the live `Context` of that solve; no other callback of the
+    // solve runs at the same time.
+    let ctx = unsafe { &mut *ctx.cast::<Context>() };
+    match catch_unwind(AssertUnwindSafe(|| ctx.problem.linear_iteration())) {
+        Ok(Ok(())) => 0,
+        Ok(Err(CallbackError::Domain(msg) | CallbackError::Fatal(msg))) => {
+            ctx.fatal = Some(msg);
+            ERR_USER
+        }
+        Err(p) => {
+            ctx.fatal = Some(format!(
+                "panic in the linear solver's monitor: {}",
                 panic_message(p.as_ref())
             ));
             ERR_USER

@@ -26,11 +26,13 @@ use crate::space::{from_xy, rotation_xy, xy};
 use crate::transfer::{self, GridState, StepSolution, TransferError};
 use nalgebra::{SMatrix, SVector, Vector2};
 use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 mod contacts;
 mod finish;
 mod input;
+mod interrupt;
 mod path;
 mod prepare;
 mod processes;
@@ -41,6 +43,7 @@ mod system;
 
 use contacts::ContactSet;
 pub use input::StepData;
+pub use interrupt::{FINISH_WITHIN, Interrupt};
 pub use path::PathPoint;
 use prepare::{Loading, StepPlan};
 use processes::{agree, agreed, complete_read_rows, complete_rows, largest};
@@ -99,6 +102,8 @@ pub struct Workspace<const D: usize = 2> {
     /// MPM on several processes: the node rows of the step's nodal sums on every process (P2G and the
     /// `eta_bar` projection are summed over neighbouring processes only).
     windows: Option<NodalWindows>,
+    /// The request to stop that the steps watch ([`Simulation::watch`]).
+    interrupt: Option<Arc<Interrupt>>,
 }
 
 impl<const D: usize> Workspace<D> {
@@ -129,6 +134,14 @@ impl<const D: usize> Simulation<D> {
         })
     }
 
+    /// Makes the steps watch `interrupt`: once a request is older than [`FINISH_WITHIN`], the step in
+    /// progress is abandoned at its next residual or Jacobian evaluation or linear-solver iteration
+    /// ([`StepError::Interrupted`], nothing committed). While a step is watched, each of them costs one
+    /// reduction over the processes, which agree on the one where they all abandon the step.
+    pub fn watch(&mut self, interrupt: Arc<Interrupt>) {
+        self.workspace.interrupt = Some(interrupt);
+    }
+
     /// Advances one step: [`advance`] on the simulation's parts.
     pub fn advance(&mut self, session: &SessionGuard) -> Result<StepReport, StepError> {
         advance(&self.model, &mut self.state, &mut self.workspace, session)
@@ -140,7 +153,8 @@ impl<const D: usize> Simulation<D> {
 /// is tried first at the same step); a reduced step is doubled again, up to the nominal `dt`, after
 /// `GROW_AFTER` steps in a row converged at their first try. The first step of a dynamic run starts with the consistent initial
 /// acceleration unless `initial_acceleration` is [`InitialAcceleration::Zero`] (computed into `state`
-/// before the first attempt). A failed attempt leaves `state` as it was.
+/// before the first attempt). A failed attempt leaves `state` as it was. A step abandoned on the
+/// workspace's interrupt ([`Simulation::watch`]) is [`StepError::Interrupted`] at once, not retried.
 pub fn advance<const D: usize>(
     model: &Model<D>,
     state: &mut State<D>,

@@ -51,6 +51,18 @@ pub enum StepError {
     /// contact between bodies on several processes, a grid node shared by three bodies).
     #[error("{0}")]
     Setup(String),
+    /// The step was abandoned on an interrupt ([`Interrupt`]) before it converged, on every process at
+    /// the same evaluation: nothing was committed, the state is that of the last finished step. Not a
+    /// failure of the step: it is not retried.
+    #[error(
+        "step {step} at t = {time:e} s was abandoned on an interrupt; nothing of it was committed"
+    )]
+    Interrupted {
+        /// Step number.
+        step: usize,
+        /// Time at the start of the step (s).
+        time: f64,
+    },
     /// With the points shared out over processes: another process's point failed in this step (that
     /// process reports which).
     #[error("a point held by another process failed in this step (that process names it)")]

@@ -210,7 +210,8 @@ fn read_rows<const D: usize>(
 impl<const D: usize> Step<'_, D> {
     /// Second phase: SNES from the prepared guess, repeated from the last solution while the contact
     /// active set and the rotation of pinned devices settle (`docs/theory.md`, "Contact with rigid
-    /// devices"). `Ok(Err(reason))` if a solve fails (nothing committed).
+    /// devices"). `Ok(Err(reason))` if a solve fails (nothing committed); [`StepError::Interrupted`] if
+    /// it was abandoned on the workspace's interrupt.
     pub(super) fn solve(
         &mut self,
         session: &SessionGuard,
@@ -226,8 +227,10 @@ impl<const D: usize> Step<'_, D> {
             assembler,
             system,
             partners,
+            interrupt,
             ..
         } = &mut *self.work;
+        let interrupt = interrupt.as_deref();
         let StepPlan {
             contacts,
             loading,
@@ -269,9 +272,28 @@ impl<const D: usize> Step<'_, D> {
                 owned,
                 ..
             } = sys;
-            let mut problem =
-                StepProblem::new(&input, assembly_event, assembler, contacts, owned, session);
-            let info = match path::newton(snes, &mut problem, x, jac, path.as_mut()) {
+            let mut problem = StepProblem::new(
+                &input,
+                assembly_event,
+                assembler,
+                (contacts, owned),
+                session,
+                interrupt,
+            );
+            let result = path::newton(snes, &mut problem, x, jac, path.as_mut());
+            solves.assembly_time += problem.assembly_time;
+            solves.evaluations[0] += problem.residuals;
+            solves.evaluations[1] += problem.jacobians;
+            if problem.abandoned {
+                // Every process left the solve at the same evaluation. PETSc's objects, left in the
+                // middle of a solve, are built anew should the run go on.
+                *system = None;
+                return Err(StepError::Interrupted {
+                    step: step + 1,
+                    time: self.state.counters.time,
+                });
+            }
+            let info = match result {
                 Ok(info) => info,
                 // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails
                 // this attempt like a diverged solve; the objects are rebuilt for the next attempt.
@@ -284,9 +306,6 @@ impl<const D: usize> Step<'_, D> {
                 }
                 Err(e) => return Err(e.into()),
             };
-            solves.assembly_time += problem.assembly_time;
-            solves.evaluations[0] += problem.residuals;
-            solves.evaluations[1] += problem.jacobians;
             if !info.converged() {
                 return Ok(Err(diverged(&info)));
             }

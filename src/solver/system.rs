@@ -27,18 +27,26 @@ pub(super) struct StepProblem<'a, 'b, const D: usize> {
     pub(super) session: &'a SessionGuard,
     /// The residual of all unknowns (this process hands PETSc its own rows).
     pub(super) scratch: Vec<f64>,
+    /// The request to stop that the step watches ([`Simulation::watch`]).
+    pub(super) interrupt: Option<&'a Interrupt>,
+    /// The processes agreed to abandon the step at an evaluation ([`StepProblem::abandon`]).
+    pub(super) abandoned: bool,
 }
+
+/// The message of the callback error that abandons a solve on an interrupt (SNES stops at once).
+const ABANDONED: &str = "the step was abandoned on an interrupt";
 
 impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
     /// The problem of the step `input` with its `contacts`, evaluated by `assembler` on the rows
-    /// `owned` by this process (residual and Jacobian evaluations timed under `event`).
+    /// `owned` by this process (residual and Jacobian evaluations timed under `event`), abandoned on
+    /// `interrupt`.
     pub(super) fn new(
         input: &'a StepInput<'b, D>,
         event: LogEvent,
         assembler: &'a mut Assembler<D>,
-        contacts: &'a [ContactSet<D>],
-        owned: &'a OwnedRows,
+        (contacts, owned): (&'a [ContactSet<D>], &'a OwnedRows),
         session: &'a SessionGuard,
+        interrupt: Option<&'a Interrupt>,
     ) -> Self {
         Self {
             input,
@@ -52,12 +60,33 @@ impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
             owned,
             session,
             scratch: Vec::new(),
+            interrupt,
+            abandoned: false,
         }
+    }
+
+    /// Before an evaluation and at each iteration of the linear solver: whether the step is to be
+    /// abandoned on its interrupt, agreed by every process (one reduction while an interrupt is watched;
+    /// SNES calls them on all processes in the same order, so they all leave at the same one). Once abandoned, every evaluation fails with
+    /// a fatal error, which ends the solve at once; the caller tells it from a failure by
+    /// [`StepProblem::abandoned`].
+    fn abandon(&mut self) -> Result<(), CallbackError> {
+        if !self.abandoned {
+            let Some(interrupt) = self.interrupt else {
+                return Ok(());
+            };
+            self.abandoned = self.session.any(interrupt.overdue());
+        }
+        if self.abandoned {
+            return Err(CallbackError::Fatal(ABANDONED.into()));
+        }
+        Ok(())
     }
 }
 
 impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
     fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
+        self.abandon()?;
         let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
@@ -83,7 +112,13 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         result
     }
 
+    /// Between evaluations a linear solve may take long: its iterations check the interrupt too.
+    fn linear_iteration(&mut self) -> Result<(), CallbackError> {
+        self.abandon()
+    }
+
     fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
+        self.abandon()?;
         let _event = self.event.begin();
         let t = Instant::now();
         let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());

@@ -13,12 +13,12 @@ use crate::io::RunOutput;
 use crate::model::State;
 use crate::petsc::SessionGuard;
 use crate::rundir::{DirLock, RunIdentity, RunRecord};
-use crate::solver::{Simulation, StepError, StepReport};
+use crate::solver::{Interrupt, Simulation, StepError, StepReport};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use nalgebra::Vector2;
+use std::borrow::Cow;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 /// `result` agreed by every process: an error on one is an error on all (on the others a
 /// [`FailedElsewhere`]). Collective, so also a barrier.
@@ -28,6 +28,18 @@ pub(super) fn agreed<T>(session: &SessionGuard, result: Result<T>) -> Result<T> 
         Ok(_) if failed => Err(FailedElsewhere.into()),
         other => other,
     }
+}
+
+/// The whole committed state of `sim` on process 0 (gathered where the points are shared out), `None`
+/// on the others, which write nothing. Collective ([`agreed`]).
+fn gather<'s, const D: usize>(
+    session: &SessionGuard,
+    sim: &'s Simulation<D>,
+) -> Result<Option<Cow<'s, State<D>>>> {
+    let whole = crate::partition::whole_state(session, &sim.state)
+        .context("gathering the points on process 0");
+    let root = session.rank() == 0;
+    agreed(session, whole).map(|w| w.filter(|_| root))
 }
 
 /// The records of a run in progress: its output and its run.json, and where they go.
@@ -49,9 +61,7 @@ impl Records<'_> {
     /// Keeps the current state (with the points shared out over processes, process 0 gathers them
     /// first): [`Records::keep`]. Collective.
     fn save<const D: usize>(&mut self, session: &SessionGuard, sim: &Simulation<D>) -> Result<()> {
-        let whole = crate::partition::whole_state(session, &sim.state)
-            .context("gathering the points on process 0");
-        let whole = agreed(session, whole)?;
+        let whole = gather(session, sim)?;
         self.keep(session, whole.as_deref())
     }
 
@@ -64,17 +74,26 @@ impl Records<'_> {
         state: Option<&State<D>>,
     ) -> Result<()> {
         let written = match state {
-            Some(state) => self.write(state),
+            Some(state) => {
+                self.out.note_snapshot(state);
+                self.write_checkpoint(state)
+                    .and_then(|()| self.write_snapshot(state))
+            }
             None => Ok(()),
         };
         agreed(session, written)
     }
 
-    /// The writes of [`Records::keep`] on process 0.
-    fn write<const D: usize>(&mut self, state: &State<D>) -> Result<()> {
-        self.out.note_snapshot(state);
+    /// The checkpoint of `state` on process 0 (a resumed run writes the snapshot of its step if its files
+    /// are missing).
+    fn write_checkpoint<const D: usize>(&mut self, state: &State<D>) -> Result<()> {
         checkpoint::save(self.dir, state, &self.out, self.identity)?;
         self.checkpoint = Some(state.counters.step);
+        Ok(())
+    }
+
+    /// The rest of [`Records::keep`] on process 0: the snapshot, the force plots and run.json.
+    fn write_snapshot<const D: usize>(&mut self, state: &State<D>) -> Result<()> {
         self.out.write_snapshot(state)?;
         self.out.force_plots()?;
         self.record.snapshots = Some(self.out.snapshot_records());
@@ -170,9 +189,9 @@ impl Records<'_> {
 pub(super) struct Steps<'a> {
     pub(super) session: &'a SessionGuard,
     pub(super) bar: &'a ProgressBar,
-    /// Set by the handler of SIGINT, SIGTERM and SIGHUP (an MPI launcher forwards Ctrl-C to the
-    /// processes as SIGTERM).
-    pub(super) interrupted: &'a AtomicBool,
+    /// Requested by the handler of SIGINT, SIGTERM and SIGHUP (an MPI launcher forwards Ctrl-C to the
+    /// processes as SIGTERM); the steps watch it too ([`Simulation::watch`]).
+    pub(super) interrupted: &'a Interrupt,
     pub(super) hint: &'a str,
     pub(super) quiet: bool,
 }
@@ -190,6 +209,10 @@ impl Steps<'_> {
         loop {
             let mut report = match step {
                 Ok(r) => r,
+                // Not a failure: the step did not get the time to end.
+                Err(StepError::Interrupted { step, .. }) => {
+                    return Err(self.interrupt(records, sim, Some(step)));
+                }
                 Err(e) => return Err(self.failed(records, sim, &e)),
             };
             let front = crack_front(self.session, &records.out, &sim.state);
@@ -202,17 +225,16 @@ impl Steps<'_> {
             let every = records.cfg.run.output_every;
             // Every process stops after the same step (a signal may reach them at different steps, or
             // only some of them).
-            let stop = self.session.any(self.interrupted.load(Ordering::SeqCst));
+            let stop = self.session.any(self.interrupted.requested());
+            if stop && sim.state.counters.step < steps {
+                return Err(self.interrupt(records, sim, None));
+            }
             if (every > 0 && sim.state.counters.step % every == 0)
                 || sim.state.counters.step == steps
-                || stop
             {
                 if let Err(e) = records.save(self.session, sim) {
                     return Err(records.abandon(self.session, sim, e, self.hint));
                 }
-            }
-            if stop && sim.state.counters.step < steps {
-                return Err(self.interrupt(records, sim));
             }
             if sim.state.counters.step >= steps {
                 return Ok(());
@@ -221,28 +243,48 @@ impl Steps<'_> {
         }
     }
 
-    /// The end of an interrupted run whose state is saved: run.json says `interrupted`, and process 0's
-    /// error says how to continue.
+    /// The end of an interrupted run (`abandoned`: the step that was abandoned unfinished, if any), in
+    /// the second or so that an MPI launcher leaves the processes after it forwarded the signal: the
+    /// checkpoint of the last finished step (unless the directory holds it already), then run.json
+    /// closed as `interrupted`; the step's snapshot is left to the resumed run, which writes a missing
+    /// one. Process 0's error says how to continue. Collective.
     fn interrupt<const D: usize>(
         &self,
         records: &mut Records,
         sim: &Simulation<D>,
+        abandoned: Option<usize>,
     ) -> anyhow::Error {
         self.bar.abandon();
-        let why = format!("interrupted after step {}", sim.state.counters.step);
-        if let Err(e) = records.finish(self.session, sim, "interrupted", Some(why)) {
+        let (session, done) = (self.session, sim.state.counters.step);
+        if session.any(records.root && records.checkpoint != Some(done)) {
+            let saved = gather(session, sim).and_then(|whole| {
+                let written = match whole.as_deref() {
+                    Some(state) => records.write_checkpoint(state),
+                    None => Ok(()),
+                };
+                agreed(session, written)
+            });
+            if let Err(e) = saved {
+                return records.abandon(session, sim, e, self.hint);
+            }
+        }
+        let why = match abandoned {
+            None => format!("interrupted after step {done}"),
+            Some(k) => format!("interrupted after step {done} (step {k} was abandoned unfinished)"),
+        };
+        if let Err(e) = records.finish(session, sim, "interrupted", Some(why.clone())) {
             return e;
         }
         if !records.root {
             return FailedElsewhere.into();
         }
         anyhow::anyhow!(
-            "interrupted after step {}; the state is saved in {}: continue with {}",
-            sim.state.counters.step,
+            "{why}; the state is saved in {}: continue with {}",
             records.dir.display(),
             self.hint
         )
     }
+
     /// A step's line: on the progress bar, and with `--quiet` on standard error (process 0).
     fn show(&self, report: &StepReport, root: bool) {
         let msg = format!(
