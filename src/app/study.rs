@@ -771,6 +771,7 @@ pub fn all_failed(dir: &Path, results: &[SetResult]) -> Option<String> {
     );
     for r in results {
         let reason = r.error.as_deref().unwrap_or("stopped before its last step");
+        let reason = reason.strip_prefix("error: ").unwrap_or(reason);
         let _ = write!(
             text,
             "\n  {}: {} step(s) done, {reason} (run in {})",
@@ -833,6 +834,19 @@ mod tests {
                 line: 1,
             }
         );
+        // Quoted values are one word each, as a shell gives them to the run; a `#` inside quotes is no
+        // comment.
+        std::fs::write(
+            &p,
+            "q: --set run.name=\"CT a#1\" --set 'ct.notch=\"round\"' -pc_type lu # c\n",
+        )
+        .expect("write");
+        let sets = read_sets(&p).expect("valid");
+        assert_eq!(
+            sets[0].overrides,
+            vec!["run.name=CT a#1".to_string(), "ct.notch=\"round\"".into()]
+        );
+        assert_eq!(sets[0].options, "-pc_type lu");
         // (file, where the error points, what it says)
         let set_a = "sets.txt:1: set `a`";
         for (text, at, needle) in [
@@ -862,6 +876,16 @@ mod tests {
                 "a: -ksp_type gmres -ksp_rtol -5\n",
                 "sets.txt:1",
                 "-ksp_rtol -5",
+            ),
+            (
+                "a: --set run.name='x -pc_type lu\n",
+                set_a,
+                "unterminated '",
+            ),
+            (
+                "a: -pc_type \"l u\"\n",
+                set_a,
+                "PETSc option word \"l u\" is empty or holds a space",
             ),
             (
                 "no colon here\n",
