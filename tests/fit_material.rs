@@ -78,7 +78,11 @@ fn bad_engineering_data_is_refused_naming_the_option_and_its_range() {
         (
             "--fracture-energy",
             "1e9",
-            &["--fracture-energy", "<= G_F <= 1.309e0 N/mm", "a smaller --c"],
+            &[
+                "--fracture-energy",
+                "<= G_F <= 1.309e0 N/mm",
+                "a smaller --c",
+            ],
         ),
         (
             "--fracture-energy",

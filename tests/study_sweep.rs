@@ -131,8 +131,14 @@ fn a_study_whose_every_set_fails_says_so_for_each_set() {
     let o = study(&dir, &["--sets", "sets.txt", "--output", "out"]);
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(1), "{err}");
-    assert!(!err.contains("cannot plot") && !err.contains("panicked"), "{err}");
-    assert!(err.contains("error: every set of the study failed (2 of 2)"), "{err}");
+    assert!(
+        !err.contains("cannot plot") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(
+        err.contains("error: every set of the study failed (2 of 2)"),
+        "{err}"
+    );
     for (set, option) in [("a", "-snes_monitr"), ("b", "-pc_typ")] {
         let line = err
             .lines()
