@@ -35,15 +35,18 @@ enum Command {
     /// Run a simulation described by a TOML configuration (see configs/ and docs/configuration.md).
     Run(RunFlags),
     /// Solver-comparison study: runs a configuration for a few steps with several PETSc option sets (each in
-    /// its own process) and writes a table (Markdown, CSV) and charts.
+    /// its own process) and writes a table (Markdown, CSV) and charts. A failed set is reported in the
+    /// table; if every set fails the study ends with each set's reason and exit code 1.
     Study {
         /// Configuration file.
         config: PathBuf,
         /// Steps per option set.
         #[arg(long, default_value_t = 10)]
         steps: usize,
-        /// Option sets, one per line `name: -petsc -options` (default: MUMPS, SuperLU_dist, GMRES with ILU,
-        /// BoomerAMG, GAMG, fieldsplit on (u, eta_bar), trust-region Newton).
+        /// Option sets, one per line `name: [--set KEY=VALUE ...] [--steps N] [--allow-large] -petsc
+        /// -options`, words split as a shell does (quote a value with spaces: --set run.name="CT a"), every
+        /// line checked before the first run (default: MUMPS, SuperLU_dist, GMRES with ILU, BoomerAMG, GAMG,
+        /// fieldsplit on (u, eta_bar), trust-region Newton).
         #[arg(long)]
         sets: Option<PathBuf>,
         /// Output directory (default runs/study-<config name>).
@@ -86,7 +89,8 @@ enum Command {
     MaterialDriver(material_driver::DriverArgs),
     /// Fit microplane parameters to E, nu, f_t, G_F (optionally f_c) and a gradient length: f_t by the
     /// material driver, G_F by a quasi-static regularised bar; prints the [material] section and writes
-    /// it with plots (docs/material.md, "Parameters from engineering data").
+    /// it with plots (docs/material.md, "Parameters from engineering data"). Takes no PETSc options (the
+    /// bar is always solved by Newton with MUMPS LU).
     FitMaterial(fit_material::FitArgs),
     /// Solve a small nonlinear lattice problem (3 unknowns per node) with SNES: checks the PETSc set-up
     /// and the solver options given on the command line.

@@ -48,7 +48,7 @@ fn with(option: &str, value: &str) -> Vec<String> {
 
 #[test]
 fn bad_engineering_data_is_refused_naming_the_option_and_its_range() {
-    let cases: [(&str, &str, &[&str]); 9] = [
+    let cases: [(&str, &str, &[&str]); 11] = [
         ("--youngs-modulus", "-30000", &["--youngs-modulus", "E > 0"]),
         ("--youngs-modulus", "NaN", &["--youngs-modulus", "E > 0"]),
         (
@@ -74,17 +74,57 @@ fn bad_engineering_data_is_refused_naming_the_option_and_its_range() {
         ),
         ("--length", "-3", &["--length", "l > 0"]),
         ("--h", "inf", &["--h", "0 < h <= 5"]),
+        // Far beyond what the fitting bar reaches: refused at once, the range with its unit.
+        (
+            "--fracture-energy",
+            "1e9",
+            &[
+                "--fracture-energy",
+                "<= G_F <= 1.309e0 N/mm",
+                "a smaller --c",
+            ],
+        ),
+        (
+            "--fracture-energy",
+            "1e-9",
+            &["--fracture-energy", "4.500e-3 <= G_F", "N/mm", "snaps back"],
+        ),
     ];
     for (k, (option, value, needles)) in cases.into_iter().enumerate() {
         let args = with(option, value);
+        let start = std::time::Instant::now();
         let (dir, out) = fit(
             &format!("bad{k}"),
             &args.iter().map(String::as_str).collect::<Vec<_>>(),
         );
         refused(&out, needles);
         assert!(!dir.join("out").exists(), "{option}: nothing written");
+        // Before any bar run (one takes seconds).
+        assert!(
+            start.elapsed().as_secs_f64() < 5.0,
+            "{option} {value}: {:?}",
+            start.elapsed()
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
+}
+
+/// PETSc options would be ignored (the fitting bar's solver is fixed): refused before any work.
+#[test]
+fn petsc_options_are_refused_before_any_work() {
+    let mut args: Vec<&str> = GOOD.to_vec();
+    args.extend(["-snes_monitor", "-ksp_type", "gmres"]);
+    let (dir, out) = fit("petsc", &args);
+    refused(
+        &out,
+        &[
+            "fit-material takes no PETSc options",
+            "-snes_monitor -ksp_type gmres",
+            "MUMPS LU",
+        ],
+    );
+    assert!(!dir.join("out").exists(), "nothing written");
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The targets of the documented example.

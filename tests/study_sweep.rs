@@ -74,7 +74,7 @@ fn a_sweep_over_overrides_runs_each_set_with_its_overrides_into_one_table() {
 
 #[test]
 fn every_set_line_is_checked_before_the_first_run() {
-    let cases: [(&str, &[&str]); 5] = [
+    let cases: [(&str, &[&str]); 7] = [
         (
             "ok: --set ct.loading_rate=2000\nh1: --set grid.cell_siz=1\n",
             &["sets.txt:2: set `h1`", "cell_siz"],
@@ -95,6 +95,15 @@ fn every_set_line_is_checked_before_the_first_run() {
                 "`--output` is no option of a set line",
             ],
         ),
+        // A quoted value with a space is one word, checked as the run would get it.
+        (
+            "a: --set run.petsc_options=\"-ksp_rtol -5\"\n",
+            &["sets.txt:1: set `a`", "run.petsc_options", "-ksp_rtol -5"],
+        ),
+        (
+            "a: --set run.name=\"CT a -pc_type lu\n",
+            &["sets.txt:1: set `a`", "unterminated \""],
+        ),
     ];
     for (i, (sets, needles)) in cases.iter().enumerate() {
         let dir = scratch("study", &format!("refusal{i}"), &[("sets.txt", sets)]);
@@ -110,6 +119,39 @@ fn every_set_line_is_checked_before_the_first_run() {
         std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
         "mine"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A study in which every set fails ends with each set's reason and its directory, exit code 1, its
+/// report written and no charts (nothing to draw).
+#[test]
+fn a_study_whose_every_set_fails_says_so_for_each_set() {
+    let sets = "a: -snes_monitr\nb: -pc_typ lu\n";
+    let dir = scratch("study", "all-fail", &[("sets.txt", sets)]);
+    let o = study(&dir, &["--sets", "sets.txt", "--output", "out"]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        !err.contains("cannot plot") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(
+        err.contains("error: every set of the study failed (2 of 2)"),
+        "{err}"
+    );
+    for (set, option) in [("a", "-snes_monitr"), ("b", "-pc_typ")] {
+        let line = err
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{set}: ")))
+            .unwrap_or_else(|| panic!("no line of set {set}: {err}"));
+        assert!(
+            line.contains("unknown or unused PETSc option") && line.contains(option),
+            "{line}"
+        );
+        assert!(line.contains(&format!("out/{set}")), "{line}");
+    }
+    assert!(dir.join("out/study.md").exists() && dir.join("out/study.csv").exists());
+    assert!(!dir.join("out/study_newton.png").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -138,6 +138,9 @@ pub fn study(
         study::run(&exe, config, steps, &sets, &dir, &replace).map_err(anyhow::Error::msg)?;
     let failed = results.iter().filter(|r| !r.completed).count();
     println!("{}", std::fs::read_to_string(dir.join(study::REPORT))?);
+    if let Some(summary) = study::all_failed(&dir, &results) {
+        anyhow::bail!(summary);
+    }
     println!(
         "{} of {} sets completed; results in {}",
         results.len() - failed,

@@ -93,7 +93,7 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
     let mut sets: Vec<OptionSet> = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let at = format!("{}:{}", path.display(), i + 1);
-        let line = line.split('#').next().unwrap_or("").trim();
+        let line = line[..comment_start(line)].trim();
         if line.is_empty() {
             continue;
         }
@@ -116,7 +116,9 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
                 s.line
             ));
         }
-        let mut set = parse_set_line(rest).map_err(|e| format!("{at}: set `{name}`: {e}"))?;
+        let mut set = words(rest)
+            .and_then(|w| parse_set_line(&w))
+            .map_err(|e| format!("{at}: set `{name}`: {e}"))?;
         crate::preflight::check_petsc_options(&set.options).map_err(|e| format!("{at}: {e}"))?;
         crate::preflight::check_options_files(set.options.split_whitespace())
             .map_err(|e| format!("{at}: {e}"))?;
@@ -130,11 +132,65 @@ pub fn read_sets(path: &Path) -> Result<Vec<OptionSet>, String> {
     Ok(sets)
 }
 
-/// The options of a set line after its name: program options, then PETSc options (everything from the
-/// first token with one dash on).
-fn parse_set_line(rest: &str) -> Result<OptionSet, String> {
+/// Where the comment of a set line starts: its first `#` outside quotes (the line's length without one).
+fn comment_start(line: &str) -> usize {
+    let mut quote = None;
+    let mut escaped = false;
+    for (i, c) in line.char_indices() {
+        match (quote, c) {
+            _ if escaped => escaped = false,
+            (Some('"'), '\\') => escaped = true,
+            (Some(q), c) if c == q => quote = None,
+            (None, '"' | '\'') => quote = Some(c),
+            (None, '#') => return i,
+            _ => {}
+        }
+    }
+    line.len()
+}
+
+/// The words of a set line as a shell splits them, so that the checks and the runs see the same values:
+/// whitespace separates words, `'...'` and `"..."` quote (inside double quotes `\"` and `\\` stand for `"`
+/// and `\`), e.g. `--set run.name="CT a"` gives `--set` and `run.name=CT a`.
+fn words(text: &str) -> Result<Vec<String>, String> {
+    let mut words = Vec::new();
+    let mut word: Option<String> = None;
+    let mut chars = text.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            c if c.is_whitespace() => words.extend(word.take()),
+            '\'' | '"' => {
+                let w = word.get_or_insert_with(String::new);
+                loop {
+                    match chars.next() {
+                        Some(q) if q == c => break,
+                        Some('\\') if c == '"' => match chars.next() {
+                            Some(e @ ('"' | '\\')) => w.push(e),
+                            Some(e) => w.extend(['\\', e]),
+                            None => w.push('\\'),
+                        },
+                        Some(other) => w.push(other),
+                        None => {
+                            return Err(format!(
+                                "unterminated {c}: a quoted value ends with its quote on the same line"
+                            ));
+                        }
+                    }
+                }
+            }
+            c => word.get_or_insert_with(String::new).push(c),
+        }
+    }
+    words.extend(word);
+    Ok(words)
+}
+
+/// The options of a set line after its name, as [`words`]: program options, then PETSc options
+/// (everything from the first word with one dash on; each a single word without spaces, as they are
+/// passed on to the run).
+fn parse_set_line(words: &[String]) -> Result<OptionSet, String> {
     let mut set = OptionSet::default();
-    let mut tokens = rest.split_whitespace().peekable();
+    let mut tokens = words.iter().map(String::as_str).peekable();
     while let Some(&token) = tokens.peek() {
         if token.starts_with('-') && !token.starts_with("--") {
             break;
@@ -172,7 +228,17 @@ fn parse_set_line(rest: &str) -> Result<OptionSet, String> {
             crate::input::echoed(bad)
         ));
     }
-    set.options = tokens.collect::<Vec<_>>().join(" ");
+    let options: Vec<&str> = tokens.collect();
+    if let Some(bad) = options
+        .iter()
+        .find(|o| o.is_empty() || o.contains(char::is_whitespace))
+    {
+        return Err(format!(
+            "PETSc option word {bad:?} is empty or holds a space: the PETSc options of a set line are \
+             single words (quotes are for the values of --set)"
+        ));
+    }
+    set.options = options.join(" ");
     Ok(set)
 }
 
@@ -388,8 +454,7 @@ pub fn run_one(
             .lines()
             .rev()
             .find(|l| l.starts_with("error"))
-            .unwrap_or("failed")
-            .to_owned()
+            .map_or_else(|| format!("failed ({})", output.status), str::to_owned)
     });
     let mut result = read_result(set, &out.join(file::HISTORY), &stdout, total, steps, error);
     result.crack = last_crack_state(&out.join(file::CRACK));
@@ -677,6 +742,10 @@ fn write_plots(dir: &Path, results: &[SetResult]) -> Result<(), String> {
         ),
     ];
     for (file, label, s) in plots {
+        // No set ran a step: nothing to draw (the report says why each set failed).
+        if s.is_empty() {
+            continue;
+        }
         let plot = LinePlot {
             title: format!("solver study: {label}"),
             x_label: "step".into(),
@@ -686,6 +755,32 @@ fn write_plots(dir: &Path, results: &[SetResult]) -> Result<(), String> {
         plot.save_png(dir.join(file)).map_err(|e| e.to_string())?;
     }
     Ok(())
+}
+
+/// The summary of a study in which no set completed (`None` if one did): each set's reason and
+/// directory, for an error that ends the study.
+pub fn all_failed(dir: &Path, results: &[SetResult]) -> Option<String> {
+    if results.is_empty() || results.iter().any(|r| r.completed) {
+        return None;
+    }
+    let mut text = format!(
+        "every set of the study failed ({} of {}); the report is {}:",
+        results.len(),
+        results.len(),
+        dir.join(REPORT).display()
+    );
+    for r in results {
+        let reason = r.error.as_deref().unwrap_or("stopped before its last step");
+        let reason = reason.strip_prefix("error: ").unwrap_or(reason);
+        let _ = write!(
+            text,
+            "\n  {}: {} step(s) done, {reason} (run in {})",
+            r.set.name,
+            r.steps,
+            dir.join(&r.set.name).display()
+        );
+    }
+    Some(text)
 }
 
 /// Default output directory of a study of `config`.
@@ -739,6 +834,19 @@ mod tests {
                 line: 1,
             }
         );
+        // Quoted values are one word each, as a shell gives them to the run; a `#` inside quotes is no
+        // comment.
+        std::fs::write(
+            &p,
+            "q: --set run.name=\"CT a#1\" --set 'ct.notch=\"round\"' -pc_type lu # c\n",
+        )
+        .expect("write");
+        let sets = read_sets(&p).expect("valid");
+        assert_eq!(
+            sets[0].overrides,
+            vec!["run.name=CT a#1".to_string(), "ct.notch=\"round\"".into()]
+        );
+        assert_eq!(sets[0].options, "-pc_type lu");
         // (file, where the error points, what it says)
         let set_a = "sets.txt:1: set `a`";
         for (text, at, needle) in [
@@ -768,6 +876,16 @@ mod tests {
                 "a: -ksp_type gmres -ksp_rtol -5\n",
                 "sets.txt:1",
                 "-ksp_rtol -5",
+            ),
+            (
+                "a: --set run.name='x -pc_type lu\n",
+                set_a,
+                "unterminated '",
+            ),
+            (
+                "a: -pc_type \"l u\"\n",
+                set_a,
+                "PETSc option word \"l u\" is empty or holds a space",
             ),
             (
                 "no colon here\n",

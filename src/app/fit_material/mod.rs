@@ -37,7 +37,9 @@ pub struct FitArgs {
     /// Uniaxial tensile strength f_t (MPa), 0 < f_t <= E/100.
     #[arg(long = "tensile-strength", allow_negative_numbers = true)]
     pub tensile_strength: f64,
-    /// Fracture energy G_F (N/mm), > 0.
+    /// Fracture energy G_F (N/mm), > 0; a G_F more than ten times beyond what the 300 mm fitting bar
+    /// can reach for E, f_t and c (below a tenth of f_t^2 L/(2E), above ten times the estimated largest,
+    /// about 1.3 N/mm at E = 30000, f_t = 3, c = 9) is refused before any work.
     #[arg(long = "fracture-energy", allow_negative_numbers = true)]
     pub fracture_energy: f64,
     /// Uniaxial compressive strength f_c (MPa), > f_t; fitted through k_r (default: k_r = 14, Table 1).
@@ -114,6 +116,19 @@ pub fn targets(a: &FitArgs) -> Result<(Targets, FitSettings)> {
         (None, None) => 9.0,
     };
     let h = require("--h", a.h, a.h > 0.0 && a.h <= 5.0, "0 < h <= 5 mm")?;
+    // A G_F far outside what the fitting bar can reach is refused before any bar run.
+    let (lo, hi) = search::plausible_fracture_energy(e, ft, c);
+    require(
+        "--fracture-energy",
+        gf,
+        (lo..=hi).contains(&gf),
+        &format!(
+            "{lo:.3e} <= G_F <= {hi:.3e} N/mm for E = {e} MPa, f_t = {ft} MPa, c = {c} mm^2 (a tenth of \
+             f_t^2 L/(2E), below which the {} mm fitting bar snaps back, to ten times the estimated \
+             largest G_F of its most ductile band, which falls as 1/c: a smaller --c reaches a larger G_F)",
+            search::BAR_LENGTH
+        ),
+    )?;
     for (option, n) in [
         ("--bar-steps", a.bar_steps),
         ("--strength-steps", a.strength_steps),
@@ -241,6 +256,11 @@ fn rel(a: f64, b: f64) -> f64 {
 
 /// Runs the command: checks, fits, measures, writes and prints.
 pub fn run(args: &FitArgs, petsc_args: &[String]) -> Result<()> {
+    super::no_petsc_options(
+        "fit-material",
+        ": its fitting bar is always solved by Newton with MUMPS LU at fixed tolerances",
+        petsc_args,
+    )?;
     let (t, settings) = targets(args)?;
     let s = Session::initialize(petsc_args).context("starting PETSc")?;
     petsc::apply_default_options(

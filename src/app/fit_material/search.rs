@@ -239,6 +239,39 @@ pub fn bar_fracture_energy(
     Ok(out)
 }
 
+/// The fracture energy (N/mm) at which the fitting bar stores as much elastic energy per unit section at
+/// its peak as the band can dissipate, `f_t^2 L/(2E)` (characteristic length `E G_F/f_t^2 = L/2`): a
+/// uniform bar this brittle snaps back under displacement control. The weak zone lets the fit go
+/// somewhat below (measured: 0.03 N/mm fitted at 0.045 N/mm for E = 30000 MPa, f_t = 3 MPa).
+pub fn brittle_fracture_energy(youngs_modulus: f64, tensile_strength: f64) -> f64 {
+    tensile_strength.powi(2) * BAR_LENGTH / (2.0 * youngs_modulus)
+}
+
+/// `G_F` of the most ductile bar ([`x_range`]'s smallest `x`) times `E c/f_t^2` (mm^3): measured
+/// 0.1309 N/mm for E = 30000 MPa, f_t = 3 MPa, c = 9 mm^2, h = 2 mm.
+const DUCTILE_CAP_SCALE: f64 = 0.1309 * 30000.0 * 9.0 / 9.0;
+
+/// An estimate of the largest `G_F` the fit reaches (N/mm): the most ductile bar's, scaled from the
+/// measured one as `f_t^2/(E c)` (the band's dissipation density goes as `f_t^2/(E x)`, and the smallest
+/// `x` as `c`). Only an estimate: the cell size `h` and the nonlinear softening shift it.
+pub fn ductile_fracture_energy(youngs_modulus: f64, tensile_strength: f64, c: f64) -> f64 {
+    DUCTILE_CAP_SCALE * tensile_strength.powi(2) / (youngs_modulus * c)
+}
+
+/// How far beyond the estimates [`brittle_fracture_energy`] and [`ductile_fracture_energy`] a target
+/// `G_F` is refused before any bar run: far enough that no target the search could reach is refused
+/// (the targets between are left to the search, which names the exact limit it reached).
+pub const FRACTURE_ENERGY_MARGIN: f64 = 10.0;
+
+/// The `G_F` range (N/mm) accepted before any work for `E`, `f_t` and `c`: [`FRACTURE_ENERGY_MARGIN`]
+/// beyond the estimates of the brittle and ductile limits on either side.
+pub fn plausible_fracture_energy(youngs_modulus: f64, tensile_strength: f64, c: f64) -> (f64, f64) {
+    (
+        brittle_fracture_energy(youngs_modulus, tensile_strength) / FRACTURE_ENERGY_MARGIN,
+        ductile_fracture_energy(youngs_modulus, tensile_strength, c) * FRACTURE_ENERGY_MARGIN,
+    )
+}
+
 /// The ductility range searched for `G_F` at gradient parameter `c` (mm^2): from the `x` whose onset
 /// half-wavelength `pi sqrt(c/x)` is a quarter of the bar (more would not fit the band into the bar) to
 /// [`X_MAX`].
@@ -329,10 +362,23 @@ pub fn fit(
     };
     let x0 = (X_START * range.0).clamp(range.0, range.1);
     let Some(mut a) = try_evaluate(s, t, x0, settings)? else {
-        bail!(BadInput(format!(
-            "--fracture-energy {target}: the bar at alpha beta gamma_0 = {x0:.4} snaps back; these E, \
-             f_t, c need a larger G_F (or a shorter bar length or a smaller --h)"
-        )));
+        let brittle = brittle_fracture_energy(t.youngs_modulus, t.tensile_strength);
+        // Below the brittle estimate the material is too brittle for the bar; above it the bar's steps
+        // (to an elongation that grows with G_F) were too coarse to follow the softening.
+        bail!(BadInput(if target < brittle {
+            format!(
+                "--fracture-energy {target} N/mm: the most ductile bar tried (alpha beta gamma_0 = \
+                 {x0:.4}) snaps back: too brittle for the {BAR_LENGTH} mm fitting bar (it stores \
+                 f_t^2 L/(2E) = {brittle:.4} N/mm at its peak): give a larger G_F (or a smaller --h)"
+            )
+        } else {
+            format!(
+                "--fracture-energy {target} N/mm: the bar at alpha beta gamma_0 = {x0:.4} failed to \
+                 follow its softening in {} steps: give more --bar-steps (or a smaller G_F, a smaller \
+                 --h)",
+                settings.bar_steps
+            )
+        }));
     };
     log(&a);
     let mut next = (a.x * (a.bar.fracture_energy / target)).clamp(range.0, range.1);
