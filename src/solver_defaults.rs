@@ -99,8 +99,10 @@ const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_
 /// (`bjacobi` with `sub_pc_type ilu`, the default of inertia-dominated 2D steps, or `ilu`), BAIJ, whose
 /// kernels work on the node's `bs x bs` blocks: on the first 200 steps of the half-resolution CT at
 /// 4.3 m/s (38,900 points, 3 unknowns per node) the factorisations took 24.7 against 35.6 ms and a
-/// triangular solve 2.2 against 4.0 ms, for the same Krylov iterations (2736 against 2737; block ILU(0)
-/// keeps the couplings inside a node's block, its pivots are shifted like point ILU's), docs/benchmarks.md.
+/// triangular solve 2.2 against 4.1 ms, for the same Krylov iterations (2736 against 2737), and whole runs
+/// took 0.86x the time. Block ILU(0) shifts a pivot only when it is exactly zero: in 5 of the 1000 steps
+/// of that CT, after the crack branched, it failed where point ILU(0) passed and the fallback solved the
+/// step (about 3 % of the run); docs/benchmarks.md, "Block storage for the CT's ILU".
 /// Everywhere else AIJ with the block size set: GAMG, hypre and the field split need it, and on several
 /// processes PETSc's parallel BAIJ has no in-place update of the values (filling it block by block made
 /// the half-resolution CT's assembly 1.5x slower on two processes).
