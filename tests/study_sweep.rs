@@ -243,3 +243,33 @@ fn a_study_replaces_no_run_it_did_not_start() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `bench` writes each case into `<output>/<case>` with the study's rules: a case directory holding files
+/// that no run of this program writes is refused before any case runs, and the files stay.
+#[test]
+fn bench_never_replaces_files_it_did_not_write() {
+    let dir = scratch("study", "bench-foreign", &[]);
+    let case = dir.join("out").join("ct-demo");
+    std::fs::create_dir_all(&case).expect("case dir");
+    std::fs::write(case.join("notes.txt"), "mine").expect("foreign file");
+    let o = Command::new(EXE)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["bench", "--cases", "ct-demo", "--steps", "1", "--output"])
+        .arg(dir.join("out"))
+        .output()
+        .expect("start mpm-concrete");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "bench replaced a foreign directory:\n{err}"
+    );
+    assert!(
+        err.contains("notes.txt") && err.contains("ct-demo") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(case.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert!(!dir.join("out").join("bench.json").exists());
+}

@@ -134,8 +134,15 @@ pub fn run(exe: &Path, cases: &[Case], petsc_options: &str, dir: &Path) -> Resul
         options: petsc_options.into(),
         ..OptionSet::default()
     };
+    // Every case's directory is checked before the first run, with the study's rules: a case replaces
+    // only an earlier run that its record identifies as one of this program, never files it did not
+    // write or a run in progress.
+    let replace = cases
+        .iter()
+        .map(|case| study::check_set_dir(&dir.join(&case.name), true))
+        .collect::<Result<Vec<_>, _>>()?;
     let mut results = Vec::new();
-    for case in cases {
+    for (case, replace) in cases.iter().zip(replace) {
         eprintln!(
             "bench: {} ({} steps of {})",
             case.name,
@@ -148,7 +155,7 @@ pub fn run(exe: &Path, cases: &[Case], petsc_options: &str, dir: &Path) -> Resul
             case.steps,
             &set,
             &dir.join(&case.name),
-            true,
+            replace,
         )?;
         let c = CaseResult::from_run(case, &r);
         eprintln!(

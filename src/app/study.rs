@@ -350,8 +350,9 @@ pub fn check_set_dirs(
         .collect()
 }
 
-/// The check of [`check_set_dirs`] for one set's directory `out`.
-fn check_set_dir(out: &Path, overwrite: bool) -> Result<bool, String> {
+/// The check of [`check_set_dirs`] for one run directory `out` (a study's set, a benchmark's case):
+/// whether a run started there replaces an earlier run, or why it may not.
+pub fn check_set_dir(out: &Path, overwrite: bool) -> Result<bool, String> {
     // A file in the way and a run.json that is no regular file are refused here.
     let contents = rundir::inspect(out)?;
     if !out.is_dir() {
@@ -380,8 +381,9 @@ fn check_set_dir(out: &Path, overwrite: bool) -> Result<bool, String> {
     };
     if !foreign.is_empty() {
         return Err(format!(
-            "{}: holds files that no run of this program writes ({}): a study writes each set's run into \
-             its own directory and replaces only run directories: move them, or give another --output",
+            "{}: holds files that no run of this program writes ({}): each set of a study (each case of \
+             a benchmark) runs in its own directory, and only run directories are replaced: move them, \
+             or give another --output",
             out.display(),
             listed(&foreign)
         ));
@@ -407,8 +409,8 @@ fn check_set_dir(out: &Path, overwrite: bool) -> Result<bool, String> {
             ))
         }
         (None, _) => Err(format!(
-            "{} holds results ({}) without a run record (run.json) that identifies the run: the study \
-             does not replace them, also with --overwrite: move them, or give another --output",
+            "{} holds results ({}) without a run record (run.json) that identifies the run: they are \
+             not replaced, also with --overwrite: move them, or give another --output",
             out.display(),
             listed(&contents.results)
         )),
