@@ -17,6 +17,21 @@ use mpm_concrete::checkpoint;
 use std::io::BufRead;
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+/// The tests of this file run side by side, except the slow-step Ctrl-C test, which needs the machine to
+/// itself: Open MPI kills its processes 2 s after Ctrl-C, and the checkpoint must be written before that.
+static MACHINE: RwLock<()> = RwLock::new(());
+
+/// Held by a test that may share the machine with the others.
+fn shared() -> RwLockReadGuard<'static, ()> {
+    MACHINE.read().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Held by a test that must run alone.
+fn alone() -> RwLockWriteGuard<'static, ()> {
+    MACHINE.write().unwrap_or_else(|e| e.into_inner())
+}
 
 /// `timeout 120 mpm-concrete ARGS` in `cwd`, not yet started.
 fn command(cwd: &Path, args: &[&str]) -> Command {
@@ -70,6 +85,7 @@ fn long_run(dir: &Path) -> (Child, ErrLines) {
 
 #[test]
 fn a_directory_that_a_run_is_writing_is_refused_to_a_second_run() {
+    let _machine = shared();
     let dir = scratch("faults", "lock", &[]);
     let (mut first, rest) = long_run(&dir);
     let pid = first.id();
@@ -108,6 +124,7 @@ fn a_directory_that_a_run_is_writing_is_refused_to_a_second_run() {
 
 #[test]
 fn of_two_runs_started_together_into_one_directory_one_runs() {
+    let _machine = shared();
     let dir = scratch("faults", "race", &[]);
     let start = |config: &str| {
         command(&dir, &["run", config, "--quiet", "--output", "d"])
@@ -198,6 +215,7 @@ fn resume_two_more(dir: &Path, hint: &str, done: usize) {
 /// (and writes the snapshot of that step).
 #[test]
 fn ctrl_c_on_several_processes_stops_them_at_one_saved_step() {
+    let _machine = shared();
     for target in ["group", "launcher"] {
         let dir = scratch("faults", &format!("mpi-int-{target}"), &[]);
         let mut child = Command::new("timeout")
@@ -313,6 +331,7 @@ fn history_rows(dir: &Path) -> Vec<Vec<(String, String)>> {
 /// abandoned; the printed command resumes from it, and the resumed run matches an uninterrupted one.
 #[test]
 fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
+    let _machine = alone();
     let dir = scratch("faults", "mpi-abandon", &[]);
     let mut args = vec![
         "run",
@@ -483,6 +502,7 @@ fn run_limited(dir: &Path, kib: usize, args: &str) -> Output {
 /// --resume.
 #[test]
 fn a_failed_write_leaves_a_resumable_state_and_a_failed_record() {
+    let _machine = shared();
     let dir = scratch("faults", "full", &[]);
     // The checkpoint grows by about 1.4 kB per step, the fields' index by 3.3 kB per snapshot: with one
     // snapshot per step the index passes 400 KiB first, near step 120.
@@ -558,6 +578,7 @@ fn corrupt_point(file: &Path, name: &str, value: f64) {
 /// outside [0, 1] is refused, naming the file and the dataset, and crack.json is not rewritten.
 #[test]
 fn crack_refuses_corrupt_snapshots_and_keeps_crack_json() {
+    let _machine = shared();
     let dir = scratch("faults", "crack-corrupt", &[]);
     succeeds(&run(
         &dir,
@@ -615,6 +636,7 @@ fn rewrite(file: &Path, name: &str, value: Option<f64>, shift: f64) {
 /// list in run.json).
 #[test]
 fn crack_refuses_snapshots_that_are_not_the_runs_own() {
+    let _machine = shared();
     let dir = scratch("faults", "crack-identity", &[]);
     succeeds(&run(
         &dir,
@@ -770,6 +792,7 @@ y = "fixed"
 /// without it, and under mpirun once (by process 0).
 #[test]
 fn a_far_rigid_body_is_warned_about_once() {
+    let _machine = shared();
     let dir = scratch("faults", "far", &[]);
     std::fs::write(dir.join("far.toml"), FAR).expect("config");
     let warning =
