@@ -95,30 +95,6 @@ const STIFFNESS_FIELD_SPLIT: &str = "-snes_lag_preconditioner 2 -ksp_type gmres 
 /// Newton with MUMPS LU, a new factorisation every iteration.
 const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
 
-/// The storage of the Jacobian (`-mat_type` overrides it): on one process, under a point-block ILU
-/// (`bjacobi` with `sub_pc_type ilu`, the default of inertia-dominated 2D steps, or `ilu`), BAIJ, whose
-/// kernels work on the node's `bs x bs` blocks: on the first 200 steps of the half-resolution CT at
-/// 4.3 m/s (38,900 points, 3 unknowns per node) the factorisations took 24.7 against 35.6 ms and a
-/// triangular solve 2.2 against 4.1 ms, for the same Krylov iterations (2736 against 2737), and whole runs
-/// took 0.86x the time. Block ILU(0) shifts a pivot only when it is exactly zero: in 5 of the 1000 steps
-/// of that CT, after the crack branched, it failed where point ILU(0) passed and the fallback solved the
-/// step (about 3 % of the run); docs/benchmarks.md, "Block storage for the CT's ILU".
-/// Everywhere else AIJ with the block size set: GAMG, hypre and the field split need it, and on several
-/// processes PETSc's parallel BAIJ has no in-place update of the values (filling it block by block made
-/// the half-resolution CT's assembly 1.5x slower on two processes).
-pub fn matrix_type(processes: usize, pc: Option<&str>, sub_pc: Option<&str>) -> &'static str {
-    let point_block_ilu = match pc {
-        Some("ilu") => true,
-        Some("bjacobi") => sub_pc.is_none_or(|s| s == "ilu"),
-        _ => false,
-    };
-    if processes == 1 && point_block_ilu {
-        "baij"
-    } else {
-        "aij"
-    }
-}
-
 /// Options prefix of the fallback solver.
 pub const FALLBACK_PREFIX: &str = "fallback_";
 
@@ -265,19 +241,6 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(config);
         let cfg = RunConfig::from_file(&path).expect("config");
         classify(&crate::scenario::build(&cfg).expect("model"))
-    }
-
-    #[test]
-    fn block_storage_only_under_a_point_block_ilu_on_one_process() {
-        assert_eq!(matrix_type(1, Some("bjacobi"), None), "baij");
-        assert_eq!(matrix_type(1, Some("bjacobi"), Some("ilu")), "baij");
-        assert_eq!(matrix_type(1, Some("ilu"), None), "baij");
-        assert_eq!(matrix_type(2, Some("bjacobi"), Some("ilu")), "aij");
-        assert_eq!(matrix_type(1, Some("bjacobi"), Some("lu")), "aij");
-        for pc in ["gamg", "hypre", "fieldsplit", "mg", "lu", "asm"] {
-            assert_eq!(matrix_type(1, Some(pc), None), "aij", "{pc}");
-        }
-        assert_eq!(matrix_type(1, None, None), "aij");
     }
 
     #[test]

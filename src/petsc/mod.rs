@@ -17,7 +17,7 @@ pub mod sys;
 mod vector;
 
 pub use ksp::LinearSolve;
-pub use matrix::{BlockCsr, BlockLayout, IndexSet, Matrix};
+pub use matrix::{BlockCsr, BlockLayout, IndexSet, Matrix, matrix_type_for};
 pub use options::{
     apply_default_options, has_option, option_string, set_default_option, set_option,
     unused_options,

@@ -4,7 +4,6 @@
 
 use super::*;
 use crate::multigrid::Hierarchy;
-use crate::solver_defaults;
 
 /// The nonlinear problem of one step, handed to SNES.
 pub(super) struct StepProblem<'a, 'b, const D: usize> {
@@ -348,7 +347,7 @@ impl LinearSystem {
         let pc = snes.pc_type()?;
         let sub_pc =
             petsc::option_string(session, &format!("{}sub_pc_type", prefix.unwrap_or("")))?;
-        let kind = solver_defaults::matrix_type(session.size(), pc.as_deref(), sub_pc.as_deref());
+        let kind = petsc::matrix_type_for(session.size(), pc.as_deref(), sub_pc.as_deref());
         let mut jac = Matrix::with_type(session, n, nf, kind)?;
         jac.set_block_pattern(&owned.pattern())?;
         // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
