@@ -207,6 +207,67 @@ fn read_rows<const D: usize>(
         .collect()
 }
 
+/// One SNES solve of the attempt from the current iterate of `system`, its evaluations counted in
+/// `solves`: the statistics of a solve that ended (converged or not), a failure of the attempt (a
+/// numerical failure inside PETSc: the objects are rebuilt for the next attempt), or
+/// [`StepError::Interrupted`] when the processes abandoned it on the interrupt (`at`: the step and time
+/// of the committed state).
+fn newton_once<const D: usize>(
+    system: &mut Option<LinearSystem>,
+    (input, event, assembler, contacts): (
+        &StepInput<'_, D>,
+        LogEvent,
+        &mut Assembler<D>,
+        &[ContactSet<D>],
+    ),
+    (session, interrupt): (&SessionGuard, Option<&Interrupt>),
+    path: Option<&mut path::PathStep>,
+    solves: &mut Solves,
+    (step, time): (usize, f64),
+) -> Result<Result<SolveInfo, Failure>, StepError> {
+    let LinearSystem {
+        x,
+        jac,
+        snes,
+        owned,
+        ..
+    } = system.as_mut().expect("prepared linear system");
+    let mut problem = StepProblem::new(
+        input,
+        event,
+        assembler,
+        (contacts, owned),
+        session,
+        interrupt,
+    );
+    let result = path::newton(snes, &mut problem, x, jac, path);
+    solves.assembly_time += problem.assembly_time;
+    solves.evaluations[0] += problem.residuals;
+    solves.evaluations[1] += problem.jacobians;
+    if problem.abandoned {
+        // Every process left the solve at the same evaluation. PETSc's objects, left in the middle of a
+        // solve, are built anew should the run go on.
+        *system = None;
+        return Err(StepError::Interrupted {
+            step: step + 1,
+            time,
+        });
+    }
+    match result {
+        Ok(info) => Ok(Ok(info)),
+        // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails this
+        // attempt like a diverged solve; the objects are rebuilt for the next attempt.
+        Err(e) if e.is_numerical() => {
+            *system = None;
+            Ok(Err(Failure {
+                reason: format!("SNES failed: {e}"),
+                linear: true,
+            }))
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 impl<const D: usize> Step<'_, D> {
     /// Second phase: SNES from the prepared guess, repeated from the last solution while the contact
     /// active set and the rotation of pinned devices settle (`docs/theory.md`, "Contact with rigid
@@ -264,48 +325,18 @@ impl<const D: usize> Step<'_, D> {
         assembler.restrict_to_rows(&input, rows);
         loop {
             solves.count += 1;
-            let sys = system.as_mut().expect("prepared linear system");
-            let LinearSystem {
-                x,
-                jac,
-                snes,
-                owned,
-                ..
-            } = sys;
-            let mut problem = StepProblem::new(
-                &input,
-                assembly_event,
-                assembler,
-                (contacts, owned),
-                session,
-                interrupt,
-            );
-            let result = path::newton(snes, &mut problem, x, jac, path.as_mut());
-            solves.assembly_time += problem.assembly_time;
-            solves.evaluations[0] += problem.residuals;
-            solves.evaluations[1] += problem.jacobians;
-            if problem.abandoned {
-                // Every process left the solve at the same evaluation. PETSc's objects, left in the
-                // middle of a solve, are built anew should the run go on.
-                *system = None;
-                return Err(StepError::Interrupted {
-                    step: step + 1,
-                    time: self.state.counters.time,
-                });
-            }
-            let info = match result {
+            let info = match newton_once(
+                system,
+                (&input, assembly_event, &mut *assembler, contacts.as_slice()),
+                (session, interrupt),
+                path.as_mut(),
+                &mut solves,
+                (step, self.state.counters.time),
+            )? {
                 Ok(info) => info,
-                // A numerical failure inside PETSc (e.g. MUMPS failing on a nearly singular matrix) fails
-                // this attempt like a diverged solve; the objects are rebuilt for the next attempt.
-                Err(e) if e.is_numerical() => {
-                    *system = None;
-                    return Ok(Err(Failure {
-                        reason: format!("SNES failed: {e}"),
-                        linear: true,
-                    }));
-                }
-                Err(e) => return Err(e.into()),
+                Err(failure) => return Ok(Err(failure)),
             };
+            let sys = system.as_mut().expect("prepared linear system");
             if !info.converged() {
                 return Ok(Err(diverged(&info)));
             }
