@@ -41,11 +41,14 @@ pub enum StepClass {
 /// Newton settings shared by every class: relative and absolute residual tolerances, at most 25 iterations.
 const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
 
-/// GMRES preconditioned by ILU(0) per process (pivots shifted away from zero), refactored at every Newton
-/// iteration: lagging it (`-snes_lag_preconditioner 3`) saved the factorisations but raised the linear
-/// iterations of the half-resolution CT at 4.3 m/s from 11.4 to 18.2 per step once damage grows, a net loss
-/// (a factorisation costs about 2.3 GMRES iterations there).
-const INERTIA: &str = "-ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
+/// GMRES preconditioned by ILU(0) per process (pivots shifted away from zero), factored at the first Newton
+/// iteration of a step and every third one. With the Jacobian stored by node blocks (one process,
+/// `petsc::matrix_type_for`) a factorisation of the widened CPDI pattern costs about five GMRES iterations,
+/// and reusing it within the step pays: the half-resolution CT at 4.3 m/s to 1 ms took 356 s instead of
+/// 399 s (0.89x) for 1.29x the Krylov iterations, 20 cracked steps 0.82x (`docs/benchmarks.md`, "Reusing the
+/// factorisation within a step"). With the former point-wise storage and the stale-factorisation bug of
+/// the block storage, the same lag had measured as a loss.
+const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
      -pc_type bjacobi -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
 
 /// In 3D (a plate): GMRES preconditioned by ILU(0) on overlapping subdomains (additive Schwarz, one layer
