@@ -20,7 +20,11 @@
 //!   notch tip, sorted along the circle and split where two neighbours are more than `2 s` apart; each
 //!   group is one crossing of a band, and its width is its arc extent plus one point spacing (the bands
 //!   leave the notch tip roughly radially, so the circle cuts them nearly square). The median over all
-//!   crossings is the reported band width, the largest one its maximum.
+//!   crossings is the reported band width, the largest one its maximum;
+//! * *zone width* is the same measure for the regularised zone, the points with damage at least
+//!   `zone_threshold` (0.5): on each station circle the zone's groups of points that contain a crossing of
+//!   the crack, their median width. It follows the regularisation's length scale where the band width of
+//!   the nearly broken core (`d >= 0.9`) follows the cell.
 
 use nalgebra::Vector2;
 use std::collections::{HashMap, HashSet, VecDeque};
@@ -43,6 +47,15 @@ pub struct CrackCriteria {
     /// Cracked cells within this distance of the notch tip (mm; at least `2 h`) start the crack.
     #[serde(default)]
     pub seed_radius: f64,
+    /// Damage at and above which a point belongs to the regularised zone whose width is measured across
+    /// the bands (`zone_width`).
+    #[serde(default = "default_zone_threshold")]
+    pub zone_threshold: f64,
+}
+
+/// The damage level of the regularised zone ([`CrackCriteria::zone_threshold`]).
+fn default_zone_threshold() -> f64 {
+    0.5
 }
 
 impl Default for CrackCriteria {
@@ -55,6 +68,7 @@ impl Default for CrackCriteria {
             min_length: 10.0,
             width_stations: [0.25, 0.5, 0.75],
             seed_radius: 0.0,
+            zone_threshold: default_zone_threshold(),
         }
     }
 }
@@ -112,6 +126,10 @@ pub struct CrackState {
     /// Largest crossing width (mm).
     #[serde(default)]
     pub band_width_max: f64,
+    /// Median width of the regularised zone (`d >= zone_threshold`) across the bands at the same
+    /// stations (mm; 0 without crossings).
+    #[serde(default)]
+    pub zone_width: f64,
     /// Energy dissipated in the whole specimen so far by microplanes under tensile and under
     /// compressive normal strain (N mm per mm of thickness; filled in by the output writer).
     #[serde(default)]
@@ -158,11 +176,30 @@ pub fn measure(
     };
     let mut widths: Vec<f64> = crossings.iter().map(|b| b.width).collect();
     widths.sort_by(f64::total_cmp);
-    let band_width = match widths.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => widths[n / 2],
-        n => 0.5 * (widths[n / 2 - 1] + widths[n / 2]),
+    let band_width = median(&widths);
+    // The regularised zone around the same crossings.
+    let zone: Vec<usize> = (0..x.len())
+        .filter(|&i| damage[i] >= c.zone_threshold)
+        .collect();
+    let mut zone_widths: Vec<f64> = if crossings.is_empty() {
+        Vec::new()
+    } else {
+        c.width_stations
+            .iter()
+            .flat_map(|f| crossings_of(x, &zone, notch_tip, f * length, spacing))
+            .filter(|z| {
+                let (lo, hi) = (
+                    z.angle_degrees - z.half_degrees,
+                    z.angle_degrees + z.half_degrees,
+                );
+                crossings.iter().any(|b| {
+                    (b.radius - z.radius).abs() < 1e-9 && (lo..=hi).contains(&b.angle_degrees)
+                })
+            })
+            .map(|z| z.width)
+            .collect()
     };
+    zone_widths.sort_by(f64::total_cmp);
     CrackState {
         time,
         length,
@@ -172,6 +209,7 @@ pub fn measure(
         crossings,
         band_width,
         band_width_max: widths.last().copied().unwrap_or(0.0),
+        zone_width: median(&zone_widths),
         dissipated: [0.0; 2],
         nonlocal_points: 0,
     }
@@ -375,6 +413,17 @@ pub fn band_width_1d(profile: &[(f64, f64)], level: f64) -> f64 {
 }
 
 /// The band crossings of the crack points `crack` on the circle of radius `r` around `centre`.
+/// The median of sorted `values` (0 if empty).
+fn median(values: &[f64]) -> f64 {
+    match values.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => values[n / 2],
+        n => 0.5 * (values[n / 2 - 1] + values[n / 2]),
+    }
+}
+
+/// The crossings of the bands formed by the points `crack` with the circle of radius `r` (mm) around
+/// `centre` ([`crossings_of`]).
 fn crossings(
     x: &[Vector2<f64>],
     crack: &[usize],
@@ -382,6 +431,35 @@ fn crossings(
     r: f64,
     spacing: f64,
 ) -> Vec<BandCrossing> {
+    crossings_of(x, crack, centre, r, spacing)
+        .into_iter()
+        .map(|z| BandCrossing {
+            radius: z.radius,
+            angle_degrees: z.angle_degrees,
+            width: z.width,
+        })
+        .collect()
+}
+
+/// One group of points on a station circle: a crossing with its angular half-extent.
+struct Crossing {
+    radius: f64,
+    angle_degrees: f64,
+    /// Half the angle the group spans, widened by half a point spacing on each side (degrees).
+    half_degrees: f64,
+    width: f64,
+}
+
+/// The groups of the points `points` within half a point spacing `spacing` of the circle of radius `r`
+/// (mm) around `centre`, sorted along the circle and split where two neighbours are more than two
+/// spacings apart; each group's width is its arc extent plus one spacing.
+fn crossings_of(
+    x: &[Vector2<f64>],
+    crack: &[usize],
+    centre: Vector2<f64>,
+    r: f64,
+    spacing: f64,
+) -> Vec<Crossing> {
     // Arc length along the circle from the notch axis (+x); the cut of atan2 at +-180 degrees lies in the
     // notch behind the tip, where no band runs.
     let mut arcs: Vec<f64> = crack
@@ -397,9 +475,10 @@ fn crossings(
     for k in 1..=arcs.len() {
         if k == arcs.len() || arcs[k] - arcs[k - 1] > 2.0 * spacing {
             let (a, b) = (arcs[start], arcs[k - 1]);
-            out.push(BandCrossing {
+            out.push(Crossing {
                 radius: r,
                 angle_degrees: (0.5 * (a + b) / r).to_degrees(),
+                half_degrees: ((0.5 * (b - a) + 0.5 * spacing) / r).to_degrees(),
                 width: b - a + spacing,
             });
             start = k;
@@ -517,6 +596,37 @@ mod tests {
         let (x, d) = field(|p| p.x >= 30.0 && p.x <= 70.0 && (p.y - 50.0).abs() <= 5.0);
         let wide = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
         assert!((wide.band_width - 10.0).abs() <= 0.6, "{wide:?}");
+    }
+
+    #[test]
+    fn zone_width_measures_the_regularised_zone_around_the_crack_only() {
+        // A core of d = 1 (|y - 50| <= 1, 2 mm wide) inside a zone of d = 0.6 (|y - 50| <= 4, 8 mm wide),
+        // and a patch of d = 0.6 away from the crack that meets the stations' circles but no crossing.
+        let (x, _) = field(|_| true);
+        let d: Vec<f64> = (x.iter())
+            .map(|p| {
+                let band = p.x >= 30.0 && p.x <= 70.0;
+                let zone = band && (p.y - 50.0).abs() <= 4.0;
+                let patch = (p.x - 30.0).abs() <= 3.0 && p.y > 65.0 && p.y < 90.0;
+                if band && (p.y - 50.0).abs() <= 1.0 {
+                    1.0
+                } else if zone || patch {
+                    0.6
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &CrackCriteria::default(), 0.0);
+        assert!((s.band_width - 2.0).abs() <= 0.3, "{s:?}");
+        assert!((s.zone_width - 8.0).abs() <= 0.6, "{s:?}");
+        // A zone no wider than the core reads as the core.
+        let core: Vec<f64> = d
+            .iter()
+            .map(|&v| if v >= 1.0 { 1.0 } else { 0.0 })
+            .collect();
+        let s = measure(&x, &core, TIP, 1.0, 0.5, &CrackCriteria::default(), 0.0);
+        assert!((s.zone_width - s.band_width).abs() < 1e-9, "{s:?}");
     }
 
     #[test]

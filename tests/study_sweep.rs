@@ -68,7 +68,7 @@ fn a_sweep_over_overrides_runs_each_set_with_its_overrides_into_one_table() {
         md.contains("- `slow`: `--set ct.loading_rate=2000`"),
         "{md}"
     );
-    assert!(md.contains("| crack | branches | angles | dissipated | peak reaction |"));
+    assert!(md.contains("| crack | branches | angles | widths | dissipated | peak reaction |"));
     std::fs::remove_dir_all(&dir).ok();
 }
 

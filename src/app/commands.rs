@@ -35,13 +35,15 @@ pub fn crack(run_dir: &Path, petsc_args: &[String]) -> Result<()> {
     })?;
     for s in &states {
         println!(
-            "t = {:8.1} us: {:<10} length {:6.1} mm, bands [{}] deg, band width {:.1} mm (max {:.1})",
+            "t = {:8.1} us: {:<10} length {:6.1} mm, bands [{}] deg, band width {:.1} mm (max {:.1}), \
+             zone width (d >= 0.5) {:.1} mm",
             s.time * 1e6,
             s.classification,
             s.length,
             s.band_angles(),
             s.band_width,
-            s.band_width_max
+            s.band_width_max,
+            s.zone_width
         );
     }
     Ok(())

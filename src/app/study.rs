@@ -591,16 +591,18 @@ fn report_tables(config: &Path, steps: usize, results: &[SetResult]) -> (String,
     let mut md = format!(
         "# Study: `{}`, {steps} steps\n\nWall times in s, memory in MB (peak resident set of the run's process). \
          Crack length (mm), branches and band angles (deg against the notch axis) of the last crack state \
-         in `crack.json`, the energy the damage dissipated under tension / compression and the largest \
+         in `crack.json`, the median widths across the bands of the zones with damage d >= 0.9 and d >= 0.5 \
+         (mm), the energy the damage dissipated under tension / compression and the largest \
          reaction |F| of the run (N per mm thickness; N in 3D), all in the specimen's frame (also with \
          `grid.rotation`). PETSc's profile of each set: `<set>/log_view.txt`.\n\n",
         config.display()
     );
-    md.push_str("| set | converged | steps | Newton/step | KSP/Newton | set-up | assembly | PETSc solve | total | peak MB | retries | crack | branches | angles | dissipated | peak reaction |\n");
-    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| set | converged | steps | Newton/step | KSP/Newton | set-up | assembly | PETSc solve | total | peak MB | retries | crack | branches | angles | widths | dissipated | peak reaction |\n");
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let mut csv = String::from(
         "set,converged,steps,newton_per_step,ksp_per_newton,setup_s,assembly_s,solve_s,total_s,peak_mb,retries,\
-         crack_length_mm,branches,band_angles_deg,classification,dissipated_tension,dissipated_compression,\
+         crack_length_mm,branches,band_angles_deg,classification,band_width_mm,zone_width_mm,\
+         dissipated_tension,dissipated_compression,\
          peak_reaction,peak_reaction_set,overrides,options,error\n",
     );
     for r in results {
@@ -678,10 +680,12 @@ fn result_cells(r: &SetResult) -> (String, String) {
             let [t, k] = c.dissipated;
             let _ = write!(
                 md,
-                " {:.1} | {} | {} | {t:.2} / {k:.2} |",
+                " {:.1} | {} | {} | {:.1} / {:.1} | {t:.2} / {k:.2} |",
                 c.length,
                 c.bands.len(),
-                angles.join(", ")
+                angles.join(", "),
+                c.band_width,
+                c.zone_width
             );
             let precise: Vec<String> = c
                 .bands
@@ -690,16 +694,18 @@ fn result_cells(r: &SetResult) -> (String, String) {
                 .collect();
             let _ = write!(
                 csv,
-                ",{:.3},{},\"{}\",{},{t:.6e},{k:.6e}",
+                ",{:.3},{},\"{}\",{},{:.3},{:.3},{t:.6e},{k:.6e}",
                 c.length,
                 c.bands.len(),
                 precise.join(" "),
-                c.classification
+                c.classification,
+                c.band_width,
+                c.zone_width
             );
         }
         None => {
-            md.push_str(" - | - | - | - |");
-            csv.push_str(",,,,,,");
+            md.push_str(" - | - | - | - | - |");
+            csv.push_str(",,,,,,,,");
         }
     }
     match &r.peak_reaction {
@@ -933,7 +939,7 @@ mod tests {
             "time": 3e-4, "length": 101.84, "tip": [150.0, 7.0],
             "bands": [{ "angle_degrees": -94.04, "points": 3 }, { "angle_degrees": -68.0, "points": 3 }],
             "classification": "branching", "crossings": [], "band_width": 4.0, "band_width_max": 6.0,
-            "dissipated": [88.834, 3.41]
+            "zone_width": 9.25, "dissipated": [88.834, 3.41]
         });
         lu.crack = Some(serde_json::from_value(state).expect("a crack state"));
         lu.peak_reaction = Some(("loading_plate".into(), 2276.0751));
@@ -941,8 +947,8 @@ mod tests {
         let (md, csv) = report_tables(Path::new("c.toml"), 2, &results);
         assert!(
             md.contains(
-                "| lu | yes | 2 | 3.50 | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 | 101.8 | 2 | -94, -68 | 88.83 / 3.41 | 2276.08 (loading_plate) |\n\
-                 | ilu | **no** | 0 | NaN | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 | - | - | - | - | - |\n"
+                "| lu | yes | 2 | 3.50 | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 | 101.8 | 2 | -94, -68 | 4.0 / 9.2 | 88.83 / 3.41 | 2276.08 (loading_plate) |\n\
+                 | ilu | **no** | 0 | NaN | 2.3 | 0.12 | 0.33 | 2.50 | 4.00 | 106 | 1 | - | - | - | - | - | - |\n"
             ),
             "{md}"
         );
@@ -952,9 +958,9 @@ mod tests {
         );
         assert!(
             csv.ends_with(
-                "lu,true,2,3.5000,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,101.840,2,\"-94.04 -68.00\",branching,\
+                "lu,true,2,3.5000,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,101.840,2,\"-94.04 -68.00\",branching,4.000,9.250,\
                  8.883400e1,3.410000e0,2.276075e3,loading_plate,\"grid.rotation=15\",\"-pc_type lu\",\"\"\n\
-                 ilu,false,0,NaN,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,,,,,,,,,\"\",\"-pc_type lu\",\"diverged 'x'\"\n"
+                 ilu,false,0,NaN,2.3450,0.1250,0.3333,2.5000,4.0000,106.1,1,,,,,,,,,,,\"\",\"-pc_type lu\",\"diverged 'x'\"\n"
             ),
             "{csv}"
         );

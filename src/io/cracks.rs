@@ -150,7 +150,8 @@ pub(super) fn save_line_plot(plot: &LinePlot, path: &Path) -> Result<(), OutputE
 }
 
 /// `crack_length.png` and `band_width.png`: the crack length and the width of the `d >= 0.9` zone across
-/// the bands (median and largest crossing) at the output steps.
+/// the bands (median and largest crossing) and of the regularised zone `d >= 0.5` (median) at the output
+/// steps.
 fn crack_plots(dir: &Path, cracks: &[CrackState]) -> Result<(), OutputError> {
     let points = |value: fn(&CrackState) -> f64| -> Vec<(f64, f64)> {
         cracks.iter().map(|c| (c.time * 1e6, value(c))).collect()
@@ -167,12 +168,13 @@ fn crack_plots(dir: &Path, cracks: &[CrackState]) -> Result<(), OutputError> {
     )?;
     save(
         LinePlot::new(
-            "width of the damage bands (d >= 0.9 across the band)",
+            "width of the damage bands across the band",
             "time [us]",
             "width [mm]",
         )
-        .with_series("median of the stations", points(|c| c.band_width))
-        .with_series("largest crossing", points(|c| c.band_width_max)),
+        .with_series("d >= 0.9, median of the stations", points(|c| c.band_width))
+        .with_series("d >= 0.9, largest crossing", points(|c| c.band_width_max))
+        .with_series("d >= 0.5, median of the stations", points(|c| c.zone_width)),
         file::BAND_WIDTH,
     )
 }
