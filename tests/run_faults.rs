@@ -1,7 +1,8 @@
 //! Runs survive what happens to real runs: the real binary on a tiny CT specimen (360 points) under the
 //! faults of docs/bad-input.md, "While running":
 //!
-//! * a second run into a directory that a run is writing is refused, also with --overwrite or --resume;
+//! * a second run into a directory that a run is writing is refused, also with --overwrite or --resume,
+//!   and under `mpirun` alike (exit code 2, one error line);
 //! * Ctrl-C on several processes stops them all at the same step with a complete checkpoint of it, also
 //!   when a step is too slow to end before the launcher kills them (it is abandoned);
 //! * a write that fails (a file-size limit standing in for a full disk) leaves a resumable state and a
@@ -154,6 +155,47 @@ fn of_two_runs_started_together_into_one_directory_one_runs() {
     assert!(checkpoint::read_header(&dir.join("d")).is_ok());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Under `mpirun -n 2` a directory that another run holds is refused as on one process: exit code 2 and
+/// one error line (process 0's), every time. Process 0 alone takes the lock; the other process, which
+/// finds no other fault, learns of the refusal once PETSc has started, and both end alike (a refusal by
+/// process 0 alone raced the other's start of MPI: exit code 1 in about one try of two). Five tries into
+/// an empty directory, with and without --overwrite, then two where every process refuses the input
+/// before PETSc starts (results, no checkpoint to resume) and process 0 names the lock first.
+#[test]
+fn a_held_directory_is_refused_alike_on_several_processes() {
+    let _machine = shared();
+    let dir = scratch("faults", "mpi-lock", &[]);
+    let d = dir.join("d");
+    std::fs::create_dir(&d).expect("d");
+    let lock = mpm_concrete::rundir::lock(&d).expect("lock");
+    let needles = [
+        "d: another run is writing into this directory (a run that is starting",
+        "wait until it has ended, or give another --output",
+    ];
+    let refused_once = |extra: &[&str]| {
+        let mut args = vec!["run", "tiny.toml", "--quiet", "--output", "d"];
+        args.extend(extra);
+        let out = mpirun(&dir, &args).output().expect("mpirun");
+        refused(&out, &needles);
+        let err = stderr(&out);
+        assert!(!err.contains("error (process"), "{extra:?}: {err}");
+    };
+    for i in 0..5 {
+        refused_once(if i % 2 == 0 { &[] } else { &["--overwrite"] });
+    }
+    std::fs::write(d.join("history.csv"), "step\n").expect("history.csv");
+    refused_once(&[]);
+    refused_once(&["--resume", "--steps", "8"]);
+    drop(lock);
+    let left: Vec<String> = std::fs::read_dir(&d)
+        .expect("d")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left, ["history.csv"], "nothing written");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The files of `dir` whose names end in `.tmp` or hold `.tmp-` (the temporaries of unfinished writes).
 fn temporaries(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)

@@ -99,6 +99,18 @@ struct Prepared {
     /// The lock of the output directory, if it existed (process 0; a new directory is locked when it is
     /// created).
     lock: Option<DirLock>,
+    /// Process 0's refusal of the output directory when it could not take its lock (another run holds
+    /// it): every process ends with it once PETSc has started ([`refuse_if_locked_out`]).
+    locked_out: Option<String>,
+}
+
+/// `e`, an input that every process refuses before PETSc starts, or in its place on process 0 the refusal
+/// `locked_out` of an output directory that another run holds: the lock comes first, as on one process.
+fn lock_first(locked_out: Option<&str>, e: anyhow::Error) -> anyhow::Error {
+    match locked_out {
+        Some(refusal) => bad(refusal),
+        None => e,
+    }
 }
 
 /// `run CONFIG`: checks the input (`own_args` the program's arguments, `petsc_args` PETSc's, starting with
@@ -109,9 +121,11 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     let prepared = prepare(path, &flags, petsc_args)?;
     let file = path.display().to_string();
     let label = config::source_label(&file, &prepared.overrides);
-    let plan = scenario::plan(&prepared.cfg).map_err(|e| bad(e.in_file(&label)))?;
-    check_memory(&plan, &label, flags.allow_large)?;
+    let held_first = |e| lock_first(prepared.locked_out.as_deref(), e);
+    let plan = scenario::plan(&prepared.cfg).map_err(|e| held_first(bad(e.in_file(&label))))?;
+    check_memory(&plan, &label, flags.allow_large).map_err(held_first)?;
     let session = Session::initialize(petsc_args).context("starting PETSc")?;
+    let session = refuse_if_locked_out(session, &prepared)?;
     share_cores(&session);
     let invocation = Invocation {
         own: own_args,
@@ -174,16 +188,21 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
     let identity = RunIdentity::new(&effective, &petsc_options);
     let contents = rundir::inspect(&dir).map_err(bad)?;
     // Another run writing into the directory comes first: neither --overwrite nor --resume may touch it.
-    let lock = if launcher_rank() == 0 && dir.is_dir() {
-        Some(rundir::lock(&dir).map_err(bad)?)
-    } else {
-        None
-    };
+    // Process 0 alone takes the lock, so a refusal is not yet returned here: the input the other
+    // processes refuse before PETSc starts, process 0 refuses with the lock's refusal instead; the rest
+    // are told once PETSc has started ([`refuse_if_locked_out`]), so that every process ends alike.
+    let (lock, locked_out) =
+        match (launcher_rank() == 0 && dir.is_dir()).then(|| rundir::lock(&dir)) {
+            Some(Ok(lock)) => (Some(lock), None),
+            Some(Err(refusal)) => (None, Some(refusal)),
+            None => (None, None),
+        };
+    let held_first = |e| lock_first(locked_out.as_deref(), e);
     let resume_from = if flags.resume {
-        Some(check_resume(&dir, &identity, cfg.run.steps)?)
+        Some(check_resume(&dir, &identity, cfg.run.steps).map_err(held_first)?)
     } else {
         if !contents.results.is_empty() && !flags.overwrite {
-            return Err(bad(refusal(&dir, &contents, &identity)));
+            return Err(held_first(bad(refusal(&dir, &contents, &identity))));
         }
         None
     };
@@ -195,7 +214,26 @@ fn prepare(path: &Path, flags: &RunFlags, petsc_args: &[String]) -> Result<Prepa
         dir,
         resume_from,
         lock,
+        locked_out,
     })
+}
+
+/// The session of a run whose output directory process 0 could lock. Process 0 alone knows whether
+/// another run holds the directory: if it does, every process finishes PETSc and ends with the refusal
+/// (exit code 2), which process 0 reports; the others end without a word, as they do with bad input that
+/// every process meets. Collective.
+fn refuse_if_locked_out(session: SessionGuard, prepared: &Prepared) -> Result<SessionGuard> {
+    // Reported before the processes agree: once one of them has ended with an error, the launcher may
+    // end the others at any moment.
+    if let Some(refusal) = &prepared.locked_out {
+        eprintln!("error: {refusal}");
+    }
+    if !session.any(prepared.locked_out.is_some()) {
+        return Ok(session);
+    }
+    // The refusal is what the user must learn, also if PETSc fails to finish.
+    Session::finalize(session).ok();
+    Err(bad(""))
 }
 
 /// Refuses a run whose estimated memory need exceeds the memory available, unless `allow_large`; `label`
