@@ -81,7 +81,11 @@ fn the_ct_configurations_default_to_the_converged_choice_and_the_c1_files_are_on
         );
         let (overridden, text) =
             RunConfig::load(&default_path, &[PAPER_CONSTANT.to_string()]).expect(default);
-        assert_eq!(without_name(&text), without_name(&old_text), "{default} vs {c1}");
+        assert_eq!(
+            without_name(&text),
+            without_name(&old_text),
+            "{default} vs {c1}"
+        );
         assert_eq!(
             format!("{:?}", overridden.materials()),
             format!("{:?}", old.materials()),
