@@ -59,7 +59,8 @@ enum Command {
         overwrite: bool,
     },
     /// Performance benchmark: the paper-size CT, the elastic cantilever at 40,960 and 163,840 points and
-    /// the CT demo, each for a fixed number of steps in its own process, plus the microplane update's
+    /// the CT demo (both CTs with the paper's constant c = 1 mm^2, the setting of the recorded timings),
+    /// each for a fixed number of steps in its own process, plus the microplane update's
     /// throughput; writes bench.json and bench.md (docs/benchmarks.md). PETSc options after the arguments
     /// go to every case.
     Bench {

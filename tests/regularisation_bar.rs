@@ -12,9 +12,10 @@
 //! **Band width**: distance between the outermost crossings of d = 0.5 by the points' damage profile.
 //! **Dissipated energy**: `D = (W_ext - Psi - K)/h` per mm^2 of the section (N mm/mm^2).
 //!
-//! Measured (2026-12-03): with the recommended setting (`c_0 = 9 mm^2`, `R = 0.45`: residual length 2 mm)
-//! band 16.55 / 16.40 mm (0.9 %), D 0.5603 / 0.5427 N mm/mm^2 (3.2 %) on h = 1 / 0.5 mm. With the CT
-//! configs' localizing setting (`c_0 = 1 mm^2`, `R = 0.01`: residual length 0.1 mm) the fully damaged core
+//! Measured (2026-12-03): with the recommended setting (`c_0 = 9 mm^2`, `R = 0.45`: residual length 2 mm,
+//! the CT configs' default since 2026-12-06)
+//! band 16.55 / 16.40 mm (0.9 %), D 0.5603 / 0.5427 N mm/mm^2 (3.2 %) on h = 1 / 0.5 mm. With the
+//! `ct-paper-c1-*-localizing` configs' setting (`c_0 = 1 mm^2`, `R = 0.01`: residual length 0.1 mm) the fully damaged core
 //! has one-point-wide edges and follows the cell: band 4.42 / 4.05 mm (9.2 %), D 0.2620 / 0.2329
 //! (12.5 %), so this test fails with it.
 

@@ -32,6 +32,11 @@ pub struct Case {
 /// 4.3 m/s (155,600 points, microplane with gradient enhancement, 3 unknowns per node), the elastic
 /// cantilever at 10,240, 40,960 and 163,840 points (stiffness-dominated steps: whether the cost per
 /// unknown stays flat as the grid grows), and the CT demo (9,780 points).
+///
+/// The two CT cases keep the paper's constant gradient activity (`c = 1 mm^2`, the `-c1` configurations)
+/// although the CT configurations' default is now the converged regularisation: the benchmark measures the
+/// code's speed, and its recorded timings (`docs/benchmarks.md`) were all taken with that setting, so a
+/// new measurement compares with them only on the same model.
 pub fn default_cases() -> Vec<Case> {
     let case = |name: &str, config: &str, steps| Case {
         name: name.into(),
@@ -39,11 +44,11 @@ pub fn default_cases() -> Vec<Case> {
         steps,
     };
     vec![
-        case("ct-paper-4.3mps", "configs/ct-paper-4.3mps.toml", 20),
+        case("ct-paper-4.3mps", "configs/ct-paper-c1-4.3mps.toml", 20),
         case("cantilever-10k", "configs/bench/cantilever-10k.toml", 10),
         case("cantilever-41k", "configs/bench/cantilever-41k.toml", 10),
         case("cantilever-164k", "configs/bench/cantilever-164k.toml", 5),
-        case("ct-demo", "configs/ct-demo.toml", 50),
+        case("ct-demo", "configs/ct-demo-c1.toml", 50),
     ]
 }
 

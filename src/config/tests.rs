@@ -20,11 +20,89 @@ fn the_shipped_configurations_are_valid() {
         }
     }
     assert!(checked >= 13, "{checked} configurations");
-    let plane = RunConfig::from_file(&dir.join("ct-demo.toml")).expect("ct-demo");
-    let plate = RunConfig::from_file(&dir.join("ct-3d-demo.toml")).expect("ct-3d-demo");
-    assert!(plane.extrusion.is_none());
-    assert_eq!(plate.extrusion.map(|e| e.thickness), Some(8.0));
-    assert_eq!(format!("{:?}", plane.ct), format!("{:?}", plate.ct));
+    for (plane, plate) in [
+        ("ct-demo.toml", "ct-3d-demo.toml"),
+        ("ct-demo-c1.toml", "ct-3d-demo-c1.toml"),
+    ] {
+        let plane = RunConfig::from_file(&dir.join(plane)).expect(plane);
+        let plate = RunConfig::from_file(&dir.join(plate)).expect(plate);
+        assert!(plane.extrusion.is_none());
+        assert_eq!(plate.extrusion.map(|e| e.thickness), Some(8.0));
+        assert_eq!(format!("{:?}", plane.ct), format!("{:?}", plate.ct));
+    }
+}
+
+/// The override that gives a CT configuration the paper's constant `c = 1 mm^2` (`docs/configuration.md`,
+/// "The regularisation of the CT configurations").
+const PAPER_CONSTANT: &str =
+    r#"ct.material={ model = "microplane", preset = "paper", erosion_damage = 0.95 }"#;
+
+/// The CT configurations run the converged regularisation (`c_0 = 9 mm^2`, localizing activity with
+/// residual 0.45 and decay 0), and the paper's constant is one override away: each `-c1` file is its
+/// sibling with the override, the same effective configuration but for the run's name. So the runs of the
+/// old setting in the docs, whose commands name the `-c1` files, keep their results.
+#[test]
+fn the_ct_configurations_default_to_the_converged_choice_and_the_c1_files_are_one_override_away() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let converged = crate::material::GradientActivity::Localizing {
+        residual: 0.45,
+        decay: 0.0,
+    };
+    let pairs = [
+        ("ct-paper-4.3mps", "ct-paper-c1-4.3mps"),
+        ("ct-paper-1.4mps", "ct-paper-c1-1.4mps"),
+        ("ct-paper-0.035mps", "ct-paper-c1-0.035mps"),
+        ("ct-paper-0.035mps-10ms", "ct-paper-c1-0.035mps-10ms"),
+        ("ct-paper-h2-4.3mps", "ct-paper-c1-h2-4.3mps"),
+        ("ct-paper-h2-1.4mps", "ct-paper-c1-h2-1.4mps"),
+        ("ct-paper-h2-0.035mps-10ms", "ct-paper-c1-h2-0.035mps-10ms"),
+        ("ct-demo", "ct-demo-c1"),
+        ("ct-3d-demo", "ct-3d-demo-c1"),
+    ];
+    let without_name = |text: &str| {
+        let mut t: toml::Table = toml::from_str(text).expect("canonical text");
+        t["run"].as_table_mut().expect("[run]").remove("name");
+        t
+    };
+    for (default, c1) in pairs {
+        let default_path = dir.join(format!("{default}.toml"));
+        let c1_path = dir.join(format!("{c1}.toml"));
+        let (cfg, _) = RunConfig::load(&default_path, &[]).expect(default);
+        let m = cfg.materials().concrete.as_ref().expect(default);
+        assert_eq!(m.gradient_parameter(), 9.0, "{default}");
+        assert_eq!(m.gradient_activity(), converged, "{default}");
+        let (old, old_text) = RunConfig::load(&c1_path, &[]).expect(c1);
+        let m = old.materials().concrete.as_ref().expect(c1);
+        assert_eq!(m.gradient_parameter(), 1.0, "{c1}");
+        assert_eq!(
+            m.gradient_activity(),
+            crate::material::GradientActivity::Constant,
+            "{c1}"
+        );
+        let (overridden, text) =
+            RunConfig::load(&default_path, &[PAPER_CONSTANT.to_string()]).expect(default);
+        assert_eq!(
+            without_name(&text),
+            without_name(&old_text),
+            "{default} vs {c1}"
+        );
+        assert_eq!(
+            format!("{:?}", overridden.materials()),
+            format!("{:?}", old.materials()),
+            "{default} vs {c1}"
+        );
+    }
+    // The configurations without a `-c1` file take the same override (the inserts' CT, docs/results.md).
+    let (inserts, _) = RunConfig::load(
+        &dir.join("ct-paper-4.3mps-inserts.toml"),
+        &[PAPER_CONSTANT.to_string()],
+    )
+    .expect("inserts");
+    let (old, _) = RunConfig::load(&dir.join("ct-paper-c1-4.3mps.toml"), &[]).expect("c1");
+    assert_eq!(
+        format!("{:?}", inserts.materials().concrete),
+        format!("{:?}", old.materials().concrete)
+    );
 }
 
 const MINIMAL: &str = r#"
