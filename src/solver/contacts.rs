@@ -1,8 +1,21 @@
 //! The contact sets of a step: the rigid devices in contact with the specimen and the node pairs between
 //! bodies on their own velocity fields, found at the start of every attempt.
 
-use super::*;
-use nalgebra::Matrix2;
+use super::Step;
+use super::report::StepError;
+use crate::assembly::Newmark;
+use crate::contact::{
+    self, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus, RowMap,
+};
+use crate::dofs::INACTIVE;
+use crate::grid::Grid;
+use crate::model::{Model, State};
+use crate::particles::Particles;
+use crate::petsc::SessionGuard;
+use crate::space::{from_xy, xy};
+use crate::transfer::GridState;
+use nalgebra::{Matrix2, SVector, Vector2};
+use std::ops::Range;
 
 /// A rigid device in contact with the specimen during one step attempt: its contact nodes and its motion
 /// in the step (translation, and rotation about its pin settled with the active set).

@@ -1,7 +1,19 @@
 //! Third phase of a step attempt: reactions, the new nodal accelerations, the work of the constraints,
 //! G2P and the commit of the material state, the motion of the rigid bodies; the report.
 
-use super::*;
+use super::Step;
+use super::contacts::{self, ContactSet};
+use super::path;
+use super::prepare::StepPlan;
+use super::processes::agreed;
+use super::report::{StepError, StepReport};
+use super::solve::Solved;
+use crate::assembly::{Committed, Newmark};
+use crate::petsc::SessionGuard;
+use crate::space::{from_xy, rotation_xy, xy};
+use crate::transfer::{self, StepSolution};
+use nalgebra::{SMatrix, SVector, Vector2};
+use std::time::Instant;
 
 /// What `finish` computes before the commit: per constraint set the reaction (N; in 2D per mm
 /// thickness) and the prescribed displacement increment (mm), loads included, and the nodal increments

@@ -1,7 +1,16 @@
 //! The assembler's view of a step ([`StepInput`]): built in one place, by the step's phases and by
 //! [`StepData`] for tests and benches that call the assembler directly.
 
-use super::*;
+use super::prepare::{Loading, StepPlan};
+use super::report::StepError;
+use super::{Step, Workspace, row_scale};
+use crate::assembly::StepInput;
+use crate::dofs::DofMap;
+use crate::model::{Model, State};
+use crate::particles::Particles;
+use crate::petsc::SessionGuard;
+use crate::shape::ShapeTable;
+use crate::transfer::GridState;
 
 impl<const D: usize> Step<'_, D> {
     /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
@@ -33,8 +42,8 @@ impl<const D: usize> Step<'_, D> {
 }
 
 impl<const D: usize> Workspace<D> {
-    /// Starts the assembler's step ([`Assembler::begin_step`]) on the workspace's shape functions,
-    /// unknowns, grid state and contact pairs with the step's `loading`.
+    /// Starts the assembler's step ([`Assembler::begin_step`](crate::assembly::Assembler::begin_step)) on the
+    /// workspace's shape functions, unknowns, grid state and contact pairs with the step's `loading`.
     pub(super) fn begin_assembly(
         &mut self,
         model: &Model<D>,
@@ -54,10 +63,10 @@ impl<const D: usize> Workspace<D> {
     }
 }
 
-/// A step's data on the grid built the solver's way from a model and a state: shape functions and P2G,
-/// the unknowns with the constraints of the model's boxes and glued bodies, the loads, the pairs between
-/// bodies and the inertia of a step of `dt`: what the step prepares before its PETSc objects.
-/// For tests and benches that call the [`Assembler`] directly ([`StepData::input`]); the solver itself
+/// A step's data on the grid built the solver's way from a model and a state: shape functions and P2G, the
+/// unknowns with the constraints of the model's boxes and glued bodies, the loads, the pairs between bodies
+/// and the inertia of a step of `dt`: what the step prepares before its PETSc objects. For tests and benches
+/// that call the [`Assembler`](crate::assembly::Assembler) directly ([`StepData::input`]); the solver itself
 /// never builds one.
 pub struct StepData<const D: usize = 2> {
     /// The state the step starts from (a copy: preparing a step may reorder the points among the
@@ -106,7 +115,8 @@ impl<const D: usize> StepData<D> {
         &self.work.dofs
     }
 
-    /// Per node copy, its partner in contact between bodies ([`INACTIVE`]: none; empty: one field).
+    /// Per node copy, its partner in contact between bodies ([`INACTIVE`](crate::dofs::INACTIVE): none;
+    /// empty: one field).
     pub fn partners(&self) -> &[u32] {
         &self.work.partners
     }

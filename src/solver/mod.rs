@@ -5,27 +5,14 @@
 //! Committed state (particles, time) is only modified after SNES converges: a failed attempt leaves the
 //! simulation exactly as it was, so it can be retried with a smaller time step.
 
-use crate::assembly::{Assembler, AssemblyError, Committed, Newmark, StepInput};
-use crate::boundary::{Motion, prescribed_acceleration, prescribed_increment};
-use crate::contact::{
-    self, BlockRows, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus,
-    RowMap,
-};
-use crate::dofs::{DofMap, INACTIVE};
-use crate::grid::Grid;
+use crate::assembly::Assembler;
+use crate::dofs::DofMap;
 use crate::material::Material;
-use crate::model::{EnergyBooks, InitialAcceleration, Model, ModelError, Setup, State};
-use crate::particles::Particles;
-use crate::partition::{self, NodalWindows, Partition};
-use crate::petsc::{
-    self, BlockCsr, CallbackError, GatherAll, GatherRange, IndexSet, LogEvent, Matrix,
-    NonlinearProblem, PetscInt, SessionGuard, Snes, SolveInfo, Tolerances, Vector,
-};
-use crate::shape::{ShapeError, ShapeTable};
-use crate::space::{from_xy, rotation_xy, xy};
-use crate::transfer::{self, GridState, StepSolution, TransferError};
-use nalgebra::{SMatrix, SVector, Vector2};
-use std::ops::Range;
+use crate::model::{InitialAcceleration, Model, Setup, State};
+use crate::partition::{NodalWindows, Partition};
+use crate::petsc::{LogEvent, SessionGuard};
+use crate::shape::ShapeTable;
+use crate::transfer::GridState;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -41,16 +28,12 @@ mod solve;
 mod start;
 mod system;
 
-use contacts::ContactSet;
 pub use input::StepData;
 pub use interrupt::{FINISH_WITHIN, Interrupt};
 pub use path::PathPoint;
-use prepare::{Loading, StepPlan};
-use processes::{agree, agreed, complete_read_rows, complete_rows, largest};
 use report::Failure;
 pub use report::{StepError, StepReport};
-use solve::Solved;
-use system::{LinearSystem, StepProblem};
+use system::LinearSystem;
 
 /// Converged steps in a row, without a retry, after which a reduced time step is doubled again: doubling
 /// at once after a halved step made the crack onset of the 0.035 m/s CT fail every other attempt.
@@ -84,7 +67,8 @@ pub struct Workspace<const D: usize = 2> {
     grid_state: GridState<D>,
     /// The unknowns and their constraints.
     dofs: DofMap,
-    /// Per node copy, its partner in contact between bodies ([`INACTIVE`]: none; empty: one field).
+    /// Per node copy, its partner in contact between bodies ([`INACTIVE`](crate::dofs::INACTIVE): none;
+    /// empty: one field).
     partners: Vec<u32>,
     assembler: Assembler<D>,
     /// PETSc objects reused while the pattern does not change.

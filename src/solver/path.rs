@@ -18,9 +18,12 @@
 //! bordered Newton instead of SNES's with path following), `Step::finish` scales the sets' increments by `k` and reports the
 //! [`PathPoint`].
 
-use super::*;
-use crate::petsc::PetscError;
-use system::OwnedRows;
+use super::Step;
+use super::report::StepError;
+use super::system::{OwnedRows, StepProblem};
+use crate::petsc::{
+    CallbackError, Matrix, NonlinearProblem, PetscError, SessionGuard, Snes, SolveInfo, Vector,
+};
 
 /// Where the path is after a step: the load factor and the opening.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -35,7 +38,8 @@ pub struct PathPoint {
 
 /// The control of one step attempt: the opening's coefficients on the unknowns and its target.
 pub(super) struct PathStep {
-    /// `c`: the opening increment `c . x` as a function of all unknowns (dense, in [`DofMap`] order).
+    /// `c`: the opening increment `c . x` as a function of all unknowns (dense, in
+    /// [`DofMap`](crate::dofs::DofMap) order).
     coefficients: Vec<f64>,
     /// The opening increment of the step (mm).
     target: f64,

@@ -1,7 +1,19 @@
 //! First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the loads,
 //! the PETSc objects and the first guess.
 
-use super::*;
+use super::Step;
+use super::contacts::ContactSet;
+use super::path;
+use super::processes::{agreed, largest};
+use super::report::StepError;
+use super::system::LinearSystem;
+use crate::assembly::Newmark;
+use crate::boundary::{Motion, prescribed_increment};
+use crate::model::Model;
+use crate::petsc::SessionGuard;
+use crate::shape::ShapeTable;
+use crate::transfer;
+use nalgebra::SVector;
 
 /// Per load, its active grid nodes and their shares of the resultant (summing to 1).
 pub(super) type LoadNodes = Vec<Vec<(usize, f64)>>;
@@ -498,7 +510,10 @@ impl<const D: usize> Step<'_, D> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shape::ShapeKind;
+    use crate::grid::Grid;
+    use crate::particles::Particles;
+    use crate::shape::{ShapeError, ShapeKind};
+    use nalgebra::Vector2;
 
     #[test]
     fn pushed_forward_gradients_reproduce_the_deformed_configuration() {

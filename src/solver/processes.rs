@@ -1,7 +1,13 @@
 //! The process plumbing of a step: agreement on failures, residual rows completed over the processes,
 //! points shared out with their ghosts and the block rows each process owns.
 
-use super::*;
+use super::Step;
+use super::report::StepError;
+use crate::assembly::AssemblyError;
+use crate::partition::{self, NodalWindows, Partition};
+use crate::petsc::{self, CallbackError, SessionGuard};
+use nalgebra::SVector;
+use std::ops::Range;
 
 /// A domain error (an inverted point, a failed material update) on any process, reported on all: SNES
 /// takes domain errors collectively, and with each process evaluating the points of its own rows only
@@ -98,11 +104,11 @@ pub(super) fn bytes_per_process(
     Ok([of(0), of(1)])
 }
 
-/// Completes the physical residual `r` after a solve where the step reads it beyond this process's
-/// own block rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they
-/// are zeroed and only the unknowns `read` ([`solve`]'s constrained and contact rows) are summed over
-/// the processes (each from its owner, the others adding zeros: the same bits on every process).
-/// Without shared points every process evaluated every row: nothing to do.
+/// Completes the physical residual `r` after a solve where the step reads it beyond this process's own block
+/// rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they are zeroed and
+/// only the unknowns `read` ([`solve`](super::solve)'s constrained and contact rows) are summed over the
+/// processes (each from its owner, the others adding zeros: the same bits on every process). Without shared
+/// points every process evaluated every row: nothing to do.
 pub(super) fn complete_read_rows(
     session: &SessionGuard,
     shared: bool,
@@ -196,10 +202,10 @@ impl<const D: usize> Step<'_, D> {
         }
     }
 
-    /// The unknowns (indices in [`DofMap`] order) this process reads at an evaluation: those of the
-    /// active nodes from the lowest to the highest node in the support of its points (its own and the
-    /// ghosts; all points where they are not shared out) and of its own block rows, a contiguous range
-    /// because the nodes are numbered row by row.
+    /// The unknowns (indices in [`DofMap`](crate::dofs::DofMap) order) this process reads at an evaluation:
+    /// those of the active nodes from the lowest to the highest node in the support of its points (its own
+    /// and the ghosts; all points where they are not shared out) and of its own block rows, a contiguous
+    /// range because the nodes are numbered row by row.
     pub(super) fn unknowns_window(&self, session: &SessionGuard) -> Range<usize> {
         let table = &self.work.table;
         let (lo, hi) = (0..table.len())

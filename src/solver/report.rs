@@ -1,7 +1,12 @@
 //! What a step reports: its statistics and results ([`StepReport`]), and why it or the run failed
 //! ([`StepError`]; an attempt that only needs a smaller step is a `Failure`).
 
-use super::*;
+use super::path;
+use crate::assembly::AssemblyError;
+use crate::model::{EnergyBooks, ModelError};
+use crate::petsc::{self, SolveInfo};
+use crate::shape::ShapeError;
+use crate::transfer::TransferError;
 
 /// Why a step attempt did not converge (nothing was committed).
 pub(super) struct Failure {
@@ -44,16 +49,16 @@ pub enum StepError {
         /// SNES reason or domain error.
         reason: String,
     },
-    /// The set-up cannot become a model ([`Model::new`]).
+    /// The set-up cannot become a model ([`Model::new`](crate::model::Model::new)).
     #[error(transparent)]
     Model(#[from] ModelError),
     /// The step met an inconsistency of the run's definition (a load whose segment carries no mass,
     /// contact between bodies on several processes, a grid node shared by three bodies).
     #[error("{0}")]
     Setup(String),
-    /// The step was abandoned on an interrupt ([`Interrupt`]) before it converged, on every process at
-    /// the same evaluation: nothing was committed, the state is that of the last finished step. Not a
-    /// failure of the step: it is not retried.
+    /// The step was abandoned on an interrupt ([`Interrupt`](super::Interrupt)) before it converged, on every
+    /// process at the same evaluation: nothing was committed, the state is that of the last finished step.
+    /// Not a failure of the step: it is not retried.
     #[error(
         "step {step} at t = {time:e} s was abandoned on an interrupt; nothing of it was committed"
     )]

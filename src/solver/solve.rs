@@ -1,7 +1,19 @@
 //! Second phase of a step attempt: SNES from the prepared guess, repeated while the contact active set and
 //! the rotations of pinned devices settle.
 
-use super::*;
+use super::contacts::ContactSet;
+use super::interrupt::Interrupt;
+use super::path;
+use super::prepare::StepPlan;
+use super::processes::{agreed, complete_read_rows};
+use super::report::{Failure, StepError};
+use super::system::{LinearSystem, StepProblem};
+use super::{MAX_CONTACT_SOLVES, Step, Workspace};
+use crate::assembly::{Assembler, StepInput};
+use crate::contact::{Converged, NodeStatus};
+use crate::grid::Grid;
+use crate::petsc::{LogEvent, SessionGuard, SolveInfo, Tolerances};
+use std::time::Instant;
 
 /// What `Step::solve` hands to `Step::finish`.
 pub(super) struct Solved {

@@ -1,6 +1,14 @@
 //! The start of a dynamic run: the consistent initial acceleration.
 
-use super::*;
+use super::Step;
+use super::prepare::Loading;
+use super::processes::{agreed, complete_rows};
+use super::report::StepError;
+use crate::boundary::prescribed_acceleration;
+use crate::petsc::SessionGuard;
+use crate::space::from_xy;
+use crate::transfer;
+use nalgebra::SVector;
 
 impl<const D: usize> Step<'_, D> {
     /// The consistent initial acceleration of a dynamic run (`docs/theory.md`, "Initial acceleration"):

@@ -2,8 +2,22 @@
 //! SNES ([`LinearSystem`]), the block rows this process owns ([`OwnedRows`]), the nonlinear problem handed
 //! to SNES and the rigid-body modes for algebraic multigrid.
 
-use super::*;
+use super::contacts::ContactSet;
+use super::interrupt::Interrupt;
+use super::processes::agree;
+use super::report::StepError;
+use crate::assembly::{Assembler, StepInput};
+use crate::contact::BlockRows;
+use crate::dofs::DofMap;
+use crate::grid::Grid;
 use crate::multigrid::Hierarchy;
+use crate::petsc::{
+    self, BlockCsr, CallbackError, GatherAll, GatherRange, IndexSet, LogEvent, Matrix,
+    NonlinearProblem, PetscInt, SessionGuard, Snes, Tolerances, Vector,
+};
+use nalgebra::SVector;
+use std::ops::Range;
+use std::time::Instant;
 
 /// The nonlinear problem of one step, handed to SNES.
 pub(super) struct StepProblem<'a, 'b, const D: usize> {
@@ -26,7 +40,7 @@ pub(super) struct StepProblem<'a, 'b, const D: usize> {
     pub(super) session: &'a SessionGuard,
     /// The residual of all unknowns (this process hands PETSc its own rows).
     pub(super) scratch: Vec<f64>,
-    /// The request to stop that the step watches ([`Simulation::watch`]).
+    /// The request to stop that the step watches ([`Simulation::watch`](super::Simulation::watch)).
     pub(super) interrupt: Option<&'a Interrupt>,
     /// The processes agreed to abandon the step at an evaluation ([`StepProblem::abandon`]).
     pub(super) abandoned: bool,
@@ -153,9 +167,9 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
     }
 }
 
-/// The block rows (active nodes, in [`DofMap`] order) of the Jacobian and the unknowns this process
-/// owns: a contiguous range ([`Step::own_rows`]). The process evaluates the points in their support
-/// (its own and the ghosts of MPM on several processes, all points in FEM mode) at the gathered
+/// The block rows (active nodes, in [`DofMap`] order) of the Jacobian and the unknowns this process owns: a
+/// contiguous range ([`Step::own_rows`](super::Step::own_rows)). The process evaluates the points in their
+/// support (its own and the ghosts of MPM on several processes, all points in FEM mode) at the gathered
 /// unknowns and hands PETSc its own rows; PETSc's vectors, matrix and solvers are distributed.
 pub(super) struct OwnedRows {
     /// Owned block rows.
@@ -171,12 +185,14 @@ pub(super) struct OwnedRows {
     /// physical residual after a solve.
     pub(super) gather: Option<GatherAll>,
     /// More than one process: the gather of the unknowns this process reads at an evaluation
-    /// ([`Step::unknowns_window`]), rebuilt when the window moves ([`OwnedRows::set_window`]).
+    /// ([`Step::unknowns_window`](super::Step::unknowns_window)), rebuilt when the window moves
+    /// ([`OwnedRows::set_window`]).
     pub(super) window: Option<GatherRange>,
 }
 
 impl OwnedRows {
-    /// The block rows `rows` (from [`Step::own_rows`]) with their pattern, of `total` unknowns.
+    /// The block rows `rows` (from [`Step::own_rows`](super::Step::own_rows)) with their pattern, of `total`
+    /// unknowns.
     pub(super) fn new<const D: usize>(
         asm: &Assembler<D>,
         rows: Range<usize>,
@@ -233,9 +249,9 @@ impl OwnedRows {
         }
     }
 
-    /// On more than one process: the gather of the unknowns `window` (indices in [`DofMap`] order,
-    /// from [`Step::unknowns_window`]) for the evaluations of the step, built anew if any process's
-    /// window moved (collective).
+    /// On more than one process: the gather of the unknowns `window` (indices in [`DofMap`] order, from
+    /// [`Step::unknowns_window`](super::Step::unknowns_window)) for the evaluations of the step, built anew
+    /// if any process's window moved (collective).
     pub(super) fn set_window(
         &mut self,
         session: &SessionGuard,
