@@ -163,7 +163,8 @@ pub fn measure(
     c: &CrackCriteria,
     time: f64,
 ) -> CrackState {
-    let crack = crack_points(x, damage, notch_tip, h, c);
+    let mut crack = crack_points(x, damage, notch_tip, h, c);
+    crack.sort_unstable();
     let (length, tip) = farthest(x, &crack, notch_tip);
     let (bands, classification) = classify(x, &crack, notch_tip, length, h, c);
     let crossings = if length < c.min_length {
@@ -261,7 +262,8 @@ pub fn front(
     h: f64,
     c: &CrackCriteria,
 ) -> Front {
-    let crack = crack_points(x, damage, notch_tip, h, c);
+    let mut crack = crack_points(x, damage, notch_tip, h, c);
+    crack.sort_unstable();
     let (length, tip) = farthest(x, &crack, notch_tip);
     let (bands, _) = classify(x, &crack, notch_tip, length, h, c);
     Front {
@@ -450,40 +452,57 @@ struct Crossing {
     width: f64,
 }
 
-/// The groups of the points `points` within half a point spacing `spacing` of the circle of radius `r`
-/// (mm) around `centre`, sorted along the circle and split where two neighbours are more than two
-/// spacings apart; each group's width is its arc extent plus one spacing.
+/// The groups of the points `points` (a sorted subset of `x`) within half a point spacing `spacing` of the
+/// circle of radius `r` (mm) around `centre`, sorted along the circle. Two neighbours of a group more than
+/// two spacings apart belong to different bands where other points of the ring lie between them, and to
+/// the two faces of one opened band where none does (the gap is the crack's opening): the faces are one
+/// crossing, whose width is that of its material (the extents of its runs of points, each plus one
+/// spacing), without the opening.
 fn crossings_of(
     x: &[Vector2<f64>],
-    crack: &[usize],
+    points: &[usize],
     centre: Vector2<f64>,
     r: f64,
     spacing: f64,
 ) -> Vec<Crossing> {
-    // Arc length along the circle from the notch axis (+x); the cut of atan2 at +-180 degrees lies in the
-    // notch behind the tip, where no band runs.
-    let mut arcs: Vec<f64> = crack
-        .iter()
-        .filter_map(|&i| {
+    // Arc length along the circle from the notch axis (+x), with membership; the cut of atan2 at +-180
+    // degrees lies in the notch behind the tip, where no band runs.
+    let mut ring: Vec<(f64, bool)> = (0..x.len())
+        .filter_map(|i| {
             let d = x[i] - centre;
-            ((d.norm() - r).abs() <= 0.5 * spacing).then(|| d.y.atan2(d.x) * r)
+            ((d.norm() - r).abs() <= 0.5 * spacing)
+                .then(|| (d.y.atan2(d.x) * r, points.binary_search(&i).is_ok()))
         })
         .collect();
-    arcs.sort_by(f64::total_cmp);
+    ring.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut out = Vec::new();
-    let mut start = 0;
-    for k in 1..=arcs.len() {
-        if k == arcs.len() || arcs[k] - arcs[k - 1] > 2.0 * spacing {
-            let (a, b) = (arcs[start], arcs[k - 1]);
-            out.push(Crossing {
-                radius: r,
-                angle_degrees: (0.5 * (a + b) / r).to_degrees(),
-                half_degrees: ((0.5 * (b - a) + 0.5 * spacing) / r).to_degrees(),
-                width: b - a + spacing,
-            });
-            start = k;
+    // The open group: its first point, the start of its current run, its last point, the width of its
+    // closed runs, and whether a point outside the set lies after its last point.
+    let mut group: Option<(f64, f64, f64, f64)> = None;
+    let mut between = false;
+    let close = |(a, run, b, w): (f64, f64, f64, f64)| Crossing {
+        radius: r,
+        angle_degrees: (0.5 * (a + b) / r).to_degrees(),
+        half_degrees: ((0.5 * (b - a) + 0.5 * spacing) / r).to_degrees(),
+        width: w + (b - run) + spacing,
+    };
+    for &(t, member) in &ring {
+        if !member {
+            between = group.is_some();
+            continue;
         }
+        group = Some(match group {
+            None => (t, t, t, 0.0),
+            Some((a, run, b, w)) if t - b <= 2.0 * spacing => (a, run, t, w),
+            Some((a, run, b, w)) if !between => (a, t, t, w + (b - run) + spacing),
+            Some(g) => {
+                out.push(close(g));
+                (t, t, t, 0.0)
+            }
+        });
+        between = false;
     }
+    out.extend(group.map(close));
     out
 }
 
@@ -627,6 +646,31 @@ mod tests {
             .collect();
         let s = measure(&x, &core, TIP, 1.0, 0.5, &CrackCriteria::default(), 0.0);
         assert!((s.zone_width - s.band_width).abs() < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn an_opened_band_is_one_crossing_as_wide_as_its_material() {
+        // A band 6 mm wide (|y - 50| <= 3) opened by 2 mm in its middle (no points at |y - 50| < 1): the
+        // two faces are one crossing of 4 mm of material at each station, not two bands of 2 mm.
+        let (x, d) = field(|p| p.x >= 30.0 && p.x <= 70.0 && (p.y - 50.0).abs() <= 3.0);
+        let (x, d): (Vec<_>, Vec<_>) = (x.into_iter().zip(d))
+            .filter(|(p, _)| !(p.x >= 30.0 && (p.y - 50.0).abs() < 1.0))
+            .unzip();
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &CrackCriteria::default(), 0.0);
+        assert_eq!(s.crossings.len(), 3, "{s:?}");
+        assert!((s.band_width - 4.0).abs() <= 0.3, "{s:?}");
+        assert!((s.zone_width - 4.0).abs() <= 0.3, "{s:?}");
+        // Two bands with undamaged material between them stay two crossings.
+        let (x, d) = field(|p| {
+            p.x >= 30.0 && p.x <= 70.0 && (p.y - 50.0).abs() >= 2.0 && (p.y - 50.0).abs() <= 4.0
+        });
+        let c = CrackCriteria {
+            seed_radius: 5.0,
+            ..CrackCriteria::default()
+        };
+        let s = measure(&x, &d, TIP, 1.0, 0.5, &c, 0.0);
+        assert_eq!(s.crossings.len(), 6, "{s:?}");
+        assert!((s.band_width - 2.0).abs() <= 0.3, "{s:?}");
     }
 
     #[test]
