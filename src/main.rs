@@ -108,6 +108,10 @@ enum Command {
     },
 }
 
+/// How long a process other than process 0 waits before it ends on bad input, so that process 0's error
+/// line is printed before the launcher stops the processes (s).
+const REPORT_GRACE: std::time::Duration = std::time::Duration::from_secs(1);
+
 fn main() -> std::process::ExitCode {
     // Under mpirun every process takes the same decisions and meets the same warnings: process 0 logs and
     // warns, the others report only errors.
@@ -141,8 +145,14 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => match e.chain().find_map(|c| c.downcast_ref::<BadInput>()) {
             Some(b) => {
-                if !b.0.is_empty() && rank == 0 {
-                    eprintln!("error: {}", error_line(&e));
+                if rank == 0 {
+                    if !b.0.is_empty() {
+                        eprintln!("error: {}", error_line(&e));
+                    }
+                } else {
+                    // Process 0 reports bad input: the others give it time to print before the launcher,
+                    // seeing one of them end, stops the rest.
+                    std::thread::sleep(REPORT_GRACE);
                 }
                 std::process::ExitCode::from(2)
             }
