@@ -45,7 +45,7 @@ const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
 /// iteration of a step and every third one. With the Jacobian stored by node blocks (one process,
 /// `petsc::matrix_type_for`) a factorisation of the widened CPDI pattern costs about five GMRES iterations,
 /// and reusing it within the step pays: the half-resolution CT at 4.3 m/s to 1 ms took 356 s instead of
-/// 399 s (0.89x) for 1.29x the Krylov iterations, 20 cracked steps 0.82x (`docs/benchmarks.md`, "Reusing the
+/// 399 s (0.89x) for 1.29x the Krylov iterations, 40 cracked steps 0.92x (`docs/benchmarks.md`, "Reusing the
 /// factorisation within a step"). With the former point-wise storage and the stale-factorisation bug of
 /// the block storage, the same lag had measured as a loss.
 const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
