@@ -414,7 +414,6 @@ pub fn band_width_1d(profile: &[(f64, f64)], level: f64) -> f64 {
     }
 }
 
-/// The band crossings of the crack points `crack` on the circle of radius `r` around `centre`.
 /// The median of sorted `values` (0 if empty).
 fn median(values: &[f64]) -> f64 {
     match values.len() {
