@@ -17,6 +17,7 @@ use crate::input::BadValue;
 use crate::material::{Constitutive, Material};
 use crate::particles::Particles;
 use crate::shape::{ShapeError, ShapeKind, ShapeTable};
+use crate::space::Frame;
 use nalgebra::{Matrix3, SVector};
 
 /// Time integration settings.
@@ -133,6 +134,9 @@ pub struct Parameters<const D: usize = 2> {
     /// Path following of a quasi-static run (indirect displacement control); None: the prescribed
     /// motion follows time.
     pub path: Option<PathControl<D>>,
+    /// The specimen's frame on the grid (`grid.rotation`): the set-up was turned by it inside the
+    /// axis-aligned grid, and results are reported back through it. The identity in 3D.
+    pub frame: Frame,
 }
 
 impl<const D: usize> Parameters<D> {
@@ -163,6 +167,7 @@ impl<const D: usize> Parameters<D> {
             mass_tolerance: 1e-6,
             fallback_prefix: None,
             path: None,
+            frame: Frame::IDENTITY,
         }
     }
 }
@@ -717,6 +722,8 @@ impl Setup<2> {
                 direction: SVector::from([p.direction.x, p.direction.y, 0.0]),
                 increment: p.increment,
             }),
+            // A turned set-up is plane only (the configuration refuses a turned plate).
+            frame: Frame::IDENTITY,
         };
         let particles = extrude_points(&particles, thickness)?;
         Ok(Setup {

@@ -308,7 +308,7 @@ impl Plan<'_> {
             rigid,
             rigid_points,
         };
-        let frame = Frame::from_degrees(cfg.grid.rotation);
+        let frame = cfg.grid.frame();
         if !frame.is_identity() {
             seeded.turn(&frame);
         }
@@ -343,7 +343,7 @@ impl Seeded {
     /// `body_bounds`, mm: of every point, also where this process holds a band only) and the rigid
     /// bodies' points, the node boxes, the loads and the time integration.
     fn setup(self, cfg: &RunConfig, body_bounds: Bounds) -> Result<Setup, ScenarioError> {
-        let frame = Frame::from_degrees(cfg.grid.rotation);
+        let frame = cfg.grid.frame();
         warn_far_rigid_body(cfg, body_bounds, &self.rigid_points);
         let grid = covering_grid(cfg, body_bounds, &self.rigid_points)?;
         let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
@@ -377,6 +377,7 @@ impl Seeded {
                     direction: frame.to_grid(Vector2::from(p.direction())),
                     increment: p.increment,
                 }),
+                frame,
             },
             particles: self.particles,
             rigid_points: self.rigid_points,

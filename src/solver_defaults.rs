@@ -16,6 +16,7 @@
 
 use crate::model::Setup;
 use crate::petsc::{self, SessionGuard};
+use crate::space::Frame;
 
 /// Below this ratio `r` a dynamic step counts as stiffness-dominated.
 pub const STIFFNESS_DOMINATED_BELOW: f64 = 0.01;
@@ -95,6 +96,13 @@ const STIFFNESS_FIELD_SPLIT: &str = "-snes_lag_preconditioner 2 -ksp_type gmres 
      -fieldsplit_eta_bar_ksp_type preonly -fieldsplit_eta_bar_pc_type bjacobi \
      -fieldsplit_eta_bar_sub_pc_type ilu";
 
+/// On a set-up turned inside the grid (`grid.rotation`): the Jacobian stored point-wise, so that ILU(0)
+/// factors scalar pivots (`petsc::matrix_type_for` would choose node blocks on one process). Block ILU(0)
+/// breaks down there: the half-size CT at 1 mm cells turned by 30 deg sent 28 of its first 97 steps to the
+/// fallback and stopped at 90 us with the block storage, and ran clean with this one (`docs/results.md`,
+/// "Refinement to 0.5 mm on the half-size CT").
+const TURNED: &str = "-mat_type aij";
+
 /// Newton with MUMPS LU, a new factorisation every iteration.
 const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
 
@@ -151,8 +159,8 @@ pub fn classify<const D: usize>(setup: &Setup<D>) -> StepClass {
 }
 
 /// The default options of the main solver for a class of steps in `D` dimensions (2 or 3: a plate);
-/// `gradient` tells whether the model solves for eta_bar too.
-pub fn main_options<const D: usize>(class: StepClass, gradient: bool) -> String {
+/// `gradient` tells whether the model solves for eta_bar too, `frame` how the set-up sits in the grid.
+pub fn main_options<const D: usize>(class: StepClass, gradient: bool, frame: Frame) -> String {
     let solver = match class {
         StepClass::InertiaDominated { .. } if D == 3 => INERTIA_3D,
         StepClass::InertiaDominated { .. } => INERTIA,
@@ -160,7 +168,10 @@ pub fn main_options<const D: usize>(class: StepClass, gradient: bool) -> String 
         StepClass::StiffnessDominated { .. } => STIFFNESS_MG,
         StepClass::QuasiStatic => QUASI_STATIC,
     };
-    format!("{NEWTON} {solver}")
+    match frame.degrees() {
+        Some(_) => format!("{NEWTON} {solver} {TURNED}"),
+        None => format!("{NEWTON} {solver}"),
+    }
 }
 
 /// Applies the defaults of the model's class and the fallback solver to the options database (options
@@ -177,7 +188,13 @@ pub fn apply<const D: usize>(
     setup.params.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
     let gradient = setup.params.materials.iter().any(|m| m.is_nonlocal());
-    let options = main_options::<D>(class, gradient);
+    let options = main_options::<D>(class, gradient, setup.params.frame);
+    if let Some(degrees) = setup.params.frame.degrees() {
+        tracing::info!(
+            "the set-up is turned by {degrees} deg inside the grid: the Jacobian is stored point-wise \
+             ({TURNED})"
+        );
+    }
     let mut applied: Vec<String> = petsc::apply_default_options(session, &options)?
         .into_iter()
         .chain(petsc::apply_default_options(session, FALLBACK)?)
@@ -266,23 +283,35 @@ mod tests {
             class_of("configs/crosscheck-cantilever.toml"),
             StepClass::QuasiStatic
         );
-        assert!(main_options::<2>(StepClass::QuasiStatic, true).contains("mumps"));
+        assert!(main_options::<2>(StepClass::QuasiStatic, true, Frame::IDENTITY).contains("mumps"));
         // A plate: overlapping subdomains and a factorisation kept for two Newton iterations.
         let inertia = StepClass::InertiaDominated { ratio: 1.0 };
-        assert!(main_options::<2>(inertia, true).contains("-pc_type bjacobi"));
-        let plate = main_options::<3>(inertia, true);
+        assert!(main_options::<2>(inertia, true, Frame::IDENTITY).contains("-pc_type bjacobi"));
+        // A set-up turned inside the grid: point-wise storage (block ILU(0) breaks down there), and only there.
+        assert!(!main_options::<2>(inertia, true, Frame::IDENTITY).contains("-mat_type"));
+        let turned = main_options::<2>(inertia, true, Frame::from_degrees(30.0));
+        assert!(turned.ends_with("-mat_type aij"), "{turned}");
+        let plate = main_options::<3>(inertia, true, Frame::IDENTITY);
         assert!(
             plate.contains("-pc_type asm -pc_asm_overlap 1")
                 && plate.contains("-snes_lag_preconditioner 2"),
             "{plate}"
         );
-        let mg = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, false);
+        let mg = main_options::<2>(
+            StepClass::StiffnessDominated { ratio: 1e-4 },
+            false,
+            Frame::IDENTITY,
+        );
         assert!(
             mg.contains("-pc_type mg") && mg.contains("-snes_ksp_ew"),
             "{mg}"
         );
         // The coupled system: the solver's named splits, displacements by AMG, eta_bar by ILU.
-        let split = main_options::<2>(StepClass::StiffnessDominated { ratio: 1e-4 }, true);
+        let split = main_options::<2>(
+            StepClass::StiffnessDominated { ratio: 1e-4 },
+            true,
+            Frame::IDENTITY,
+        );
         for o in [
             "-pc_type fieldsplit",
             "-fieldsplit_u_pc_type hypre",

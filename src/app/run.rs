@@ -614,7 +614,7 @@ fn open_output<'a, const D: usize>(
     if let Some(z) = cfg.extrusion.as_ref().and_then(|e| e.section_z) {
         out.set_section(z);
     }
-    out.set_frame(crate::space::Frame::from_degrees(cfg.grid.rotation));
+    out.set_frame(sim.model.params.frame);
     if let Some(ct) = &cfg.ct {
         let concrete = ct.material.build().context("ct.material")?.elastic_moduli();
         out.track_crack(

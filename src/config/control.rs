@@ -4,6 +4,7 @@ use super::{Check, ConfigError, shown};
 use crate::input::serde_defaults;
 use crate::model::{InitialAcceleration, Method};
 use crate::shape::ShapeKind;
+use crate::space::Frame;
 use serde::Deserialize;
 use std::path::PathBuf;
 
@@ -103,6 +104,13 @@ pub struct GridSection {
     /// reported back in the specimen's frame. Default 0 (plane runs only).
     #[serde(default)]
     pub rotation: f64,
+}
+
+impl GridSection {
+    /// The specimen's frame on the grid (`rotation`): the one place where the angle becomes a frame.
+    pub fn frame(&self) -> Frame {
+        Frame::from_degrees(self.rotation)
+    }
 }
 
 serde_defaults! {

@@ -205,7 +205,7 @@ pub fn remeasure_cracks(dir: &Path) -> Result<Vec<CrackState>, OutputError> {
         spacing: h / cfg.shape.points_per_cell as f64,
         criteria: CrackCriteria::for_notch(ct.notch_width, h),
         section_z: cfg.extrusion.as_ref().map(|e| e.section_z),
-        frame: Frame::from_degrees(cfg.grid.rotation),
+        frame: cfg.grid.frame(),
     };
     // The old crack.json may be absent or hold no states; one that is no regular file is refused.
     let old_json = match crate::input::read_text_input(&dir.join(file::CRACK)) {

@@ -79,7 +79,7 @@ impl Plan<'_> {
         processes > 1
             && cfg.shape.method == Method::Mpm
             && cfg.path.is_none()
-            && Frame::from_degrees(cfg.grid.rotation).is_identity()
+            && cfg.grid.frame().is_identity()
             && self.bodies.iter().all(plane)
     }
 
