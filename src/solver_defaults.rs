@@ -97,11 +97,16 @@ const STIFFNESS_FIELD_SPLIT: &str = "-snes_lag_preconditioner 2 -ksp_type gmres 
      -fieldsplit_eta_bar_sub_pc_type ilu";
 
 /// On a set-up turned inside the grid (`grid.rotation`): the Jacobian stored point-wise, so that ILU(0)
-/// factors scalar pivots (`petsc::matrix_type_for` would choose node blocks on one process). Block ILU(0)
-/// breaks down there: the half-size CT at 1 mm cells turned by 30 deg sent 28 of its first 97 steps to the
-/// fallback and stopped at 90 us with the block storage, and ran clean with this one (`docs/results.md`,
-/// "Refinement to 0.5 mm on the half-size CT").
-const TURNED: &str = "-mat_type aij";
+/// factors scalar pivots (`petsc::matrix_type_for` would choose node blocks on one process), and GMRES
+/// preconditioned from the right, so that it stops on the true residual. The oblique faces leave nodes
+/// with a sliver of support, whose small pivots make ILU(0) poor there: with the block storage the
+/// factorisation fails (the half-size CT at 1 mm cells turned by 30 deg sent 28 of its first 97 steps to
+/// the fallback and stopped at 90 us; at 2 mm 14 of the first 40 steps), and with point pivots but left
+/// preconditioning the preconditioned residual hides what the true one keeps, and Newton's line search
+/// fails (2 mm: 8 of the first 40 steps, 9 of 250). With both: no step retried at 2 mm in 250 steps or at
+/// 1 mm in 120, and at 1 mm 3712 instead of 5079 Krylov iterations (`docs/results.md`, "Refinement to
+/// 0.5 mm on the half-size CT").
+const TURNED: &str = "-mat_type aij -ksp_pc_side right";
 
 /// Newton with MUMPS LU, a new factorisation every iteration.
 const QUASI_STATIC: &str = "-ksp_type preonly -pc_type lu -pc_factor_mat_solver_type mumps";
@@ -191,8 +196,8 @@ pub fn apply<const D: usize>(
     let options = main_options::<D>(class, gradient, setup.params.frame);
     if let Some(degrees) = setup.params.frame.degrees() {
         tracing::info!(
-            "the set-up is turned by {degrees} deg inside the grid: the Jacobian is stored point-wise \
-             ({TURNED})"
+            "the set-up is turned by {degrees} deg inside the grid: point-wise ILU(0), GMRES \
+             preconditioned from the right ({TURNED})"
         );
     }
     let mut applied: Vec<String> = petsc::apply_default_options(session, &options)?
@@ -290,7 +295,10 @@ mod tests {
         // A set-up turned inside the grid: point-wise storage (block ILU(0) breaks down there), and only there.
         assert!(!main_options::<2>(inertia, true, Frame::IDENTITY).contains("-mat_type"));
         let turned = main_options::<2>(inertia, true, Frame::from_degrees(30.0));
-        assert!(turned.ends_with("-mat_type aij"), "{turned}");
+        assert!(
+            turned.ends_with("-mat_type aij -ksp_pc_side right"),
+            "{turned}"
+        );
         let plate = main_options::<3>(inertia, true, Frame::IDENTITY);
         assert!(
             plate.contains("-pc_type asm -pc_asm_overlap 1")
