@@ -124,10 +124,8 @@ fn run_bar(s: &SessionGuard, case: &BarCase) -> Result<BarResult> {
         rise_time: 0.0,
     };
     let time = TimeIntegration {
-        dt: 1.0,
-        dt_min: 1.0 / 64.0,
         quasi_static: true,
-        ..TimeIntegration::default()
+        ..TimeIntegration::with_dt(1.0)
     };
     let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2)?;
     let setup = Setup::of(

@@ -165,10 +165,8 @@ pub fn bar_simulation(spec: &BarSpec, h: f64, material: &MicroplaneConfig) -> Re
         (1.0 / h).ceil() as usize + 2,
     )?;
     let time = TimeIntegration {
-        dt: spec.dt,
-        dt_min: spec.dt / 64.0,
         quasi_static: spec.quasi_static,
-        ..TimeIntegration::default()
+        ..TimeIntegration::with_dt(spec.dt)
     };
     let params = Parameters {
         boxes: vec![

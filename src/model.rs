@@ -37,16 +37,35 @@ pub struct TimeIntegration {
     pub initial_acceleration: InitialAcceleration,
 }
 
-impl Default for TimeIntegration {
-    fn default() -> Self {
+impl TimeIntegration {
+    /// The nominal time step (s) of a run that does not set one: the CT demo's.
+    pub const DEFAULT_DT: f64 = 1e-6;
+    /// Unless set, the retry halving stops below `dt / DT_MIN_DIVISOR` (-): six halvings.
+    pub const DT_MIN_DIVISOR: f64 = 64.0;
+    /// Newmark beta of the trapezoidal rule (-).
+    pub const DEFAULT_BETA: f64 = 0.25;
+    /// Newmark gamma without numerical damping (-).
+    pub const DEFAULT_GAMMA: f64 = 0.5;
+
+    /// Dynamic steps of `dt` (s) by the trapezoidal rule, halved on failure down to
+    /// `dt / DT_MIN_DIVISOR`, starting from the consistent acceleration: the defaults of `[time]` for
+    /// that `dt`.
+    pub fn with_dt(dt: f64) -> Self {
         Self {
-            dt: 1e-6,
-            dt_min: 1e-6 / 64.0,
-            beta: 0.25,
-            gamma: 0.5,
+            dt,
+            dt_min: dt / Self::DT_MIN_DIVISOR,
+            beta: Self::DEFAULT_BETA,
+            gamma: Self::DEFAULT_GAMMA,
             quasi_static: false,
             initial_acceleration: InitialAcceleration::default(),
         }
+    }
+}
+
+impl Default for TimeIntegration {
+    /// [`TimeIntegration::with_dt`] of [`TimeIntegration::DEFAULT_DT`].
+    fn default() -> Self {
+        Self::with_dt(Self::DEFAULT_DT)
     }
 }
 
@@ -93,6 +112,10 @@ pub enum Method {
     /// (no grid reset).
     Fem,
 }
+
+/// Nodes with `m_I <= DEFAULT_MASS_TOLERANCE * max_J m_J` carry no unknowns unless a run sets its own
+/// fraction (-).
+pub const DEFAULT_MASS_TOLERANCE: f64 = 1e-6;
 
 /// What defines a run and stays fixed while it runs, apart from the points: the grid, the materials,
 /// the interpolator, time integration, constraints, devices, loads and solver prefixes. A scenario fills
@@ -142,7 +165,7 @@ pub struct Parameters<const D: usize = 2> {
 impl<const D: usize> Parameters<D> {
     /// The parameters of a run on `grid` with `materials` (one per body tag), with the defaults of a
     /// configuration file for the rest: no constraints, rigid bodies, loads or body force, MPM, nodes
-    /// with `m_I <= 1e-6 max m` without unknowns, the main solver's options without a prefix and no
+    /// with `m_I <=` [`DEFAULT_MASS_TOLERANCE`] `max m` without unknowns, the main solver's options without a prefix and no
     /// fallback solver. Set the other fields with struct-update syntax:
     /// `Parameters { boxes, ..Parameters::new(grid, materials, shape, time) }`.
     pub fn new(
@@ -164,7 +187,7 @@ impl<const D: usize> Parameters<D> {
             loads: Vec::new(),
             method: Method::Mpm,
             options_prefix: None,
-            mass_tolerance: 1e-6,
+            mass_tolerance: DEFAULT_MASS_TOLERANCE,
             fallback_prefix: None,
             path: None,
             frame: Frame::IDENTITY,
@@ -701,6 +724,7 @@ impl Setup<2> {
                 field: r.field,
             })
             .collect();
+        // Every field written out: a new setting of the plane set-up must say how it reaches the plate.
         let params = Parameters {
             grid,
             materials: plane.materials,

@@ -16,7 +16,7 @@ use crate::grid::Grid;
 use crate::input::{BadValue, shown};
 use crate::material::Material;
 use crate::model::PathControl;
-use crate::model::{Method, Parameters, Setup, TimeIntegration};
+use crate::model::{Method, Parameters, Setup};
 use crate::particles::{ParticleError, Particles, SeedingParameter};
 use crate::space::{Frame, lift3};
 use nalgebra::{Vector2, Vector3};
@@ -347,30 +347,17 @@ impl Seeded {
         warn_far_rigid_body(cfg, body_bounds, &self.rigid_points);
         let grid = covering_grid(cfg, body_bounds, &self.rigid_points)?;
         let boxes = node_boxes(&cfg.constraint, &grid, cfg.grid.cell_size)?;
-        let t = &cfg.time;
         Ok(Setup {
+            // The solver prefixes keep their defaults: they are the solver's, not the file's.
             params: Parameters {
-                grid,
-                materials: self.materials,
                 fields: self.fields,
-                shape: cfg.shape.kind,
-                time: TimeIntegration {
-                    dt: t.dt,
-                    dt_min: t.dt_min.unwrap_or(t.dt / 64.0),
-                    beta: t.beta,
-                    gamma: t.gamma,
-                    quasi_static: t.quasi_static,
-                    initial_acceleration: t.initial_acceleration,
-                },
                 body_force: frame.to_grid(Vector2::new(cfg.body_force[0], cfg.body_force[1])),
                 body_force_ramp: cfg.body_force_ramp,
                 boxes,
                 rigid: self.rigid,
                 loads: cfg.load.iter().map(nodal_load).collect(),
                 method: cfg.shape.method,
-                options_prefix: None,
                 mass_tolerance: cfg.grid.mass_tolerance,
-                fallback_prefix: None,
                 path: cfg.path.as_ref().map(|p| PathControl {
                     from: frame.to_grid(Vector2::from(p.from)),
                     to: frame.to_grid(Vector2::from(p.to)),
@@ -378,6 +365,7 @@ impl Seeded {
                     increment: p.increment,
                 }),
                 frame,
+                ..Parameters::new(grid, self.materials, cfg.shape.kind, cfg.time.integration())
             },
             particles: self.particles,
             rigid_points: self.rigid_points,

@@ -1,9 +1,11 @@
-//! The names of a run directory's files and of the columns of `history.csv`, shared by the writers
-//! (`io`, `checkpoint`, `rundir`, the `run` command) and the readers (`app::compare`, `app::study`), so
-//! that a renamed column or file changes in one place.
+//! The names of a run directory's files, shared by the writers (`io`, `checkpoint`, `rundir`, the `run`
+//! command) and the readers (`app::compare`, `app::study`), and the table of the columns of
+//! `history.csv` (name, unit, meaning and value of each), so that a renamed or added column or file
+//! changes in one place.
 //!
-//! Units of the history columns: time and dt s, displacement mm, force N per mm thickness, rotation rad,
-//! energy N mm per mm thickness, wall s.
+//! Units of the history columns: time and dt s, displacement mm, force N per mm thickness (3D: N),
+//! rotation rad, energy N mm per mm thickness (3D: N mm), wall s, crack tip and length mm, crack speed
+//! mm/s, traffic B.
 
 /// File names of a run directory.
 pub mod file {
@@ -42,146 +44,324 @@ pub mod file {
 
 /// Columns of `history.csv`: [`history::LEADING`], then per constraint set, rigid body and load the
 /// columns of [`history::reaction_columns`], per pinned device [`history::rotation_column`], then
-/// [`history::CONTACT_SOLVES`] (if there is any set), [`history::TRAILING`], in CT runs
-/// [`history::CRACK`], on several processes [`history::BYTES`] and, with path following,
-/// [`history::PATH`].
+/// [`history::TRAILING`], in CT runs [`history::CRACK`], on several processes [`history::BYTES`] and,
+/// with path following, [`history::PATH`]. Each fixed column is one [`history::Column`] of these
+/// tables: its name in the header and its value in every row come from the same entry.
 pub mod history {
-    /// Step number.
-    pub const STEP: &str = "step";
+    use crate::solver::StepReport;
+    use std::fmt::Write as _;
+
     /// Time reached (s).
     pub const TIME: &str = "time";
-    /// Time step taken (s).
-    pub const DT: &str = "dt";
     /// Attempts of the step (1 + retries with the fallback solver or a smaller dt).
     pub const ATTEMPTS: &str = "attempts";
     /// Newton iterations.
     pub const NEWTON_ITS: &str = "newton_its";
     /// Linear iterations.
     pub const LINEAR_ITS: &str = "linear_its";
-    /// SNES converged reason.
-    pub const REASON: &str = "reason";
-    /// First and last residual norm over the step's solves.
-    pub const RESIDUAL_INITIAL: &str = "residual_initial";
-    /// See [`RESIDUAL_INITIAL`].
-    pub const RESIDUAL_FINAL: &str = "residual_final";
     /// Unknowns of the step.
     pub const UNKNOWNS: &str = "unknowns";
-    /// SNES solves of the step (contact active set and pin rotations).
-    pub const CONTACT_SOLVES: &str = "contact_solves";
-    /// Energies (N mm per mm thickness).
-    pub const KINETIC_ENERGY: &str = "kinetic_energy";
-    /// See [`KINETIC_ENERGY`].
-    pub const STORED_ENERGY: &str = "stored_energy";
-    /// See [`KINETIC_ENERGY`].
-    pub const EXTERNAL_WORK: &str = "external_work";
-    /// The energy balance `W + E_0 - K - Psi` (external work, kinetic energy at t = 0, kinetic and stored
-    /// energy): what damage, erosion and the time integration took out (N mm per mm thickness).
-    pub const DISSIPATED_ENERGY: &str = "dissipated_energy";
-    /// Energy released by damage so far, the trapezoidal rule in the undamaged plane energy `psi_0`
-    /// (N mm per mm thickness; `model::EnergyBooks::damage`).
-    pub const DAMAGE_DISSIPATION: &str = "damage_dissipation";
-    /// Stored energy of eroded points, taken out when they stopped carrying stress (N mm per mm
-    /// thickness).
-    pub const EROSION_ENERGY: &str = "erosion_energy";
-    /// Kinetic energy lost at the inelastic impacts of closed contact constraints (N mm per mm
-    /// thickness).
-    pub const CONTACT_LOSS: &str = "contact_loss";
-    /// Kinetic energy the grid transfer took out: the points' kinetic energy less the grid's after P2G
-    /// minus the same after G2P, summed over the steps (N mm per mm thickness; `model::EnergyBooks::transfer`).
-    pub const TRANSFER_LOSS: &str = "transfer_loss";
-    /// `dissipated_energy - damage_dissipation - erosion_energy - contact_loss`: what the grid transfer and
-    /// the time integration took out (N mm per mm thickness).
-    pub const ENERGY_REMAINDER: &str = "energy_remainder";
-    /// [`ENERGY_REMAINDER`] as a fraction of [`EXTERNAL_WORK`] (0 while there is no work).
-    pub const REMAINDER_FRACTION: &str = "remainder_fraction";
-    /// `energy_remainder - transfer_loss`: what the time integration on the grid and the solver
-    /// tolerances took out (N mm per mm thickness).
-    pub const INTEGRATION_REMAINDER: &str = "integration_remainder";
-    /// Wall time of the step's phases (s): set-up, assembly (inside the solve), solve of the converged
-    /// attempt, and the total of the step with its failed attempts.
+    /// Wall time of the step's set-up (s).
     pub const WALL_SETUP: &str = "wall_setup";
-    /// See [`WALL_SETUP`].
+    /// Wall time of the assembly, inside the solve (s).
     pub const WALL_ASSEMBLY: &str = "wall_assembly";
-    /// See [`WALL_SETUP`].
+    /// Wall time of the converged attempt's solve (s).
     pub const WALL_SOLVE: &str = "wall_solve";
-    /// See [`WALL_SETUP`].
+    /// Wall time of the step with its failed attempts (s).
     pub const WALL_TOTAL: &str = "wall_total";
     /// 1 if the PETSc objects were built anew for the step.
     pub const NEW_PATTERN: &str = "new_pattern";
 
-    /// Crack tip after the step (CT runs; mm): the crack point farthest from the notch tip.
-    pub const CRACK_TIP_X: &str = "crack_tip_x";
-    /// See [`CRACK_TIP_X`].
-    pub const CRACK_TIP_Y: &str = "crack_tip_y";
-    /// Crack length, the tip's distance from the notch tip (mm).
-    pub const CRACK_LENGTH: &str = "crack_length";
-    /// Crack-tip speed (mm/s): least-squares slope of the crack length over the last 10 us, at least 5
-    /// steps (`crack::tip_speed`).
-    pub const CRACK_SPEED: &str = "crack_speed";
-    /// Bands of the crack on the measuring ring (2 or more: branching).
-    pub const CRACK_BANDS: &str = "crack_bands";
+    /// One cell of a history row, with the way it is written.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub enum Cell<'a> {
+        /// A count or flag, written as an integer.
+        Count(u64),
+        /// A number in scientific notation with this many digits after the point (`{:.9e}`).
+        Number(f64, usize),
+        /// A name.
+        Text(&'a str),
+        /// No value (a step of an older checkpoint without a crack front or a path point).
+        Empty,
+    }
 
-    /// Path following: the load factor (s), the reference set having moved its velocity times it.
-    pub const PATH_LAMBDA: &str = "path_lambda";
-    /// Path following: the measured opening (mm).
-    pub const PATH_OPENING: &str = "path_opening";
-    /// Path following: the step's prescribed motion over its nominal one (< 0 on a snap-back).
-    pub const PATH_RATIO: &str = "path_ratio";
+    impl Cell<'_> {
+        /// Appends the cell's text to `s`.
+        pub fn write(self, s: &mut String) {
+            let _ = match self {
+                Self::Count(n) => write!(s, "{n}"),
+                Self::Number(v, digits) => write!(s, "{v:.digits$e}"),
+                Self::Text(name) => write!(s, "{name}"),
+                Self::Empty => Ok(()),
+            };
+        }
+    }
 
-    /// Several processes: the bytes (B) the process that sent most sent in the step through the
-    /// program's own exchanges (points, nodal sums, residual rows, gathers of the unknowns; PETSc's own
-    /// traffic not counted).
-    pub const BYTES_SENT: &str = "bytes_sent";
-    /// Several processes: of [`BYTES_SENT`], the largest process's bytes in the gathers of the unknowns
-    /// for the residual and Jacobian evaluations.
-    pub const BYTES_UNKNOWNS: &str = "bytes_unknowns";
+    /// A fixed column of `history.csv`.
+    pub struct Column {
+        /// Its name in the header (lower case, `_`-separated).
+        pub name: &'static str,
+        /// Unit of its values ("-": a count, flag, name, ratio or a norm of mixed units).
+        pub unit: &'static str,
+        /// What it holds.
+        pub description: &'static str,
+        /// Its cell in the row of a step.
+        pub value: fn(&StepReport) -> Cell<'_>,
+    }
+
+    /// A column `name` in `unit` holding `description`, `value` per step.
+    const fn column(
+        name: &'static str,
+        unit: &'static str,
+        description: &'static str,
+        value: fn(&StepReport) -> Cell<'_>,
+    ) -> Column {
+        Column {
+            name,
+            unit,
+            description,
+            value,
+        }
+    }
+
+    /// The energy balance `W + E_0 - K - Psi` of a step (N mm).
+    fn dissipated(r: &StepReport) -> f64 {
+        r.external_work + r.initial_energy - r.kinetic_energy - r.stored_energy
+    }
+
+    /// `W + E_0 - K - Psi - damage - erosion - contact` of a step (N mm; `EnergyBooks::remainder`).
+    fn remainder(r: &StepReport) -> f64 {
+        r.books.remainder(
+            r.external_work,
+            r.initial_energy,
+            r.kinetic_energy,
+            r.stored_energy,
+        )
+    }
+
+    /// The largest of the processes' byte counts `b` (B; 0 without any).
+    fn largest(b: &[u64]) -> u64 {
+        b.iter().copied().max().unwrap_or(0)
+    }
+
+    /// The columns before the per-set columns.
+    pub static LEADING: [Column; 10] = [
+        column("step", "-", "step number", |r| Cell::Count(r.step as u64)),
+        column(TIME, "s", "time reached", |r| Cell::Number(r.time, 9)),
+        column("dt", "s", "time step taken", |r| Cell::Number(r.dt, 6)),
+        column(
+            ATTEMPTS,
+            "-",
+            "attempts of the step (1 + retries with the fallback solver or a smaller dt)",
+            |r| Cell::Count(r.attempts as u64),
+        ),
+        column(NEWTON_ITS, "-", "Newton iterations", |r| {
+            Cell::Count(r.solve.iterations as u64)
+        }),
+        column(LINEAR_ITS, "-", "linear iterations", |r| {
+            Cell::Count(r.solve.linear_iterations as u64)
+        }),
+        column("reason", "-", "SNES converged reason", |r| {
+            Cell::Text(&r.solve.reason_name)
+        }),
+        column(
+            "residual_initial",
+            "-",
+            "first residual norm over the step's solves",
+            |r| {
+                Cell::Number(
+                    r.solve.residual_norms.first().copied().unwrap_or(f64::NAN),
+                    6,
+                )
+            },
+        ),
+        column(
+            "residual_final",
+            "-",
+            "last residual norm over the step's solves",
+            |r| {
+                Cell::Number(
+                    r.solve.residual_norms.last().copied().unwrap_or(f64::NAN),
+                    6,
+                )
+            },
+        ),
+        column(UNKNOWNS, "-", "unknowns of the step", |r| {
+            Cell::Count(r.unknowns as u64)
+        }),
+    ];
+
+    /// The columns after the per-set columns.
+    pub static TRAILING: [Column; 17] = [
+        column(
+            "contact_solves",
+            "-",
+            "SNES solves of the step (contact active set and pin rotations)",
+            |r| Cell::Count(r.contact_solves as u64),
+        ),
+        column("kinetic_energy", "N mm", "kinetic energy K", |r| {
+            Cell::Number(r.kinetic_energy, 9)
+        }),
+        column("stored_energy", "N mm", "stored energy Psi", |r| {
+            Cell::Number(r.stored_energy, 9)
+        }),
+        column("external_work", "N mm", "external work W", |r| {
+            Cell::Number(r.external_work, 9)
+        }),
+        column(
+            "dissipated_energy",
+            "N mm",
+            "the energy balance W + E_0 - K - Psi: what damage, erosion and the time integration took out",
+            |r| Cell::Number(dissipated(r), 9),
+        ),
+        column(
+            "damage_dissipation",
+            "N mm",
+            "energy released by damage so far, the trapezoidal rule in the undamaged plane energy psi_0",
+            |r| Cell::Number(r.books.damage, 9),
+        ),
+        column(
+            "erosion_energy",
+            "N mm",
+            "stored energy of eroded points, taken out when they stopped carrying stress",
+            |r| Cell::Number(r.books.erosion, 9),
+        ),
+        column(
+            "contact_loss",
+            "N mm",
+            "kinetic energy lost at the inelastic impacts of closed contact constraints",
+            |r| Cell::Number(r.books.contact, 9),
+        ),
+        column(
+            "transfer_loss",
+            "N mm",
+            "kinetic energy the grid transfer took out: the points' less the grid's after P2G minus the \
+             same after G2P, summed over the steps",
+            |r| Cell::Number(r.books.transfer, 9),
+        ),
+        column(
+            "energy_remainder",
+            "N mm",
+            "dissipated_energy - damage_dissipation - erosion_energy - contact_loss: what the grid \
+             transfer and the time integration took out",
+            |r| Cell::Number(remainder(r), 9),
+        ),
+        column(
+            "remainder_fraction",
+            "-",
+            "energy_remainder over external_work (0 while there is no work)",
+            |r| {
+                let fraction = if r.external_work > 0.0 {
+                    remainder(r) / r.external_work
+                } else {
+                    0.0
+                };
+                Cell::Number(fraction, 6)
+            },
+        ),
+        column(
+            "integration_remainder",
+            "N mm",
+            "energy_remainder - transfer_loss: what the time integration on the grid and the solver \
+             tolerances took out",
+            |r| Cell::Number(remainder(r) - r.books.transfer, 9),
+        ),
+        column(WALL_SETUP, "s", "wall time of the step's set-up", |r| {
+            Cell::Number(r.wall_setup, 4)
+        }),
+        column(
+            WALL_ASSEMBLY,
+            "s",
+            "wall time of the assembly (inside the solve)",
+            |r| Cell::Number(r.wall_assembly, 4),
+        ),
+        column(
+            WALL_SOLVE,
+            "s",
+            "wall time of the converged attempt's solve",
+            |r| Cell::Number(r.wall_solve, 4),
+        ),
+        column(
+            WALL_TOTAL,
+            "s",
+            "wall time of the step with its failed attempts",
+            |r| Cell::Number(r.wall_total, 4),
+        ),
+        column(
+            NEW_PATTERN,
+            "-",
+            "1 if the PETSc objects were built anew for the step",
+            |r| Cell::Count(u64::from(r.new_pattern)),
+        ),
+    ];
+
+    /// The crack columns after [`TRAILING`] (CT runs), empty in the rows of an older checkpoint's steps.
+    pub static CRACK: [Column; 5] = [
+        column(
+            "crack_tip_x",
+            "mm",
+            "crack tip after the step: the crack point farthest from the notch tip",
+            |r| r.crack.map_or(Cell::Empty, |f| Cell::Number(f.tip[0], 6)),
+        ),
+        column("crack_tip_y", "mm", "see crack_tip_x", |r| {
+            r.crack.map_or(Cell::Empty, |f| Cell::Number(f.tip[1], 6))
+        }),
+        column(
+            "crack_length",
+            "mm",
+            "crack length, the tip's distance from the notch tip",
+            |r| r.crack.map_or(Cell::Empty, |f| Cell::Number(f.length, 6)),
+        ),
+        column(
+            "crack_speed",
+            "mm/s",
+            "crack-tip speed: least-squares slope of the crack length over the last 10 us, at least 5 \
+             steps (crack::tip_speed)",
+            |r| r.crack.map_or(Cell::Empty, |f| Cell::Number(f.speed, 6)),
+        ),
+        column(
+            "crack_bands",
+            "-",
+            "bands of the crack on the measuring ring (2 or more: branching)",
+            |r| r.crack.map_or(Cell::Empty, |f| Cell::Count(f.bands as u64)),
+        ),
+    ];
+
     /// The traffic columns after the crack columns (runs on several processes).
-    pub const BYTES: [&str; 2] = [BYTES_SENT, BYTES_UNKNOWNS];
+    pub static BYTES: [Column; 2] = [
+        column(
+            "bytes_sent",
+            "B",
+            "the bytes the process that sent most sent in the step through the program's own exchanges \
+             (points, nodal sums, residual rows, gathers of the unknowns; PETSc's own traffic not counted)",
+            |r| Cell::Count(largest(&r.bytes_sent)),
+        ),
+        column(
+            "bytes_unknowns",
+            "B",
+            "of bytes_sent, the largest process's bytes in the gathers of the unknowns for the residual \
+             and Jacobian evaluations",
+            |r| Cell::Count(largest(&r.bytes_unknowns)),
+        ),
+    ];
 
     /// The path-following columns, last (runs with `[path]`).
-    pub const PATH: [&str; 3] = [PATH_LAMBDA, PATH_OPENING, PATH_RATIO];
-
-    /// The crack columns after [`TRAILING`] (CT runs).
-    pub const CRACK: [&str; 5] = [
-        CRACK_TIP_X,
-        CRACK_TIP_Y,
-        CRACK_LENGTH,
-        CRACK_SPEED,
-        CRACK_BANDS,
-    ];
-
-    /// The columns before the reactions.
-    pub const LEADING: [&str; 10] = [
-        STEP,
-        TIME,
-        DT,
-        ATTEMPTS,
-        NEWTON_ITS,
-        LINEAR_ITS,
-        REASON,
-        RESIDUAL_INITIAL,
-        RESIDUAL_FINAL,
-        UNKNOWNS,
-    ];
-
-    /// The columns after the reactions.
-    pub const TRAILING: [&str; 16] = [
-        KINETIC_ENERGY,
-        STORED_ENERGY,
-        EXTERNAL_WORK,
-        DISSIPATED_ENERGY,
-        DAMAGE_DISSIPATION,
-        EROSION_ENERGY,
-        CONTACT_LOSS,
-        TRANSFER_LOSS,
-        ENERGY_REMAINDER,
-        REMAINDER_FRACTION,
-        INTEGRATION_REMAINDER,
-        WALL_SETUP,
-        WALL_ASSEMBLY,
-        WALL_SOLVE,
-        WALL_TOTAL,
-        NEW_PATTERN,
+    pub static PATH: [Column; 3] = [
+        column(
+            "path_lambda",
+            "s",
+            "the load factor: the reference set has moved its velocity times it",
+            |r| r.path.map_or(Cell::Empty, |p| Cell::Number(p.lambda, 9)),
+        ),
+        column("path_opening", "mm", "the measured opening", |r| {
+            r.path.map_or(Cell::Empty, |p| Cell::Number(p.opening, 9))
+        }),
+        column(
+            "path_ratio",
+            "-",
+            "the step's prescribed motion over its nominal one (< 0 on a snap-back)",
+            |r| r.path.map_or(Cell::Empty, |p| Cell::Number(p.ratio, 9)),
+        ),
     ];
 
     /// Displacement (mm) and force (N per mm thickness; in 3D N) columns of a constraint set, rigid body
@@ -195,5 +375,61 @@ pub mod history {
     /// Rotation column (rad) of a pinned device.
     pub fn rotation_column(name: &str) -> String {
         format!("{name}_rotation")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::history::{BYTES, CRACK, Cell, Column, LEADING, PATH, TRAILING};
+
+    fn fixed() -> impl Iterator<Item = &'static Column> {
+        [&LEADING[..], &TRAILING, &CRACK, &BYTES, &PATH]
+            .into_iter()
+            .flatten()
+    }
+
+    #[test]
+    fn every_fixed_column_has_a_distinct_csv_safe_name_a_unit_and_a_description() {
+        let mut names: Vec<&str> = fixed().map(|c| c.name).collect();
+        for c in fixed() {
+            let safe = c.name.bytes().all(|b| b.is_ascii_lowercase() || b == b'_');
+            assert!(safe, "{}", c.name);
+            assert!(
+                !c.unit.is_empty() && !c.description.is_empty(),
+                "{}",
+                c.name
+            );
+        }
+        let n = names.len();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), n, "a name is used twice");
+    }
+
+    #[test]
+    fn every_fixed_column_is_documented() {
+        let docs = include_str!("../docs/configuration.md");
+        let section = &docs[docs.find("## Columns of `history.csv`").expect("section")..];
+        for c in fixed() {
+            assert!(section.contains(&format!("`{}`", c.name)), "{}", c.name);
+        }
+    }
+
+    #[test]
+    fn cells_are_written_as_the_history_always_wrote_them() {
+        let text = |c: Cell| {
+            let mut s = String::new();
+            c.write(&mut s);
+            s
+        };
+        assert_eq!(text(Cell::Number(1e-6, 9)), "1.000000000e-6");
+        assert_eq!(text(Cell::Number(-40.87553504, 6)), "-4.087554e1");
+        assert_eq!(text(Cell::Number(f64::NAN, 6)), "NaN");
+        assert_eq!(text(Cell::Count(7722)), "7722");
+        assert_eq!(
+            text(Cell::Text("CONVERGED_FNORM_ABS")),
+            "CONVERGED_FNORM_ABS"
+        );
+        assert_eq!(text(Cell::Empty), "");
     }
 }

@@ -91,12 +91,7 @@ fn bar(method: Method) -> Setup {
         rise_time: 1e-5,
     };
     let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, H), H, 3).expect("grid");
-    let time = TimeIntegration {
-        dt: DT,
-        dt_min: DT / 64.0,
-        quasi_static: false,
-        ..TimeIntegration::default()
-    };
+    let time = TimeIntegration::with_dt(DT);
     let (kind, method) = match method {
         Method::Mpm => (ShapeKind::Cpdi1, Method::Mpm),
         Method::Fem => (ShapeKind::Linear, Method::Fem),
@@ -240,12 +235,7 @@ fn a_uniform_motion_loses_nothing_to_the_grid_transfer() {
         .iter_mut()
         .for_each(|v| *v = Vector2::new(2000.0, -500.0));
     let grid = Grid::covering(Vector2::zeros(), Vector2::new(20.0, 14.0), H, 3).expect("grid");
-    let time = TimeIntegration {
-        dt: 1e-6,
-        dt_min: 1e-6 / 64.0,
-        quasi_static: false,
-        ..TimeIntegration::default()
-    };
+    let time = TimeIntegration::with_dt(1e-6);
     let elastic = MaterialConfig::build_toml(
         "model = \"linear_elastic\"\nyoungs_modulus = 30000.0\npoisson_ratio = 0.2",
     )

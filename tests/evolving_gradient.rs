@@ -136,12 +136,7 @@ fn run_bar_with(
         (2.0 / h).ceil() as usize + 2,
     )
     .expect("grid");
-    let time = TimeIntegration {
-        dt: DT,
-        dt_min: DT / 64.0,
-        quasi_static: false,
-        ..TimeIntegration::default()
-    };
+    let time = TimeIntegration::with_dt(DT);
     let setup = Setup::of(
         Parameters {
             boxes: vec![

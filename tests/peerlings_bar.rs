@@ -87,10 +87,8 @@ fn run_bar(h: f64, steps: usize, dl: f64, prefix: &str, kin: &str, linear: &str)
     let material: Material = cfg.build().expect("material");
     let far = 1e3;
     let time = TimeIntegration {
-        dt: 1.0,
-        dt_min: 1.0 / 64.0,
         quasi_static: true,
-        ..TimeIntegration::default()
+        ..TimeIntegration::with_dt(1.0)
     };
     let grid = Grid::covering(Vector2::zeros(), Vector2::new(L, h), h, 2).expect("grid");
     let setup = Setup::of(

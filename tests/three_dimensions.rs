@@ -265,10 +265,8 @@ fn plane_strain_block<const D: usize>(
                 vec![material(law)],
                 kind,
                 TimeIntegration {
-                    dt: 1.0,
-                    dt_min: 1.0 / 64.0,
                     quasi_static: true,
-                    ..TimeIntegration::default()
+                    ..TimeIntegration::with_dt(1.0)
                 },
             )
         },

@@ -2,7 +2,7 @@
 
 use super::{Check, ConfigError, shown};
 use crate::input::serde_defaults;
-use crate::model::{InitialAcceleration, Method};
+use crate::model::{DEFAULT_MASS_TOLERANCE, InitialAcceleration, Method, TimeIntegration};
 use crate::shape::ShapeKind;
 use crate::space::Frame;
 use serde::Deserialize;
@@ -68,9 +68,9 @@ pub struct TimeSection {
 }
 
 serde_defaults! {
-    default_dt: f64 = 1e-6;
-    default_beta: f64 = 0.25;
-    default_gamma: f64 = 0.5;
+    default_dt: f64 = TimeIntegration::DEFAULT_DT;
+    default_beta: f64 = TimeIntegration::DEFAULT_BETA;
+    default_gamma: f64 = TimeIntegration::DEFAULT_GAMMA;
 }
 
 impl Default for TimeSection {
@@ -114,7 +114,7 @@ impl GridSection {
 }
 
 serde_defaults! {
-    default_mass_tolerance: f64 = 1e-6;
+    default_mass_tolerance: f64 = DEFAULT_MASS_TOLERANCE;
     default_margin: usize = 3;
 }
 
@@ -196,6 +196,21 @@ impl RunSection {
 }
 
 impl TimeSection {
+    /// The model's time integration of this section: unset keys take the defaults of
+    /// [`TimeIntegration::with_dt`] (`dt_min = dt / 64`).
+    pub fn integration(&self) -> TimeIntegration {
+        TimeIntegration {
+            dt: self.dt,
+            dt_min: self
+                .dt_min
+                .unwrap_or(TimeIntegration::with_dt(self.dt).dt_min),
+            beta: self.beta,
+            gamma: self.gamma,
+            quasi_static: self.quasi_static,
+            initial_acceleration: self.initial_acceleration,
+        }
+    }
+
     /// Checks `[time]`.
     pub(super) fn validate(&self, c: Check) -> Result<(), ConfigError> {
         let (lo, hi) = super::DT_RANGE;

@@ -1,11 +1,25 @@
 //! Tests of the configuration: parsing, overrides, the effective text and the checks' messages.
 
 use super::*;
-use crate::model::{InitialAcceleration, Method};
+use crate::model::{InitialAcceleration, Method, TimeIntegration};
 use crate::shape::ShapeKind;
 
 /// Every configuration the repository ships parses and validates (a renamed field breaks no run
 /// unnoticed), and the 3D demo is the plane demo extruded.
+#[test]
+fn an_empty_time_section_gives_the_models_default_time_integration() {
+    assert_eq!(
+        TimeSection::default().integration(),
+        TimeIntegration::default()
+    );
+    let t = TimeSection {
+        dt: 2e-7,
+        ..TimeSection::default()
+    };
+    assert_eq!(t.integration(), TimeIntegration::with_dt(2e-7));
+    assert_eq!(t.integration().dt_min, 2e-7 / 64.0);
+}
+
 #[test]
 fn the_shipped_configurations_are_valid() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");

@@ -8,7 +8,6 @@ use crate::plot::LinePlot;
 use crate::solver::StepReport;
 use crate::space::Frame;
 use nalgebra::Vector2;
-use std::fmt::Write as _;
 use std::path::Path;
 
 /// The crack-tip speed (mm/s) of a step reaching `length` (mm) at `time` (s) after the recorded steps
@@ -29,20 +28,6 @@ pub(super) fn speed_after(rows: &[StepReport], time: f64, length: f64) -> f64 {
         .collect();
     samples.push((time, length));
     crack::tip_speed(&samples)
-}
-
-/// Appends the crack columns of a step's `front` (empty fields without one) to a history row.
-pub(super) fn write_front(s: &mut String, front: Option<&Front>) {
-    match front {
-        Some(f) => {
-            let _ = write!(
-                s,
-                ",{:.6e},{:.6e},{:.6e},{:.6e},{}",
-                f.tip[0], f.tip[1], f.length, f.speed, f.bands
-            );
-        }
-        None => s.push_str(",,,,,"),
-    }
 }
 
 /// The tip speed's summary in `crack.json` from the fronts of the recorded steps `rows`: the peak speed,

@@ -539,7 +539,21 @@ impl RunOutput {
                  and forces are turned back into the specimen's frame"
             );
         }
-        let mut columns: Vec<String> = history::LEADING.map(String::from).to_vec();
+        // Rows of a run resumed from an older checkpoint have no front: their crack fields stay empty.
+        let tip = self.rows.iter().any(|r| r.crack.is_some());
+        let bytes = self.rows.iter().any(|r| !r.bytes_sent.is_empty());
+        let path = self.rows.iter().any(|r| r.path.is_some());
+        let after: Vec<&history::Column> = [
+            Some(&history::TRAILING[..]),
+            tip.then_some(&history::CRACK[..]),
+            bytes.then_some(&history::BYTES[..]),
+            path.then_some(&history::PATH[..]),
+        ]
+        .into_iter()
+        .flatten()
+        .flatten()
+        .collect();
+        let mut columns: Vec<String> = history::LEADING.iter().map(|c| c.name.into()).collect();
         if let Some(r) = self.rows.first() {
             for (name, _) in &r.reactions {
                 columns.extend(history::reaction_columns(name, self.dimension));
@@ -547,99 +561,12 @@ impl RunOutput {
             for (name, _) in &r.rotations {
                 columns.push(history::rotation_column(name));
             }
-            columns.push(history::CONTACT_SOLVES.into());
         }
-        columns.extend(history::TRAILING.map(String::from));
-        // Rows of a run resumed from an older checkpoint have no front: their crack fields stay empty.
-        let tip = self.rows.iter().any(|r| r.crack.is_some());
-        if tip {
-            columns.extend(history::CRACK.map(String::from));
-        }
-        let bytes = self.rows.iter().any(|r| !r.bytes_sent.is_empty());
-        if bytes {
-            columns.extend(history::BYTES.map(String::from));
-        }
-        let path = self.rows.iter().any(|r| r.path.is_some());
-        if path {
-            columns.extend(history::PATH.map(String::from));
-        }
+        columns.extend(after.iter().map(|c| c.name.to_string()));
         s.push_str(&columns.join(","));
         s.push('\n');
         for r in &self.rows {
-            let norms = &r.solve.residual_norms;
-            let _ = write!(
-                s,
-                "{},{:.9e},{:.6e},{},{},{},{},{:.6e},{:.6e},{}",
-                r.step,
-                r.time,
-                r.dt,
-                r.attempts,
-                r.solve.iterations,
-                r.solve.linear_iterations,
-                r.solve.reason_name,
-                norms.first().copied().unwrap_or(f64::NAN),
-                norms.last().copied().unwrap_or(f64::NAN),
-                r.unknowns
-            );
-            for ((_, f), (_, u)) in r.reactions.iter().zip(&r.displacements) {
-                for v in u.iter().chain(f) {
-                    let _ = write!(s, ",{v:.9e}");
-                }
-            }
-            for (_, theta) in &r.rotations {
-                let _ = write!(s, ",{theta:.9e}");
-            }
-            let _ = write!(s, ",{}", r.contact_solves);
-            let dissipated =
-                r.external_work + r.initial_energy - r.kinetic_energy - r.stored_energy;
-            let b = &r.books;
-            let remainder = b.remainder(
-                r.external_work,
-                r.initial_energy,
-                r.kinetic_energy,
-                r.stored_energy,
-            );
-            let fraction = if r.external_work > 0.0 {
-                remainder / r.external_work
-            } else {
-                0.0
-            };
-            let _ = write!(
-                s,
-                ",{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.9e},{:.6e},{:.9e}",
-                r.kinetic_energy,
-                r.stored_energy,
-                r.external_work,
-                dissipated,
-                b.damage,
-                b.erosion,
-                b.contact,
-                b.transfer,
-                remainder,
-                fraction,
-                remainder - b.transfer
-            );
-            let _ = write!(
-                s,
-                ",{:.4e},{:.4e},{:.4e},{:.4e},{}",
-                r.wall_setup,
-                r.wall_assembly,
-                r.wall_solve,
-                r.wall_total,
-                u8::from(r.new_pattern)
-            );
-            if tip {
-                cracks::write_front(&mut s, r.crack.as_ref());
-            }
-            if bytes {
-                let largest = |b: &[u64]| b.iter().copied().max().unwrap_or(0);
-                let (sent, unknowns) = (largest(&r.bytes_sent), largest(&r.bytes_unknowns));
-                let _ = write!(s, ",{sent},{unknowns}");
-            }
-            if let (true, Some(p)) = (path, &r.path) {
-                let _ = write!(s, ",{:.9e},{:.9e},{:.9e}", p.lambda, p.opening, p.ratio);
-            }
-            s.push('\n');
+            history_row(&mut s, r, &after);
         }
         write_atomic(&self.dir.join(file::HISTORY), s.as_bytes())
     }
@@ -941,6 +868,30 @@ impl RunOutput {
         }
         Ok(())
     }
+}
+
+/// Appends the row of step `r` to `s`: the [`history::LEADING`] cells, the displacements and forces of
+/// every set and the rotations of the pinned devices (`{:.9e}`), then the cells of the columns `after`.
+fn history_row(s: &mut String, r: &StepReport, after: &[&history::Column]) {
+    for (k, c) in history::LEADING.iter().enumerate() {
+        if k > 0 {
+            s.push(',');
+        }
+        (c.value)(r).write(s);
+    }
+    for ((_, f), (_, u)) in r.reactions.iter().zip(&r.displacements) {
+        for v in u.iter().chain(f) {
+            let _ = write!(s, ",{v:.9e}");
+        }
+    }
+    for (_, theta) in &r.rotations {
+        let _ = write!(s, ",{theta:.9e}");
+    }
+    for c in after {
+        s.push(',');
+        (c.value)(r).write(s);
+    }
+    s.push('\n');
 }
 
 #[cfg(test)]
