@@ -276,17 +276,18 @@ impl<const D: usize> ContactSet<D> {
     pub(super) fn commit(&self, state: &mut State<D>) {
         match self {
             Self::Device(d) => {
-                state.counters.contact_statuses[d.body] =
+                state.counters.contact.devices[d.body].statuses =
                     d.contact.nodes.iter().map(|c| (c.node, c.status)).collect();
             }
             Self::Bodies(b) => {
-                state.counters.closed_pairs = b
+                let closed = &mut state.counters.contact.pairs.closed;
+                *closed = b
                     .pairs
                     .iter()
                     .filter(|c| c.closed)
                     .map(|c| c.node_b)
                     .collect();
-                state.counters.closed_pairs.sort_unstable();
+                closed.sort_unstable();
             }
         }
     }
@@ -355,11 +356,11 @@ impl<const D: usize> Step<'_, D> {
             let Some(c) = &rb.contact else { continue };
             let pin = self.pin_of(k);
             let dtheta = match pin {
-                Some(_) if rotate => self.state.counters.rotation_rates[k] * dt,
+                Some(_) if rotate => self.state.counters.contact.devices[k].rotation_rate * dt,
                 _ => 0.0,
             };
             let face = Face::of(
-                contact::rotation(self.state.counters.rotations[k]) * c.normal,
+                contact::rotation(self.state.counters.contact.devices[k].rotation) * c.normal,
                 &self.state.rigid[k],
             );
             let translation = xy(&translations[k]);
@@ -377,7 +378,7 @@ impl<const D: usize> Step<'_, D> {
             };
             self.first_statuses(
                 &mut device,
-                &self.state.counters.contact_statuses[k],
+                &self.state.counters.contact.devices[k].statuses,
                 dt,
                 &mut index,
             );
@@ -402,7 +403,7 @@ impl<const D: usize> Step<'_, D> {
         for (k, rb) in self.model.params.rigid.iter().enumerate() {
             let Some(c) = &rb.contact else { continue };
             let face = Face::of(
-                contact::rotation(self.state.counters.rotations[k]) * c.normal,
+                contact::rotation(self.state.counters.contact.devices[k].rotation) * c.normal,
                 &self.state.rigid[k],
             );
             let nodes = self.face_nodes(&face, rb.field as usize, |_| Vector2::zeros(), &mut index);
@@ -566,7 +567,9 @@ impl<const D: usize> Step<'_, D> {
             let was_closed = self
                 .state
                 .counters
-                .closed_pairs
+                .contact
+                .pairs
+                .closed
                 .binary_search(&c.node_b)
                 .is_ok();
             c.closed = overlap < -1e-9 * h || (c.gap <= 1e-9 * h && was_closed);

@@ -315,10 +315,11 @@ impl<const D: usize> Step<'_, D> {
             let moved = |x: &mut SVector<f64, D>| *x += dx + r * (*x - pin);
             rb.x.iter_mut().for_each(moved);
             rb.corners.iter_mut().for_each(moved);
-            st.counters.rotations[k] += dtheta;
-            st.counters.rotation_rates[k] = dtheta / dt;
+            let memory = &mut st.counters.contact.devices[k];
+            memory.rotation += dtheta;
+            memory.rotation_rate = dtheta / dt;
         }
-        st.counters.closed_pairs.clear();
+        st.counters.contact.pairs.closed.clear();
         for c in &plan.contacts {
             c.commit(st);
         }
@@ -396,7 +397,7 @@ impl<const D: usize> Step<'_, D> {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| r.contact.as_ref().is_some_and(|c| c.pin.is_some()))
-                .map(|(k, r)| (r.name.clone(), st.counters.rotations[k]))
+                .map(|(k, r)| (r.name.clone(), st.counters.contact.devices[k].rotation))
                 .collect(),
             contact_solves: solved.contact_solves,
             migrated: self.work.moved[0],

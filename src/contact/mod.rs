@@ -19,6 +19,12 @@
 //! physical block rows), and Newton converges quadratically for a fixed set. After each solve the set
 //! is updated (tensile nodes released, penetrating nodes added, stick/slip switched by the Coulomb
 //! cone and the slip direction) until it does not change.
+//!
+//! What the contact sets carry from one step to the next is their [`ContactMemory`] (`memory.rs`).
+
+mod memory;
+
+pub use memory::{ContactMemory, ContactRecord, DeviceMemory, PairMemory};
 
 use nalgebra::{Matrix2, SVector, Vector2};
 
