@@ -179,7 +179,13 @@ impl DeviceContact {
     }
 
     /// Rewrites the Jacobian block rows of the closed nodes in place, where `rows` places them.
-    pub fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
+    pub fn jacobian_rows(
+        &self,
+        nf: usize,
+        s: f64,
+        rows: &(impl RowMap + ?Sized),
+        values: &mut [f64],
+    ) {
         let (n, t) = (self.normal, self.tangent());
         let ((rn, sn), (rt, st)) = self.row_order();
         let mut tangential = Vec::new();
@@ -428,7 +434,13 @@ impl<const D: usize> BodyContact<D> {
 
     /// Rewrites the Jacobian block rows of the closed pairs in place (placed by `rows`;
     /// the two rows of a pair have the same block columns).
-    pub fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
+    pub fn jacobian_rows(
+        &self,
+        nf: usize,
+        s: f64,
+        rows: &(impl RowMap + ?Sized),
+        values: &mut [f64],
+    ) {
         for c in self.pairs.iter().filter(|c| c.closed) {
             let (Some((sa, ncols, diag_a)), Some((sb, ncols_b, diag_b))) =
                 (rows.row_of(c.row_a), rows.row_of(c.row_b))

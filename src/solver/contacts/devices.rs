@@ -1,37 +1,38 @@
-//! The contact sets of a step: the rigid devices in contact with the specimen and the node pairs between
-//! bodies on their own velocity fields, found at the start of every attempt.
+//! The rigid devices against the specimen: loading plates and supports, flat-faced, translating with
+//! their constraint sets and, on a pin, turning about it until the moment of the contact forces about
+//! the pin vanishes (`docs/theory.md`, "Contact with rigid devices"). One set per rigid body in contact,
+//! in the order of the rigid bodies; its memory is the body's
+//! [`DeviceMemory`](crate::contact::DeviceMemory).
 
-use super::Step;
-use super::report::StepError;
-use crate::assembly::Newmark;
+use super::{Attempt, ContactKind, ContactSet, Impact, Sets, Turn};
 use crate::contact::{
-    self, BodyContact, ContactNode, Converged, DeviceContact, NodePair, NodeStatus, RowMap,
+    self, ContactMemory, ContactNode, Converged, DeviceContact, NodeStatus, RowMap,
 };
-use crate::dofs::INACTIVE;
 use crate::grid::Grid;
-use crate::model::{Model, State};
+use crate::model::Model;
 use crate::particles::Particles;
 use crate::petsc::SessionGuard;
+use crate::solver::Step;
+use crate::solver::report::StepError;
 use crate::space::{from_xy, xy};
 use crate::transfer::GridState;
 use nalgebra::{Matrix2, SVector, Vector2};
-use std::ops::Range;
 
 /// A rigid device in contact with the specimen during one step attempt: its contact nodes and its motion
 /// in the step (translation, and rotation about its pin settled with the active set).
-pub(super) struct Device {
+struct Device {
     /// The rigid body (index into [`Parameters::rigid`](crate::model::Parameters::rigid)).
-    pub(super) body: usize,
+    body: usize,
     /// The contact nodes with their statuses.
-    pub(super) contact: DeviceContact,
+    contact: DeviceContact,
     /// In-plane translation increment of the step (mm).
-    pub(super) translation: Vector2<f64>,
+    translation: Vector2<f64>,
     /// In-plane pin position (mm); `None` without a pin.
-    pub(super) pin: Option<Vector2<f64>>,
+    pin: Option<Vector2<f64>>,
     /// Rotation increment about the pin (rad, in the x-y plane).
-    pub(super) dtheta: f64,
+    dtheta: f64,
     /// Length of the contact face (mm).
-    pub(super) face_length: f64,
+    face_length: f64,
     /// The last `(dtheta, moment)` of the secant on the moment balance.
     secant: Option<(f64, f64)>,
 }
@@ -115,181 +116,157 @@ impl Device {
     }
 }
 
-/// What the inelastic-impact corrections of a step read: the Newmark constants, the grid state at the start
-/// of the step, and the grid nodes whose energy loss this process counts.
-pub(super) struct Impact<'a, const D: usize> {
-    /// Newmark constants of the step.
-    pub(super) nm: &'a Newmark,
-    /// Nodal mass, velocity and acceleration at the start of the step.
-    pub(super) gs: &'a GridState<D>,
-    /// The grid nodes this process counts ([`Step::owned_nodes`]).
-    pub(super) owned: Range<usize>,
-}
-
-/// Closed pairs between bodies leave the step with one normal velocity, the mass-weighted mean of the two
-/// copies' (the same perfectly inelastic impact as at a device); the two corrections are equal and
-/// opposite impulses, so the momentum of the pair is kept.
-fn pair_impact<const D: usize>(
-    bodies: &BodyContact<D>,
-    at: &Impact<'_, D>,
-    acc_nodes: &mut [SVector<f64, D>],
-) -> f64 {
-    let (nm, gs) = (at.nm, at.gs);
-    let dt = nm.dt;
-    let mut loss = 0.0;
-    for c in bodies.pairs.iter().filter(|c| c.closed) {
-        let n = c.normal;
-        let normal_velocity = |node: usize, acc: &SVector<f64, D>| {
-            n.dot(
-                &(gs.velocity[node]
-                    + dt * ((1.0 - nm.gamma) * gs.acceleration[node] + nm.gamma * acc)),
-            )
-        };
-        let (va, vb) = (
-            normal_velocity(c.node_a, &acc_nodes[c.node_a]),
-            normal_velocity(c.node_b, &acc_nodes[c.node_b]),
-        );
-        let (ma, mb) = (gs.mass[c.node_a], gs.mass[c.node_b]);
-        let common = (ma * va + mb * vb) / (ma + mb);
-        acc_nodes[c.node_a] += n * ((common - va) / (nm.gamma * dt));
-        acc_nodes[c.node_b] += n * ((common - vb) / (nm.gamma * dt));
-        loss += 0.5 * (ma * (va - common).powi(2) + mb * (vb - common).powi(2));
+impl<const D: usize> ContactSet<D> for Device {
+    /// A device always takes part: its nodes may close in any step.
+    fn in_play(&self) -> bool {
+        true
     }
-    loss
-}
 
-/// One contact set of a step: the interface through which the step's phases treat every kind of contact
-/// alike (`prepare` builds the sets and projects the first guess onto them, the SNES callbacks rewrite
-/// their rows, `solve` updates them at each converged iterate until they settle, `finish` takes their
-/// reactions and velocity corrections and commits their statuses as the next step's first guess).
-/// Devices come first, in the order of the rigid bodies, then the pairs between bodies.
-pub(super) enum ContactSet<const D: usize> {
-    /// A rigid device against the specimen.
-    Device(Device),
-    /// The node pairs between the specimen and the bodies on their own velocity fields.
-    Bodies(BodyContact<D>),
-}
+    fn project_guess(&self, x: &mut [f64], nf: usize, _mass: &[f64]) {
+        self.contact.project_guess(x, nf);
+    }
 
-impl<const D: usize> ContactSet<D> {
-    /// True if the set takes part in the step (a device always; pairs between bodies if there are any).
-    pub(super) fn in_play(&self) -> bool {
-        match self {
-            Self::Device(_) => true,
-            Self::Bodies(b) => !b.pairs.is_empty(),
+    fn residual_rows(&self, x: &[f64], r: &mut [f64], nf: usize, s: f64) {
+        self.contact.residual_rows(x, r, nf, s);
+    }
+
+    fn jacobian_rows(&self, nf: usize, s: f64, rows: &dyn RowMap, values: &mut [f64]) {
+        self.contact.jacobian_rows(nf, s, rows, values);
+    }
+
+    fn force_scale(&self, phys: &[f64], nf: usize) -> f64 {
+        self.contact
+            .nodes
+            .iter()
+            .filter(|c| c.status.closed())
+            .map(|c| Vector2::new(phys[c.row * nf], phys[c.row * nf + 1]).norm())
+            .fold(0.0, f64::max)
+    }
+
+    fn update(&mut self, at: Converged<'_>) -> usize {
+        self.contact.update(at)
+    }
+
+    fn statuses(&self, out: &mut Vec<NodeStatus>) {
+        out.extend(self.contact.nodes.iter().map(|c| c.status));
+    }
+
+    /// The moment balance about the pin ([`Device::balance`]).
+    fn balance(&mut self, phys: &[f64], nf: usize, grid: &Grid<D>, s: f64) -> bool {
+        Device::balance(self, phys, nf, grid, s)
+    }
+
+    /// The device's contact nodes stay with it.
+    fn hold(&self, held: &mut [bool]) {
+        for c in &self.contact.nodes {
+            held[c.node] = true;
         }
     }
 
-    /// The device of this set, if it is one.
-    pub(super) fn device(&self) -> Option<&Device> {
-        match self {
-            Self::Device(d) => Some(d),
-            Self::Bodies(_) => None,
-        }
-    }
-
-    /// Projects the guess `x` (all unknowns, `nf` per node) onto the closed constraints (`mass`: the
-    /// nodal masses, t).
-    pub(super) fn project_guess(&self, x: &mut [f64], nf: usize, mass: &[f64]) {
-        match self {
-            Self::Device(d) => d.contact.project_guess(x, nf),
-            Self::Bodies(b) => b.project_guess(x, nf, |node| mass[node]),
-        }
-    }
-
-    /// Rewrites the residual rows of the closed constraints (`s`: the row scale, MPa).
-    pub(super) fn residual_rows(&self, x: &[f64], r: &mut [f64], nf: usize, s: f64) {
-        match self {
-            Self::Device(d) => d.contact.residual_rows(x, r, nf, s),
-            Self::Bodies(b) => b.residual_rows(x, r, nf, s),
-        }
-    }
-
-    /// Rewrites the Jacobian rows of the closed constraints in place, where `rows` places them.
-    pub(super) fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
-        match self {
-            Self::Device(d) => d.contact.jacobian_rows(nf, s, rows, values),
-            Self::Bodies(b) => b.jacobian_rows(nf, s, rows, values),
-        }
-    }
-
-    /// The largest contact force of the closed constraints (`phys`: the physical residual; N per mm
-    /// thickness, N in 3D), the scale of the sign tests.
-    pub(super) fn force_scale(&self, phys: &[f64], nf: usize) -> f64 {
-        match self {
-            Self::Device(d) => d
-                .contact
+    /// Every unknown of the contact nodes (their forces and statuses are evaluated on every process).
+    fn read_rows(&self, nf: usize, out: &mut Vec<usize>) {
+        out.extend(
+            self.contact
                 .nodes
                 .iter()
-                .filter(|c| c.status.closed())
-                .map(|c| Vector2::new(phys[c.row * nf], phys[c.row * nf + 1]).norm())
-                .fold(0.0, f64::max),
-            Self::Bodies(b) => b.force_scale(phys, nf),
-        }
+                .flat_map(|c| c.row * nf..(c.row + 1) * nf),
+        );
     }
 
-    /// Updates the statuses at the converged iterate `x` with the forces `phys`; returns the number of
-    /// changes.
-    pub(super) fn update(&mut self, at: Converged<'_>) -> usize {
-        match self {
-            Self::Device(d) => d.contact.update(at),
-            Self::Bodies(b) => b.update(at),
-        }
+    /// The resultant of the contact forces, the rigid body's reaction.
+    fn reaction(&self, model: &Model<D>, phys: &[f64], nf: usize, reactions: &mut [[f64; D]]) {
+        let pin = self.pin.unwrap_or_else(Vector2::zeros);
+        let grid_x = |i| xy(&model.params.grid.node_position(i));
+        let (f, _) = self.contact.resultant(phys, nf, grid_x, pin);
+        let r = &mut reactions[model.rigid_set(self.body)];
+        r[0] = f.x;
+        r[1] = f.y;
     }
 
-    /// Appends the statuses of the set's nodes to `out` (a pair between bodies as sliding or open): the
-    /// active set, compared from solve to solve to find cycles.
-    pub(super) fn statuses(&self, out: &mut Vec<NodeStatus>) {
-        match self {
-            Self::Device(d) => out.extend(d.contact.nodes.iter().map(|c| c.status)),
-            Self::Bodies(b) => out.extend(b.pairs.iter().map(|c| match c.closed {
-                true => NodeStatus::Slide,
-                false => NodeStatus::Open,
-            })),
-        }
-    }
-
-    /// The moment balance of a pinned device ([`Device::balance`]); true for every other set.
-    pub(super) fn balance(&mut self, phys: &[f64], nf: usize, grid: &Grid<D>, s: f64) -> bool {
-        match self {
-            Self::Device(d) => d.balance(phys, nf, grid, s),
-            Self::Bodies(_) => true,
-        }
-    }
-
-    /// The inelastic-impact correction of the closed constraints' nodal accelerations, with its impulse
-    /// added to the device's entry of `reactions` (one per constraint set of `model`); returns the
-    /// kinetic energy the impacts took out on the nodes `at.owned` (N mm; in 2D per mm thickness).
-    pub(super) fn impact(
+    fn impact(
         &self,
         model: &Model<D>,
         at: &Impact<'_, D>,
         acc_nodes: &mut [SVector<f64, D>],
         reactions: &mut [[f64; D]],
     ) -> f64 {
-        match self {
-            Self::Device(d) => d.impact(at, acc_nodes, &mut reactions[model.rigid_set(d.body)]),
-            Self::Bodies(b) => pair_impact(b, at, acc_nodes),
-        }
+        Device::impact(
+            self,
+            at,
+            acc_nodes,
+            &mut reactions[model.rigid_set(self.body)],
+        )
     }
 
-    /// Keeps the set's final statuses in `state`: the first guess of the next step's active set.
-    pub(super) fn commit(&self, state: &mut State<D>) {
-        match self {
-            Self::Device(d) => {
-                state.counters.contact.devices[d.body].statuses =
-                    d.contact.nodes.iter().map(|c| (c.node, c.status)).collect();
-            }
-            Self::Bodies(b) => {
-                let closed = &mut state.counters.contact.pairs.closed;
-                *closed = b
-                    .pairs
-                    .iter()
-                    .filter(|c| c.closed)
-                    .map(|c| c.node_b)
-                    .collect();
-                closed.sort_unstable();
+    fn turn(&self, turns: &mut [Turn]) {
+        turns[self.body] = Turn {
+            pin: self.pin,
+            dtheta: self.dtheta,
+        };
+    }
+
+    /// The final statuses, the first guess of the next step's active set, and the rotation about the
+    /// pin with its rate, the first guess of the next step's.
+    fn commit(&self, memory: &mut ContactMemory, dt: f64) {
+        let m = &mut memory.devices[self.body];
+        m.rotation += self.dtheta;
+        m.rotation_rate = self.dtheta / dt;
+        m.statuses = self
+            .contact
+            .nodes
+            .iter()
+            .map(|c| (c.node, c.status))
+            .collect();
+    }
+
+    /// A touching node whose free acceleration `acc` would carry it into the device takes the device's
+    /// normal acceleration (node by node: the lumped mass decouples them; friction is not applied at
+    /// t = 0); the device's force is that of its pushed nodes.
+    fn push_at_start(
+        &self,
+        model: &Model<D>,
+        gs: &GridState<D>,
+        (r, nf): (&[f64], usize),
+        acc: &mut [SVector<f64, D>],
+    ) -> Option<(usize, SVector<f64, D>)> {
+        let n = from_xy::<D>(self.contact.normal);
+        let mut force = SVector::<f64, D>::zeros();
+        for c in self.contact.nodes.iter().filter(|c| c.status.closed()) {
+            let push = n.dot(&(from_xy::<D>(c.du_device) - acc[c.node]));
+            if push > 0.0 {
+                acc[c.node] += push * n;
+                let b = c.row * nf;
+                force += SVector::<f64, D>::from_column_slice(&r[b..b + D])
+                    + gs.mass[c.node] * acc[c.node];
             }
         }
+        Some((model.rigid_set(self.body), force))
+    }
+}
+
+/// The kind of the rigid devices: one set per rigid body in contact.
+pub(super) struct Devices;
+
+impl<const D: usize> ContactKind<D> for Devices {
+    /// The devices translating with `attempt.translations` and, in a step, turning about their pins at
+    /// the last step's rate ([`Step::contact_devices`]).
+    fn build(
+        &self,
+        step: &mut Step<'_, D>,
+        session: &SessionGuard,
+        attempt: &Attempt<'_, D>,
+        _earlier: &[Box<dyn ContactSet<D>>],
+    ) -> Result<Sets<D>, StepError> {
+        let (rotate, dt) = (attempt.dt.is_some(), attempt.dt.unwrap_or(0.0));
+        let devices = step.contact_devices(session, attempt.translations, rotate, dt)?;
+        Ok(devices
+            .into_iter()
+            .map(|d| Box::new(d) as Box<dyn ContactSet<D>>)
+            .collect())
+    }
+
+    fn candidates(&self, step: &Step<'_, D>, out: &mut Vec<usize>) {
+        out.extend(step.device_nodes());
     }
 }
 
@@ -330,7 +307,7 @@ impl Face {
 impl<const D: usize> Step<'_, D> {
     /// Current pin (mm) of rigid body `k`: its pin at t = 0 moved with the accumulated translation;
     /// `None` without a pin.
-    pub(super) fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
+    fn pin_of(&self, k: usize) -> Option<Vector2<f64>> {
         let model = self.model;
         let pin = model.params.rigid[k].contact.as_ref()?.pin?;
         let acc = self.state.counters.accumulated[model.params.boxes.len() + k];
@@ -343,7 +320,7 @@ impl<const D: usize> Step<'_, D> {
     /// node touches) and the device increment at the node for the translation `translations[k]` (mm) of
     /// rigid body `k` and its rotation about its pin in a step of `dt` (s): the last step's rate times
     /// `dt` if `rotate`, else none.
-    pub(super) fn contact_devices(
+    fn contact_devices(
         &self,
         session: &SessionGuard,
         translations: &[SVector<f64, D>],
@@ -397,7 +374,7 @@ impl<const D: usize> Step<'_, D> {
 
     /// The candidate contact nodes of every device at the start of the step (grid node indices; the
     /// nodes [`Step::contact_devices`] starts from).
-    pub(super) fn device_nodes(&self) -> Vec<usize> {
+    fn device_nodes(&self) -> Vec<usize> {
         let mut index = vec![usize::MAX; self.model.field_nodes()];
         let mut all = Vec::new();
         for (k, rb) in self.model.params.rigid.iter().enumerate() {
@@ -531,151 +508,5 @@ impl<const D: usize> Step<'_, D> {
                 c.status = NodeStatus::Slide;
             }
         }
-    }
-
-    /// The contact pairs between the specimen (field 0) and the bodies of other velocity fields at the
-    /// start of the step (`docs/theory.md`, "Contact between bodies"), and the partner of every node copy
-    /// in `Workspace::partners` (for the pattern). A pair is a grid node whose copies in field 0 and in
-    /// one other field are both active and free (no constraint, not a device's contact node). Its
-    /// normal points from the specimen into the other body along the difference of the fields' nodal
-    /// mass gradients `sum_p m_p grad S_Ip` (which point out of a body:
-    /// the specimen's minus the other's); its gap is the distance along the normal from the farthest
-    /// corner of the specimen's points to the nearest corner of the other body's points that
-    /// interpolate to the node (held at 0 when they overlap, as for the devices). A pair starts closed
-    /// if the predicted increments `dt v_I + dt^2/2 a_I` of its copies overlap, or if it touches and
-    /// was closed at the end of the last step.
-    pub(super) fn body_pairs(
-        &mut self,
-        devices: &[Device],
-        dt: f64,
-    ) -> Result<BodyContact<D>, StepError> {
-        let all = self.model.field_nodes();
-        self.work.partners.clear();
-        if self.model.num_fields() == 1 {
-            return Ok(BodyContact::default());
-        }
-        let mut pairs = self.node_pairs(devices)?;
-        let (far_a, near_b) = self.pair_extents(&pairs, all);
-        self.work.partners.resize(all, INACTIVE);
-        let h = self.model.params.grid.cell_size();
-        let gs = &self.work.grid_state;
-        let predicted =
-            |node: usize| dt * gs.velocity[node] + 0.5 * dt * dt * gs.acceleration[node];
-        for (k, c) in pairs.iter_mut().enumerate() {
-            c.gap = (near_b[k] - far_a[k]).max(0.0);
-            let overlap = c.gap + c.normal.dot(&(predicted(c.node_b) - predicted(c.node_a)));
-            let was_closed = self
-                .state
-                .counters
-                .contact
-                .pairs
-                .closed
-                .binary_search(&c.node_b)
-                .is_ok();
-            c.closed = overlap < -1e-9 * h || (c.gap <= 1e-9 * h && was_closed);
-            self.work.partners[c.node_a] = c.node_b as u32;
-            self.work.partners[c.node_b] = c.node_a as u32;
-        }
-        Ok(BodyContact { pairs })
-    }
-
-    /// The node pairs of the step without gaps or statuses: grid nodes whose copies in field 0 and in
-    /// one other field are active and free (not constrained, not held by one of the `devices`), with the
-    /// normal along the difference of the fields' nodal mass gradients.
-    fn node_pairs(&self, devices: &[Device]) -> Result<Vec<NodePair<D>>, StepError> {
-        let (model, p, table, dofs) = (
-            self.model,
-            &self.state.particles,
-            &self.work.table,
-            &self.work.dofs,
-        );
-        let (grid, fields, all) = (&model.params.grid, model.num_fields(), model.field_nodes());
-        let nodes = grid.num_nodes();
-        let nf = dofs.unknowns_per_node();
-        let mut grad_m = vec![SVector::<f64, D>::zeros(); all];
-        for q in 0..p.len() {
-            for w in table.weights(q) {
-                grad_m[w.node as usize] += p.mass[q] * w.grad;
-            }
-        }
-        // Copies held by a device stay with it.
-        let mut taken = vec![false; all];
-        for c in devices.iter().flat_map(|d| &d.contact.nodes) {
-            taken[c.node] = true;
-        }
-        let free = |node: usize| {
-            dofs.active_index(node)
-                .filter(|&a| !taken[node] && (0..D).all(|c| !dofs.is_constrained(a * nf + c)))
-        };
-        let mut pairs = Vec::new();
-        for i in 0..nodes {
-            if dofs.active_index(i).is_none() {
-                continue;
-            }
-            let mut others = (1..fields)
-                .map(|f| i + f * nodes)
-                .filter(|&b| dofs.active_index(b).is_some());
-            let Some(b) = others.next() else { continue };
-            if others.next().is_some() {
-                let at: Vec<String> = grid
-                    .node_position(i)
-                    .iter()
-                    .map(|c| format!("{c:.3}"))
-                    .collect();
-                return Err(StepError::Setup(format!(
-                    "the grid node at ({}) mm carries the specimen and two other bodies: contact is \
-                     between the specimen and one body per node; keep the other bodies at least two \
-                     cells apart",
-                    at.join(", ")
-                )));
-            }
-            let (Some(row_a), Some(row_b)) = (free(i), free(b)) else {
-                continue;
-            };
-            // `sum_p m_p grad S_Ip` points out of a body at its boundary nodes.
-            let g = grad_m[i] - grad_m[b];
-            if g.norm() == 0.0 {
-                continue;
-            }
-            pairs.push(NodePair {
-                node_a: i,
-                node_b: b,
-                row_a,
-                row_b,
-                normal: g / g.norm(),
-                gap: 0.0,
-                closed: false,
-            });
-        }
-        Ok(pairs)
-    }
-
-    /// Per pair, the farthest corner of the specimen's points and the nearest corner of the other body's
-    /// points along the pair's normal (mm), over the points that interpolate to the pair's copies.
-    fn pair_extents(&self, pairs: &[NodePair<D>], all: usize) -> (Vec<f64>, Vec<f64>) {
-        let (p, table) = (&self.state.particles, &self.work.table);
-        let mut pair_of = vec![usize::MAX; all];
-        for (k, c) in pairs.iter().enumerate() {
-            pair_of[c.node_a] = k;
-            pair_of[c.node_b] = k;
-        }
-        let mut far_a = vec![f64::NEG_INFINITY; pairs.len()];
-        let mut near_b = vec![f64::INFINITY; pairs.len()];
-        for q in 0..p.len() {
-            for w in table.weights(q) {
-                let k = pair_of[w.node as usize];
-                if w.value <= 1e-12 || k == usize::MAX {
-                    continue;
-                }
-                let n = pairs[k].normal;
-                let along = p.corners(q).iter().map(|c| n.dot(c));
-                if w.node as usize == pairs[k].node_a {
-                    far_a[k] = along.fold(far_a[k], f64::max);
-                } else {
-                    near_b[k] = along.fold(near_b[k], f64::min);
-                }
-            }
-        }
-        (far_a, near_b)
     }
 }
