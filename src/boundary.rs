@@ -1,5 +1,5 @@
 //! Boundary conditions and loads of the implicit step: constrained node boxes, rigid bodies (glued or in
-//! contact, `src/contact.rs`), nodal loads along grid lines, and the prescribed motion (a velocity that
+//! contact, `src/contact/`), nodal loads along grid lines, and the prescribed motion (a velocity that
 //! rises linearly from zero) that drives them.
 //!
 //! Units: mm, s, N (in 2D per mm thickness), MPa. Generic over the space dimension `D` (2 by default).

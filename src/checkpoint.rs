@@ -11,7 +11,7 @@
 //! attribute `crc32`. [`load`] reads and verifies every dataset before it changes anything, so a damaged
 //! file is reported as corrupt and never loaded.
 
-use crate::contact::NodeStatus;
+use crate::contact::{ContactMemory, ContactRecord};
 use crate::io::{OutputError, RunOutput};
 use crate::model::{Counters, EnergyBooks, Method, Model, State};
 use crate::rundir::RunIdentity;
@@ -417,18 +417,10 @@ pub struct CounterRecord {
     pub accumulated: Vec<Vec<f64>>,
     /// Last reactions per constraint set, one value per component (N; in 2D per mm thickness).
     pub last_reactions: Vec<Vec<f64>>,
-    /// Rotation of each rigid body about its pin (rad; 0 without a pin).
-    #[serde(default)]
-    pub rotations: Vec<f64>,
-    /// Rotation rate of each rigid body in the last step (rad/s).
-    #[serde(default)]
-    pub rotation_rates: Vec<f64>,
-    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step.
-    #[serde(default)]
-    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
-    /// The closed pairs of contact between bodies at the end of the last step.
-    #[serde(default)]
-    pub closed_pairs: Vec<usize>,
+    /// What the contact sets carry from one step to the next ([`ContactMemory::record`]), its lists
+    /// at the top level of the record.
+    #[serde(flatten)]
+    pub contact: ContactRecord,
     /// The energy books (zero in checkpoints that predate them).
     #[serde(default)]
     pub books: EnergyBooks,
@@ -446,17 +438,14 @@ impl CounterRecord {
             initial_energy: Some(c.initial_energy),
             accumulated: c.accumulated.iter().map(|a| a.to_vec()).collect(),
             last_reactions: c.last_reactions.iter().map(|f| f.to_vec()).collect(),
-            rotations: c.rotations.clone(),
-            rotation_rates: c.rotation_rates.clone(),
-            contact_statuses: c.contact_statuses.clone(),
-            closed_pairs: c.closed_pairs.clone(),
+            contact: c.contact.record(),
             books: c.books,
         }
     }
 
     /// The counters of a run with `nrigid` rigid bodies; `initial_energy` is kept where an older
-    /// checkpoint has none, lists of an older checkpoint without pins or contact are padded to one entry
-    /// per rigid body. An error says which list does not have `D` components per constraint set.
+    /// checkpoint has none, the contact memory of an older checkpoint without pins or contact is
+    /// completed with that of t = 0 ([`ContactMemory::restore`]). An error says which list does not have `D` components per constraint set.
     fn restore<const D: usize>(
         self,
         nrigid: usize,
@@ -475,12 +464,6 @@ impl CounterRecord {
                 })
                 .collect()
         };
-        let padded = |mut list: Vec<f64>| {
-            list.resize(nrigid, 0.0);
-            list
-        };
-        let mut contact_statuses = self.contact_statuses;
-        contact_statuses.resize(nrigid, Vec::new());
         Ok(Counters {
             time: self.time,
             step: self.step,
@@ -490,11 +473,46 @@ impl CounterRecord {
             initial_energy: self.initial_energy.unwrap_or(initial_energy),
             accumulated: per_set("accumulated", &self.accumulated)?,
             last_reactions: per_set("last_reactions", &self.last_reactions)?,
-            rotations: padded(self.rotations),
-            rotation_rates: padded(self.rotation_rates),
-            contact_statuses,
-            closed_pairs: self.closed_pairs,
+            contact: ContactMemory::restore(self.contact, nrigid),
             books: self.books,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::NodeStatus;
+
+    /// Format 2 keeps the contact memory as four lists at the top level of the counters, so that
+    /// checkpoints written before [`ContactMemory`] resume.
+    #[test]
+    fn the_contact_memory_keeps_the_keys_of_format_2() {
+        let mut contact = ContactMemory::new(1);
+        contact.devices[0].rotation = 0.125;
+        contact.devices[0].statuses = vec![(4, NodeStatus::Stick)];
+        contact.pairs.closed = vec![9];
+        let counters = Counters::<2> {
+            time: 1e-6,
+            step: 1,
+            dt: 1e-6,
+            calm_steps: 0,
+            external_work: 0.0,
+            initial_energy: 0.0,
+            accumulated: vec![[0.0; 2]],
+            last_reactions: vec![[0.0; 2]],
+            contact,
+            books: EnergyBooks::default(),
+        };
+        let json = serde_json::to_value(CounterRecord::of(&counters)).expect("serialized");
+        assert_eq!(json["rotations"], serde_json::json!([0.125]));
+        assert_eq!(json["rotation_rates"], serde_json::json!([0.0]));
+        assert_eq!(
+            json["contact_statuses"],
+            serde_json::json!([[[4, "Stick"]]])
+        );
+        assert_eq!(json["closed_pairs"], serde_json::json!([9]));
+        let back: CounterRecord = serde_json::from_value(json).expect("deserialized");
+        assert_eq!(back.restore::<2>(1, 0.0), Ok(counters));
     }
 }

@@ -10,7 +10,7 @@
 //! checkpoints read `&State`. Units: mm, s, N, MPa, t (tonne).
 
 use crate::boundary::{Motion, NodalLoad, NodeBox, RigidBody};
-use crate::contact::NodeStatus;
+use crate::contact::ContactMemory;
 use crate::dofs::FieldLayout;
 use crate::grid::Grid;
 use crate::input::BadValue;
@@ -514,16 +514,9 @@ pub struct Counters<const D: usize = 2> {
     /// Last reactions per constraint set and component (N, in 2D per mm thickness; the trapezoidal work
     /// increment).
     pub last_reactions: Vec<[f64; D]>,
-    /// Rotation of each rigid body about its pin since t = 0 (rad; 0 without a pin).
-    pub rotations: Vec<f64>,
-    /// Rotation rate of each rigid body in the last step (rad/s), the first guess of the next step.
-    pub rotation_rates: Vec<f64>,
-    /// Per rigid body in contact, (grid node, status) of its contact nodes at the end of the last step
-    /// (the first guess of the next step's active set, so that a resumed run takes the same steps).
-    pub contact_statuses: Vec<Vec<(usize, NodeStatus)>>,
-    /// The closed pairs of contact between bodies at the end of the last step (the other body's node
-    /// copies, sorted): with the predicted overlap, the first guess of the next step's active set.
-    pub closed_pairs: Vec<usize>,
+    /// What the contact sets carry from one step to the next (the rigid bodies' rotations about their
+    /// pins, the last active sets).
+    pub contact: ContactMemory,
     /// Where the energy went so far ([`EnergyBooks`]).
     pub books: EnergyBooks,
 }
@@ -587,10 +580,7 @@ impl<const D: usize> State<D> {
             initial_energy,
             accumulated: vec![[0.0; D]; nsets],
             last_reactions: vec![[0.0; D]; nsets],
-            rotations: vec![0.0; nrigid],
-            rotation_rates: vec![0.0; nrigid],
-            contact_statuses: vec![Vec::new(); nrigid],
-            closed_pairs: Vec::new(),
+            contact: ContactMemory::new(nrigid),
             books: EnergyBooks::default(),
         };
         Self {

@@ -2,7 +2,7 @@
 //! G2P and the commit of the material state, the motion of the rigid bodies; the report.
 
 use super::Step;
-use super::contacts::{self, ContactSet};
+use super::contacts::{self, Turn};
 use super::path;
 use super::prepare::StepPlan;
 use super::processes::agreed;
@@ -10,7 +10,7 @@ use super::report::{StepError, StepReport};
 use super::solve::Solved;
 use crate::assembly::{Committed, Newmark};
 use crate::petsc::SessionGuard;
-use crate::space::{from_xy, rotation_xy, xy};
+use crate::space::{from_xy, rotation_xy};
 use crate::transfer::{self, StepSolution};
 use nalgebra::{SMatrix, SVector, Vector2};
 use std::time::Instant;
@@ -102,13 +102,8 @@ impl<const D: usize> Step<'_, D> {
                 r
             })
             .collect();
-        for d in plan.contacts.iter().filter_map(ContactSet::device) {
-            let pin = d.pin.unwrap_or_else(Vector2::zeros);
-            let grid_x = |i| xy(&model.params.grid.node_position(i));
-            let (f, _) = d.contact.resultant(phys, nf, grid_x, pin);
-            let r = &mut reactions[model.rigid_set(d.body)];
-            r[0] = f.x;
-            r[1] = f.y;
+        for c in &plan.contacts {
+            c.reaction(model, phys, nf, &mut reactions);
         }
         let du_nodes = self.work.assembler.nodal_du().to_vec();
         let mut acc_nodes = vec![SVector::<f64, D>::zeros(); model.field_nodes()];
@@ -294,19 +289,19 @@ impl<const D: usize> Step<'_, D> {
         (v, a)
     }
 
-    /// The rigid bodies move with their sets' increments and turn about their pins; the contact sets
-    /// keep their final statuses for the next step.
+    /// The rigid bodies move with their sets' increments and turn about their pins as the contact sets
+    /// say ([`ContactSet::turn`](contacts::ContactSet::turn)); the contact sets keep what they carry to
+    /// the next step in the run's contact memory.
     fn move_rigid_bodies(&mut self, plan: &StepPlan<D>, out: &Outcome<D>) {
         let (model, dt) = (self.model, plan.dt);
         let st = &mut *self.state;
+        let mut turns = vec![Turn::default(); st.rigid.len()];
+        for c in &plan.contacts {
+            c.turn(&mut turns);
+        }
         for (k, rb) in st.rigid.iter_mut().enumerate() {
             let du = out.displacements[model.rigid_set(k)];
-            let device = plan
-                .contacts
-                .iter()
-                .filter_map(ContactSet::device)
-                .find(|d| d.body == k);
-            let (pin, dtheta) = device.map_or((None, 0.0), |d| (d.pin, d.dtheta));
+            let Turn { pin, dtheta } = turns[k];
             // x' = x + du + (R(dtheta) - I) (x - pin): translation with the pin, rotation about it (about
             // the pin's axis, z, in 3D).
             let dx = SVector::<f64, D>::from_fn(|c, _| du[c]);
@@ -315,12 +310,9 @@ impl<const D: usize> Step<'_, D> {
             let moved = |x: &mut SVector<f64, D>| *x += dx + r * (*x - pin);
             rb.x.iter_mut().for_each(moved);
             rb.corners.iter_mut().for_each(moved);
-            st.counters.rotations[k] += dtheta;
-            st.counters.rotation_rates[k] = dtheta / dt;
         }
-        st.counters.closed_pairs.clear();
         for c in &plan.contacts {
-            c.commit(st);
+            c.commit(&mut st.counters.contact, dt);
         }
     }
 
@@ -396,7 +388,7 @@ impl<const D: usize> Step<'_, D> {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| r.contact.as_ref().is_some_and(|c| c.pin.is_some()))
-                .map(|(k, r)| (r.name.clone(), st.counters.rotations[k]))
+                .map(|(k, r)| (r.name.clone(), st.counters.contact.devices[k].rotation))
                 .collect(),
             contact_solves: solved.contact_solves,
             migrated: self.work.moved[0],

@@ -2,7 +2,7 @@
 //! the PETSc objects and the first guess.
 
 use super::Step;
-use super::contacts::ContactSet;
+use super::contacts::{self, Attempt, Sets};
 use super::path;
 use super::processes::{agreed, largest};
 use super::report::StepError;
@@ -28,8 +28,9 @@ pub(super) struct StepPlan<const D: usize> {
     pub(super) set_du: Vec<[Option<f64>; D]>,
     /// The constrained unknowns of each set.
     pub(super) sets: Vec<Vec<usize>>,
-    /// The contact sets of the step: the devices, then the pairs between bodies.
-    pub(super) contacts: Vec<ContactSet<D>>,
+    /// The contact sets of the step, kind after kind ([`contacts::build`]): the devices, then the pairs
+    /// between bodies.
+    pub(super) contacts: Sets<D>,
     /// Inertia and applied forces of the step, and the nodes of each load.
     pub(super) loading: Loading<D>,
     pub(super) load_nodes: LoadNodes,
@@ -187,15 +188,13 @@ impl<const D: usize> Step<'_, D> {
         session: &SessionGuard,
         set_du: &[[Option<f64>; D]],
         dt: f64,
-    ) -> Result<Vec<ContactSet<D>>, StepError> {
+    ) -> Result<Sets<D>, StepError> {
         let translations = self.rigid_values(set_du);
-        let devices = self.contact_devices(session, &translations, true, dt)?;
-        let bodies = self.body_pairs(&devices, dt)?;
-        let mut contacts: Vec<_> = devices.into_iter().map(ContactSet::Device).collect();
-        if self.model.num_fields() > 1 {
-            contacts.push(ContactSet::Bodies(bodies));
-        }
-        Ok(contacts)
+        let attempt = Attempt {
+            translations: &translations,
+            dt: Some(dt),
+        };
+        contacts::build(self, session, &attempt)
     }
 
     /// The rigid bodies' entries of the per-set values `set_values` as vectors (free components 0).

@@ -2,6 +2,7 @@
 //! points shared out with their ghosts and the block rows each process owns.
 
 use super::Step;
+use super::contacts;
 use super::report::StepError;
 use crate::assembly::AssemblyError;
 use crate::partition::{self, NodalWindows, Partition};
@@ -243,9 +244,10 @@ impl<const D: usize> Step<'_, D> {
     }
 
     /// With the nodal sums complete on the rows each process reads only: mass, velocity and
-    /// acceleration also on the nodes of the constraint sets `sets` and the devices' contact candidates
-    /// beyond them (their reactions, statuses and impacts are evaluated on every process), from their
-    /// owners (collective; nothing to do where every process holds the whole grid).
+    /// acceleration also on the nodes of the constraint sets `sets` and the contact sets' candidates
+    /// beyond them ([`contacts::candidates`]; their reactions, statuses and impacts are evaluated on
+    /// every process), from their owners (collective; nothing to do where every process holds the
+    /// whole grid).
     pub(super) fn complete_beyond_windows(
         &mut self,
         session: &SessionGuard,
@@ -259,7 +261,7 @@ impl<const D: usize> Step<'_, D> {
             .iter()
             .flatten()
             .map(|&d| self.work.dofs.node(d / nf))
-            .chain(self.device_nodes())
+            .chain(contacts::candidates(self))
             .collect();
         nodes.sort_unstable();
         nodes.dedup();

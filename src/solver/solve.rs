@@ -101,7 +101,7 @@ fn hold_to_first_solve(sys: &mut LinearSystem, first: &SolveInfo) -> Result<(), 
 /// Updates the contact sets at the converged iterate `xs` with the forces `phys` (unless the active set
 /// is frozen), freezing it when it cycles; returns the number of status changes.
 fn update_contacts<const D: usize>(
-    contacts: &mut [ContactSet<D>],
+    contacts: &mut [Box<dyn ContactSet<D>>],
     solves: &mut Solves,
     (xs, phys, nf): (&[f64], &[f64], usize),
     h: f64,
@@ -150,7 +150,7 @@ fn update_contacts<const D: usize>(
 /// change, or a frozen cycle, and the moments balanced); `Ok(false)`: solve again; a failure after
 /// [`MAX_CONTACT_SOLVES`] solves.
 fn settle<const D: usize>(
-    contacts: &mut [ContactSet<D>],
+    contacts: &mut [Box<dyn ContactSet<D>>],
     solves: &mut Solves,
     (xs, phys, nf): (&[f64], &[f64], usize),
     grid: &Grid<D>,
@@ -199,24 +199,22 @@ fn physical_residual<const D: usize>(
 }
 
 /// The unknowns whose rows of the physical residual every process reads after a solve: the constrained
-/// ones of `sets` (the reactions) and those of the devices' contact nodes (their forces and statuses);
-/// none unless the points are `shared` out.
+/// ones of `sets` (the reactions) and those the contact sets read ([`ContactSet::read_rows`]: their
+/// forces and statuses); none unless the points are `shared` out.
 fn read_rows<const D: usize>(
     shared: bool,
     sets: &[Vec<usize>],
-    contacts: &[ContactSet<D>],
+    contacts: &[Box<dyn ContactSet<D>>],
     nf: usize,
 ) -> Vec<usize> {
     if !shared {
         return Vec::new();
     }
-    let devices = contacts.iter().filter_map(ContactSet::device);
-    let nodes = devices.flat_map(|d| d.contact.nodes.iter().map(|c| c.row));
-    sets.iter()
-        .flatten()
-        .copied()
-        .chain(nodes.flat_map(|a| a * nf..(a + 1) * nf))
-        .collect()
+    let mut rows: Vec<usize> = sets.iter().flatten().copied().collect();
+    for c in contacts {
+        c.read_rows(nf, &mut rows);
+    }
+    rows
 }
 
 /// One SNES solve of the attempt from the current iterate of `system`, its evaluations counted in
@@ -230,7 +228,7 @@ fn newton_once<const D: usize>(
         &StepInput<'_, D>,
         LogEvent,
         &mut Assembler<D>,
-        &[ContactSet<D>],
+        &[Box<dyn ContactSet<D>>],
     ),
     (session, interrupt): (&SessionGuard, Option<&Interrupt>),
     path: Option<&mut path::PathStep>,
@@ -321,7 +319,7 @@ impl<const D: usize> Step<'_, D> {
             partners,
         );
         let nf = dofs.unknowns_per_node();
-        let in_contact = contacts.iter().any(ContactSet::in_play);
+        let in_contact = contacts.iter().any(|c| c.in_play());
         let mut solves = Solves::default();
         let mut phys = vec![0.0; dofs.len()];
         let read = read_rows(shared, sets, contacts, nf);

@@ -1,12 +1,12 @@
 //! The start of a dynamic run: the consistent initial acceleration.
 
 use super::Step;
+use super::contacts::{self, Attempt};
 use super::prepare::Loading;
 use super::processes::{agreed, complete_rows};
 use super::report::StepError;
 use crate::boundary::prescribed_acceleration;
 use crate::petsc::SessionGuard;
-use crate::space::from_xy;
 use crate::transfer;
 use nalgebra::SVector;
 
@@ -35,7 +35,7 @@ impl<const D: usize> Step<'_, D> {
                 self.work.dofs.prescribed(d).unwrap_or(-r[d] / m)
             });
         }
-        let contact_forces = self.push_at_devices(session, &g.set_values, &r, &mut acc)?;
+        let contact_forces = self.push_at_contacts(session, &g.set_values, &r, &mut acc)?;
         self.initial_reactions(&g.sets, &r, &acc, &contact_forces);
         let table = &self.work.table;
         for (p, ap) in self.state.particles.a.iter_mut().enumerate() {
@@ -93,41 +93,34 @@ impl<const D: usize> Step<'_, D> {
         Ok(r)
     }
 
-    /// Devices in contact: a touching node whose free acceleration `acc` would carry it into the device
-    /// takes the device's normal acceleration (node by node: the lumped mass decouples them; friction is
-    /// not applied at t = 0). Returns the force of each device on the specimen (one per contact device,
-    /// in the order of the rigid bodies, with its rigid body).
-    fn push_at_devices(
-        &self,
+    /// The contact sets at t = 0, moving with the `prescribed` accelerations of the rigid bodies, push
+    /// the nodes whose free acceleration `acc` would carry them into a device
+    /// ([`ContactSet::push_at_start`](contacts::ContactSet::push_at_start); `r`: the unbalanced forces).
+    /// Returns the force of each set that has one on the specimen, with its constraint set.
+    fn push_at_contacts(
+        &mut self,
         session: &SessionGuard,
         prescribed: &[[Option<f64>; D]],
         r: &[f64],
         acc: &mut [SVector<f64, D>],
     ) -> Result<Vec<(usize, SVector<f64, D>)>, StepError> {
         let nf = self.work.dofs.unknowns_per_node();
-        let device_acc = self.rigid_values(prescribed);
-        let devices = self.contact_devices(session, &device_acc, false, 0.0)?;
-        let mut forces = Vec::with_capacity(devices.len());
-        for d in &devices {
-            let n = from_xy::<D>(d.contact.normal);
-            let mut force = SVector::<f64, D>::zeros();
-            for c in d.contact.nodes.iter().filter(|c| c.status.closed()) {
-                let push = n.dot(&(from_xy::<D>(c.du_device) - acc[c.node]));
-                if push > 0.0 {
-                    acc[c.node] += push * n;
-                    let b = c.row * nf;
-                    let m = self.work.grid_state.mass[c.node];
-                    force += SVector::<f64, D>::from_column_slice(&r[b..b + D]) + m * acc[c.node];
-                }
-            }
-            forces.push((d.body, force));
-        }
-        Ok(forces)
+        let translations = self.rigid_values(prescribed);
+        let attempt = Attempt {
+            translations: &translations,
+            dt: None,
+        };
+        let sets = contacts::build(self, session, &attempt)?;
+        let (model, gs) = (self.model, &self.work.grid_state);
+        Ok(sets
+            .iter()
+            .filter_map(|c| c.push_at_start(model, gs, (r, nf), acc))
+            .collect())
     }
 
     /// The reactions at t = 0, where the trapezoidal work of the first step starts: the unbalanced force
-    /// `r` with the initial inertia in each constrained set, the devices' contact forces, the applied
-    /// resultant of each load.
+    /// `r` with the initial inertia in each constrained set, the contact forces `contact_forces` (per
+    /// constraint set), the applied resultant of each load.
     fn initial_reactions(
         &mut self,
         sets: &[Vec<usize>],
@@ -148,8 +141,8 @@ impl<const D: usize> Step<'_, D> {
                 reaction[c] += r[d] + self.work.grid_state.mass[node] * acc[node][c];
             }
         }
-        for &(k, f) in contact_forces {
-            last[model.rigid_set(k)] = std::array::from_fn(|c| f[c]);
+        for &(set, f) in contact_forces {
+            last[set] = std::array::from_fn(|c| f[c]);
         }
         for (reaction, load) in last[sets.len()..].iter_mut().zip(&model.params.loads) {
             let f = load.force * load.factor(t);

@@ -31,7 +31,7 @@ pub(super) struct StepProblem<'a, 'b, const D: usize> {
     pub(super) residuals: usize,
     pub(super) jacobians: usize,
     /// The contact sets of the step (closed constraints get their own rows).
-    pub(super) contacts: &'a [ContactSet<D>],
+    pub(super) contacts: &'a [Box<dyn ContactSet<D>>],
     /// Scale of the constraint rows (MPa).
     pub(super) row_scale: f64,
     /// The block rows this process owns.
@@ -57,7 +57,7 @@ impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
         input: &'a StepInput<'b, D>,
         event: LogEvent,
         assembler: &'a mut Assembler<D>,
-        (contacts, owned): (&'a [ContactSet<D>], &'a OwnedRows),
+        (contacts, owned): (&'a [Box<dyn ContactSet<D>>], &'a OwnedRows),
         session: &'a SessionGuard,
         interrupt: Option<&'a Interrupt>,
     ) -> Self {

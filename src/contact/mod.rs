@@ -19,6 +19,12 @@
 //! physical block rows), and Newton converges quadratically for a fixed set. After each solve the set
 //! is updated (tensile nodes released, penetrating nodes added, stick/slip switched by the Coulomb
 //! cone and the slip direction) until it does not change.
+//!
+//! What the contact sets carry from one step to the next is their [`ContactMemory`] (`memory.rs`).
+
+mod memory;
+
+pub use memory::{ContactMemory, ContactRecord, DeviceMemory, PairMemory};
 
 use nalgebra::{Matrix2, SVector, Vector2};
 
@@ -173,7 +179,13 @@ impl DeviceContact {
     }
 
     /// Rewrites the Jacobian block rows of the closed nodes in place, where `rows` places them.
-    pub fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
+    pub fn jacobian_rows(
+        &self,
+        nf: usize,
+        s: f64,
+        rows: &(impl RowMap + ?Sized),
+        values: &mut [f64],
+    ) {
         let (n, t) = (self.normal, self.tangent());
         let ((rn, sn), (rt, st)) = self.row_order();
         let mut tangential = Vec::new();
@@ -422,7 +434,13 @@ impl<const D: usize> BodyContact<D> {
 
     /// Rewrites the Jacobian block rows of the closed pairs in place (placed by `rows`;
     /// the two rows of a pair have the same block columns).
-    pub fn jacobian_rows(&self, nf: usize, s: f64, rows: &impl RowMap, values: &mut [f64]) {
+    pub fn jacobian_rows(
+        &self,
+        nf: usize,
+        s: f64,
+        rows: &(impl RowMap + ?Sized),
+        values: &mut [f64],
+    ) {
         for c in self.pairs.iter().filter(|c| c.closed) {
             let (Some((sa, ncols, diag_a)), Some((sb, ncols_b, diag_b))) =
                 (rows.row_of(c.row_a), rows.row_of(c.row_b))
