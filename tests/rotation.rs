@@ -132,36 +132,42 @@ fn a_turned_set_up_turned_back_is_the_unturned_one() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Runs `config` in `dir` turned by `degrees` with the further arguments `args`, output in `out`; returns
+/// the crack states of its `crack.json`.
+fn crack_states(
+    dir: &Path,
+    config: &str,
+    out: &str,
+    degrees: &str,
+    args: &[&str],
+) -> Vec<serde_json::Value> {
+    let o = Command::new(EXE)
+        .current_dir(dir)
+        .args(["run", config, "--quiet", "--output", out])
+        .args(args)
+        .arg("--set")
+        .arg(format!("grid.rotation={degrees}"))
+        .output()
+        .expect("start mpm-concrete");
+    succeeds(&o);
+    let text = std::fs::read_to_string(dir.join(out).join("crack.json")).expect("crack.json");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("crack.json parses");
+    json["states"].as_array().expect("states").clone()
+}
+
 #[test]
 fn the_crack_of_a_turned_set_up_is_measured_in_the_specimen_frame() {
     let dir = scratch("rotation", "crack", &[]);
     let crack = |degrees: &str| {
-        let out = format!("t{degrees}");
-        let o = Command::new(EXE)
-            .current_dir(&dir)
-            .args([
-                "run",
-                "tiny.toml",
-                "--quiet",
-                "--output",
-                &out,
-                "--steps",
-                "40",
-            ])
-            .args([
-                "--set",
-                "ct.load_introduction=\"contact\"",
-                "--set",
-                "run.output_every=20",
-            ])
-            .arg("--set")
-            .arg(format!("grid.rotation={degrees}"))
-            .output()
-            .expect("start mpm-concrete");
-        succeeds(&o);
-        let text = std::fs::read_to_string(dir.join(&out).join("crack.json")).expect("crack.json");
-        let json: serde_json::Value = serde_json::from_str(&text).expect("crack.json parses");
-        json["states"].as_array().expect("states").clone()
+        let set = [
+            "--steps",
+            "40",
+            "--set",
+            "ct.load_introduction=\"contact\"",
+            "--set",
+            "run.output_every=20",
+        ];
+        crack_states(&dir, "tiny.toml", &format!("t{degrees}"), degrees, &set)
     };
     let (plain, quarter) = (crack("0"), crack("90"));
     assert_eq!(plain.len(), 3);
@@ -199,24 +205,17 @@ fn the_crack_of_a_turned_set_up_is_measured_in_the_specimen_frame() {
 /// the half-size CT at 4.3 m/s on 2 mm cells, 250 us, turned by `degrees`.
 fn half_size_crack(dir: &Path, degrees: f64) -> (f64, f64) {
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/ct-half-4.3mps.toml");
-    let out = format!("h{degrees}");
-    let o = Command::new(EXE)
-        .current_dir(dir)
-        .arg("run")
-        .arg(&config)
-        .args(["--quiet", "--output", &out, "--steps", "250"])
-        .args(["--set", "grid.cell_size=2", "--set", "run.output_every=250"])
-        .arg("--set")
-        .arg(format!("grid.rotation={degrees}"))
-        .output()
-        .expect("start mpm-concrete");
-    succeeds(&o);
-    let text = std::fs::read_to_string(dir.join(&out).join("crack.json")).expect("crack.json");
-    let json: serde_json::Value = serde_json::from_str(&text).expect("crack.json parses");
-    let last = json["states"]
-        .as_array()
-        .and_then(|s| s.last())
-        .expect("states");
+    let set = [
+        "--steps",
+        "250",
+        "--set",
+        "grid.cell_size=2",
+        "--set",
+        "run.output_every=250",
+    ];
+    let (config, out) = (config.to_str().expect("UTF-8 path"), format!("h{degrees}"));
+    let states = crack_states(dir, config, &out, &degrees.to_string(), &set);
+    let last = states.last().expect("states");
     let main = last["bands"]
         .as_array()
         .and_then(|b| b.iter().max_by_key(|b| b["points"].as_u64()))
