@@ -23,6 +23,7 @@ use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;
 
 mod banded;
+mod extrusion;
 pub use banded::build_run_on;
 
 /// Failure to build a run from a valid configuration.

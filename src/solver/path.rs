@@ -16,7 +16,9 @@
 //!
 //! Hooks in the step: `Step::plan` builds the [`PathStep`], `Step::solve` calls [`newton`] (the
 //! bordered Newton instead of SNES's with path following), `Step::finish` scales the sets' increments by `k` and reports the
-//! [`PathPoint`].
+//! [`PathPoint`]. The gauge they read, the measured points and the load factor's reference set fixed at
+//! t = 0, is the model's ([`Gauge`](crate::model::Gauge), made by `Model::new` in
+//! [`crate::model::path`]).
 
 use super::Step;
 use super::report::StepError;
