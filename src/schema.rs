@@ -5,7 +5,7 @@
 //!
 //! Units of the history columns: time and dt s, displacement mm, force N per mm thickness (3D: N),
 //! rotation rad, energy N mm per mm thickness (3D: N mm), wall s, crack tip and length mm, crack speed
-//! mm/s, traffic B.
+//! mm/s, traffic B; the file's `# units:` line is made from the table ([`history::units_line`]).
 
 /// File names of a run directory.
 pub mod file {
@@ -107,9 +107,20 @@ pub mod history {
         pub description: &'static str,
         /// Its cell in the row of a step.
         pub value: fn(&StepReport) -> Cell<'_>,
+        /// The quantity under which the `# units:` line names its unit ("": not named there;
+        /// [`units_line`]).
+        pub quantity: &'static str,
     }
 
-    /// A column `name` in `unit` holding `description`, `value` per step.
+    impl Column {
+        /// This column with its unit named in the `# units:` line as `quantity`.
+        const fn in_units_line(self, quantity: &'static str) -> Self {
+            Self { quantity, ..self }
+        }
+    }
+
+    /// A column `name` in `unit` holding `description`, `value` per step, not named in the `# units:`
+    /// line (see [`Column::in_units_line`]).
     const fn column(
         name: &'static str,
         unit: &'static str,
@@ -121,6 +132,7 @@ pub mod history {
             unit,
             description,
             value,
+            quantity: "",
         }
     }
 
@@ -147,8 +159,8 @@ pub mod history {
     /// The columns before the per-set columns.
     pub static LEADING: [Column; 10] = [
         column("step", "-", "step number", |r| Cell::Count(r.step as u64)),
-        column(TIME, "s", "time reached", |r| Cell::Number(r.time, 9)),
-        column("dt", "s", "time step taken", |r| Cell::Number(r.dt, 6)),
+        column(TIME, "s", "time reached", |r| Cell::Number(r.time, 9)).in_units_line("time"),
+        column("dt", "s", "time step taken", |r| Cell::Number(r.dt, 6)).in_units_line("dt"),
         column(
             ATTEMPTS,
             "-",
@@ -201,51 +213,51 @@ pub mod history {
         ),
         column("kinetic_energy", "N mm", "kinetic energy K", |r| {
             Cell::Number(r.kinetic_energy, 9)
-        }),
+        }).in_units_line("energy"),
         column("stored_energy", "N mm", "stored energy Psi", |r| {
             Cell::Number(r.stored_energy, 9)
-        }),
+        }).in_units_line("energy"),
         column("external_work", "N mm", "external work W", |r| {
             Cell::Number(r.external_work, 9)
-        }),
+        }).in_units_line("energy"),
         column(
             "dissipated_energy",
             "N mm",
             "the energy balance W + E_0 - K - Psi: what damage, erosion and the time integration took out",
             |r| Cell::Number(dissipated(r), 9),
-        ),
+        ).in_units_line("energy"),
         column(
             "damage_dissipation",
             "N mm",
             "energy released by damage so far, the trapezoidal rule in the undamaged plane energy psi_0",
             |r| Cell::Number(r.books.damage, 9),
-        ),
+        ).in_units_line("energy"),
         column(
             "erosion_energy",
             "N mm",
             "stored energy of eroded points, taken out when they stopped carrying stress",
             |r| Cell::Number(r.books.erosion, 9),
-        ),
+        ).in_units_line("energy"),
         column(
             "contact_loss",
             "N mm",
             "kinetic energy lost at the inelastic impacts of closed contact constraints",
             |r| Cell::Number(r.books.contact, 9),
-        ),
+        ).in_units_line("energy"),
         column(
             "transfer_loss",
             "N mm",
             "kinetic energy the grid transfer took out: the points' less the grid's after P2G minus the \
              same after G2P, summed over the steps",
             |r| Cell::Number(r.books.transfer, 9),
-        ),
+        ).in_units_line("energy"),
         column(
             "energy_remainder",
             "N mm",
             "dissipated_energy - damage_dissipation - erosion_energy - contact_loss: what the grid \
              transfer and the time integration took out",
             |r| Cell::Number(remainder(r), 9),
-        ),
+        ).in_units_line("energy"),
         column(
             "remainder_fraction",
             "-",
@@ -265,28 +277,28 @@ pub mod history {
             "energy_remainder - transfer_loss: what the time integration on the grid and the solver \
              tolerances took out",
             |r| Cell::Number(remainder(r) - r.books.transfer, 9),
-        ),
+        ).in_units_line("energy"),
         column(WALL_SETUP, "s", "wall time of the step's set-up", |r| {
             Cell::Number(r.wall_setup, 4)
-        }),
+        }).in_units_line("wall"),
         column(
             WALL_ASSEMBLY,
             "s",
             "wall time of the assembly (inside the solve)",
             |r| Cell::Number(r.wall_assembly, 4),
-        ),
+        ).in_units_line("wall"),
         column(
             WALL_SOLVE,
             "s",
             "wall time of the converged attempt's solve",
             |r| Cell::Number(r.wall_solve, 4),
-        ),
+        ).in_units_line("wall"),
         column(
             WALL_TOTAL,
             "s",
             "wall time of the step with its failed attempts",
             |r| Cell::Number(r.wall_total, 4),
-        ),
+        ).in_units_line("wall"),
         column(
             NEW_PATTERN,
             "-",
@@ -302,23 +314,23 @@ pub mod history {
             "mm",
             "crack tip after the step: the crack point farthest from the notch tip",
             |r| r.crack.map_or(Cell::Empty, |f| Cell::Number(f.tip[0], 6)),
-        ),
+        ).in_units_line("crack tip and length"),
         column("crack_tip_y", "mm", "see crack_tip_x", |r| {
             r.crack.map_or(Cell::Empty, |f| Cell::Number(f.tip[1], 6))
-        }),
+        }).in_units_line("crack tip and length"),
         column(
             "crack_length",
             "mm",
             "crack length, the tip's distance from the notch tip",
             |r| r.crack.map_or(Cell::Empty, |f| Cell::Number(f.length, 6)),
-        ),
+        ).in_units_line("crack tip and length"),
         column(
             "crack_speed",
             "mm/s",
             "crack-tip speed: least-squares slope of the crack length over the last 10 us, at least 5 \
              steps (crack::tip_speed)",
             |r| r.crack.map_or(Cell::Empty, |f| Cell::Number(f.speed, 6)),
-        ),
+        ).in_units_line("crack speed"),
         column(
             "crack_bands",
             "-",
@@ -364,6 +376,40 @@ pub mod history {
         ),
     ];
 
+    /// The per-set columns' quantities in the `# units:` line ([`reaction_columns`], then
+    /// [`rotation_column`]): (quantity, unit, what a plate's value is).
+    pub static SET_UNITS: [(&str, &str, &str); 3] = [
+        ("displacement", "mm", ""),
+        ("force", "N", " (3D: of the whole plate)"),
+        ("rotation", "rad", ""),
+    ];
+
+    /// The `# units:` line of `history.csv` (with its newline) for a run in `dimension` (3: a plate;
+    /// otherwise plane strain, where a unit of force, `N` or `N mm`, is per mm thickness): every
+    /// quantity named in [`LEADING`], [`SET_UNITS`], [`TRAILING`] and [`CRACK`], once, in that order,
+    /// with its unit. The path-following and traffic columns are not named in it.
+    pub fn units_line(dimension: usize) -> String {
+        let named = |columns: &'static [Column]| columns.iter().map(|c| (c.quantity, c.unit, ""));
+        let quantities = named(&LEADING)
+            .chain(SET_UNITS.iter().copied())
+            .chain(named(&TRAILING))
+            .chain(named(&CRACK));
+        let mut seen: Vec<&str> = Vec::new();
+        let mut parts: Vec<String> = Vec::new();
+        for (quantity, unit, plate) in quantities {
+            if quantity.is_empty() || seen.contains(&quantity) {
+                continue;
+            }
+            seen.push(quantity);
+            parts.push(match dimension {
+                3 => format!("{quantity} {unit}{plate}"),
+                _ if unit.starts_with('N') => format!("{quantity} {unit} per mm thickness"),
+                _ => format!("{quantity} {unit}"),
+            });
+        }
+        format!("# units: {}\n", parts.join(", "))
+    }
+
     /// Displacement (mm) and force (N per mm thickness; in 3D N) columns of a constraint set, rigid body
     /// or load, `dimension` (2 or 3) components each.
     pub fn reaction_columns(name: &str, dimension: usize) -> Vec<String> {
@@ -404,6 +450,33 @@ mod tests {
         names.sort_unstable();
         names.dedup();
         assert_eq!(names.len(), n, "a name is used twice");
+    }
+
+    #[test]
+    fn the_units_line_is_the_one_history_csv_always_had() {
+        assert_eq!(
+            super::history::units_line(2),
+            "# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm \
+             per mm thickness, wall s, crack tip and length mm, crack speed mm/s\n"
+        );
+        assert_eq!(
+            super::history::units_line(3),
+            "# units: time s, dt s, displacement mm, force N (3D: of the whole plate), rotation rad, \
+             energy N mm, wall s, crack tip and length mm, crack speed mm/s\n"
+        );
+    }
+
+    #[test]
+    fn a_quantity_of_the_units_line_has_one_unit() {
+        for c in fixed().filter(|c| !c.quantity.is_empty()) {
+            let other = fixed().find(|o| o.quantity == c.quantity && o.unit != c.unit);
+            assert!(
+                other.is_none(),
+                "{} and {:?}",
+                c.name,
+                other.map(|o| o.name)
+            );
+        }
     }
 
     #[test]

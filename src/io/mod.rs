@@ -528,10 +528,7 @@ impl RunOutput {
 
     fn write_history(&self) -> Result<(), OutputError> {
         let mut s = String::new();
-        s.push_str(match self.dimension {
-            3 => "# units: time s, dt s, displacement mm, force N (3D: of the whole plate), rotation rad, energy N mm, wall s, crack tip and length mm, crack speed mm/s\n",
-            _ => "# units: time s, dt s, displacement mm, force N per mm thickness, rotation rad, energy N mm per mm thickness, wall s, crack tip and length mm, crack speed mm/s\n",
-        });
+        s.push_str(&history::units_line(self.dimension));
         if let Some(degrees) = self.frame.degrees() {
             let _ = writeln!(
                 s,
