@@ -30,9 +30,8 @@ mod system;
 
 pub use input::StepData;
 pub use interrupt::{FINISH_WITHIN, Interrupt};
-pub use path::PathPoint;
 use report::Failure;
-pub use report::{StepError, StepReport};
+pub use report::{PathPoint, StepError, StepReport};
 use system::LinearSystem;
 
 /// Converged steps in a row, without a retry, after which a reduced time step is doubled again: doubling

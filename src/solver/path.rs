@@ -21,22 +21,11 @@
 //! [`crate::model::path`]).
 
 use super::Step;
-use super::report::StepError;
+use super::report::{PathPoint, StepError};
 use super::system::{OwnedRows, StepProblem};
 use crate::petsc::{
     CallbackError, Matrix, NonlinearProblem, PetscError, SessionGuard, Snes, SolveInfo, Vector,
 };
-
-/// Where the path is after a step: the load factor and the opening.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PathPoint {
-    /// Load factor (s): the reference set has moved its velocity times this.
-    pub lambda: f64,
-    /// The measured opening (mm).
-    pub opening: f64,
-    /// The step's prescribed motion over its nominal one (`k`; < 0 on a snap-back).
-    pub ratio: f64,
-}
 
 /// The control of one step attempt: the opening's coefficients on the unknowns and its target.
 pub(super) struct PathStep {

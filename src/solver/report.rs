@@ -1,7 +1,6 @@
 //! What a step reports: its statistics and results ([`StepReport`]), and why it or the run failed
 //! ([`StepError`]; an attempt that only needs a smaller step is a `Failure`).
 
-use super::path;
 use crate::assembly::AssemblyError;
 use crate::model::{EnergyBooks, ModelError};
 use crate::petsc::{self, SolveInfo};
@@ -155,5 +154,16 @@ pub struct StepReport {
     pub crack: Option<crate::crack::Front>,
     /// Path following: the load factor, the measured opening and the step's ratio after the step.
     #[serde(default)]
-    pub path: Option<path::PathPoint>,
+    pub path: Option<PathPoint>,
+}
+
+/// Where the path is after a step: the load factor and the opening.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PathPoint {
+    /// Load factor (s): the reference set has moved its velocity times this.
+    pub lambda: f64,
+    /// The measured opening (mm).
+    pub opening: f64,
+    /// The step's prescribed motion over its nominal one (`k`; < 0 on a snap-back).
+    pub ratio: f64,
 }
