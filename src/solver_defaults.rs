@@ -24,7 +24,7 @@ pub const STIFFNESS_DOMINATED_BELOW: f64 = 0.01;
 /// The kind of implicit step, for the choice of the linear solver.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum StepClass {
-    /// Dynamic, inertia significant (`r >= 0.01`): GMRES with block-Jacobi ILU(0).
+    /// Dynamic, inertia significant (`r >= 0.01`): GMRES with ILU(0).
     InertiaDominated {
         /// The ratio `r`.
         ratio: f64,
@@ -42,7 +42,7 @@ pub enum StepClass {
 /// Newton settings shared by every class: relative and absolute residual tolerances, at most 25 iterations.
 const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
 
-/// GMRES preconditioned by ILU(0) per process (pivots shifted away from zero), factored at the first Newton
+/// On one process: GMRES preconditioned by ILU(0) (pivots shifted away from zero), factored at the first Newton
 /// iteration of a step and every third one. With the Jacobian stored by node blocks (one process,
 /// `petsc::matrix_type_for`) a factorisation of the widened CPDI pattern costs about five GMRES iterations,
 /// and reusing it within the step pays: the half-resolution CT at 4.3 m/s to 1 ms took 356 s instead of
@@ -51,6 +51,18 @@ const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
 /// the block storage, the same lag had measured as a loss.
 const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
      -pc_type bjacobi -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
+
+/// On several processes in 2D: `INERTIA`'s GMRES and lag, with ILU(0) on overlapping subdomains (additive
+/// Schwarz, one layer of overlap) instead of one ILU per process. Block Jacobi drops the coupling between
+/// the processes' bands, and it shows in both counts: on the first 40 steps of the half-resolution CT at
+/// 4.3 m/s one process takes 95 Newton / 502 Krylov iterations, block Jacobi on 2 and 4 processes 116 / 788
+/// and 117 / 952 (GMRES stopped on a preconditioned residual the bands make poor, so Newton needs more
+/// steps), the overlap 95 / 503 and 93 / 500; on 20 cracked steps at 1 mm (2 processes) 41 / 487 against
+/// 40 / 331 (one process: 40 / 317). On one process the overlap buys nothing and its sub-matrix copy costs
+/// (PCSetUp 2.1 against 1.3 s in 60 steps), so `INERTIA` stays (`docs/benchmarks.md`, "Processes: the
+/// iterations of one process on several").
+const INERTIA_PROCESSES: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 \
+     -ksp_max_it 1000 -pc_type asm -pc_asm_overlap 1 -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
 
 /// In 3D (a plate): GMRES preconditioned by ILU(0) on overlapping subdomains (additive Schwarz, one layer
 /// of overlap; on one process this is `INERTIA`'s ILU of the whole matrix), factored at the first Newton
@@ -163,11 +175,18 @@ pub fn classify<const D: usize>(setup: &Setup<D>) -> StepClass {
     }
 }
 
-/// The default options of the main solver for a class of steps in `D` dimensions (2 or 3: a plate);
-/// `gradient` tells whether the model solves for eta_bar too, `frame` how the set-up sits in the grid.
-pub fn main_options<const D: usize>(class: StepClass, gradient: bool, frame: Frame) -> String {
+/// The default options of the main solver for a class of steps in `D` dimensions (2 or 3: a plate) on
+/// `processes` processes; `gradient` tells whether the model solves for eta_bar too, `frame` how the
+/// set-up sits in the grid.
+pub fn main_options<const D: usize>(
+    class: StepClass,
+    gradient: bool,
+    frame: Frame,
+    processes: usize,
+) -> String {
     let solver = match class {
         StepClass::InertiaDominated { .. } if D == 3 => INERTIA_3D,
+        StepClass::InertiaDominated { .. } if processes > 1 => INERTIA_PROCESSES,
         StepClass::InertiaDominated { .. } => INERTIA,
         StepClass::StiffnessDominated { .. } if gradient => STIFFNESS_FIELD_SPLIT,
         StepClass::StiffnessDominated { .. } => STIFFNESS_MG,
@@ -193,7 +212,8 @@ pub fn apply<const D: usize>(
     setup.params.fallback_prefix = Some(FALLBACK_PREFIX.into());
     let class = classify(setup);
     let gradient = setup.params.materials.iter().any(|m| m.is_nonlocal());
-    let options = main_options::<D>(class, gradient, setup.params.frame);
+    let processes = session.size();
+    let options = main_options::<D>(class, gradient, setup.params.frame, processes);
     if let Some(degrees) = setup.params.frame.degrees() {
         tracing::info!(
             "the set-up is turned by {degrees} deg inside the grid: point-wise ILU(0), GMRES \
@@ -222,19 +242,26 @@ pub fn apply<const D: usize>(
         Some(pc) if !applied.iter().any(|o| o == "-pc_type") && Some(&pc) != own_pc.as_ref() => {
             tracing::info!(
                 "solver for {}: replaced by the given -pc_type {pc}",
-                describe::<D>(class, gradient)
+                describe::<D>(class, gradient, processes)
             )
         }
-        _ => tracing::info!("default solver for {}", describe::<D>(class, gradient)),
+        _ => tracing::info!(
+            "default solver for {}",
+            describe::<D>(class, gradient, processes)
+        ),
     }
     Ok((class, applied))
 }
 
-/// A one-line description for the run's log of the default solver of `class` in `D` dimensions.
-pub fn describe<const D: usize>(class: StepClass, gradient: bool) -> String {
+/// A one-line description for the run's log of the default solver of `class` in `D` dimensions on
+/// `processes` processes.
+pub fn describe<const D: usize>(class: StepClass, gradient: bool, processes: usize) -> String {
     let solver = match class {
         StepClass::InertiaDominated { .. } if D == 3 => {
             "GMRES + ILU(0) on overlapping subdomains, factored every second Newton iteration"
+        }
+        StepClass::InertiaDominated { .. } if processes > 1 => {
+            "GMRES + ILU(0) on overlapping subdomains"
         }
         StepClass::InertiaDominated { .. } => "GMRES + ILU(0)",
         StepClass::StiffnessDominated { .. } if gradient => {
@@ -288,18 +315,27 @@ mod tests {
             class_of("configs/crosscheck-cantilever.toml"),
             StepClass::QuasiStatic
         );
-        assert!(main_options::<2>(StepClass::QuasiStatic, true, Frame::IDENTITY).contains("mumps"));
+        assert!(
+            main_options::<2>(StepClass::QuasiStatic, true, Frame::IDENTITY, 1).contains("mumps")
+        );
         // A plate: overlapping subdomains and a factorisation kept for two Newton iterations.
         let inertia = StepClass::InertiaDominated { ratio: 1.0 };
-        assert!(main_options::<2>(inertia, true, Frame::IDENTITY).contains("-pc_type bjacobi"));
+        assert!(main_options::<2>(inertia, true, Frame::IDENTITY, 1).contains("-pc_type bjacobi"));
+        // On several processes: overlapping subdomains, so that the iterations do not grow with them.
+        let bands = main_options::<2>(inertia, true, Frame::IDENTITY, 2);
+        assert!(
+            bands.contains("-pc_type asm -pc_asm_overlap 1")
+                && bands.contains("-snes_lag_preconditioner 3"),
+            "{bands}"
+        );
         // A set-up turned inside the grid: point-wise storage (block ILU(0) breaks down there), and only there.
-        assert!(!main_options::<2>(inertia, true, Frame::IDENTITY).contains("-mat_type"));
-        let turned = main_options::<2>(inertia, true, Frame::from_degrees(30.0));
+        assert!(!main_options::<2>(inertia, true, Frame::IDENTITY, 1).contains("-mat_type"));
+        let turned = main_options::<2>(inertia, true, Frame::from_degrees(30.0), 1);
         assert!(
             turned.ends_with("-mat_type aij -ksp_pc_side right"),
             "{turned}"
         );
-        let plate = main_options::<3>(inertia, true, Frame::IDENTITY);
+        let plate = main_options::<3>(inertia, true, Frame::IDENTITY, 2);
         assert!(
             plate.contains("-pc_type asm -pc_asm_overlap 1")
                 && plate.contains("-snes_lag_preconditioner 2"),
@@ -309,6 +345,7 @@ mod tests {
             StepClass::StiffnessDominated { ratio: 1e-4 },
             false,
             Frame::IDENTITY,
+            1,
         );
         assert!(
             mg.contains("-pc_type mg") && mg.contains("-snes_ksp_ew"),
@@ -319,6 +356,7 @@ mod tests {
             StepClass::StiffnessDominated { ratio: 1e-4 },
             true,
             Frame::IDENTITY,
+            1,
         );
         for o in [
             "-pc_type fieldsplit",

@@ -132,10 +132,12 @@ fn ct_demo(ranks: usize, steps: usize, out: &std::path::Path, extra: &[&str]) ->
 /// `mpirun -n 2` and `-n 3` of the CT demo (30 steps, the damage starting) give one set of outputs and
 /// the history of the serial run: every process takes the same steps on the whole model while PETSc's
 /// vectors, matrix and solvers are distributed. The results are not bitwise equal: with more processes
-/// block Jacobi has more, smaller ILU blocks, so GMRES stops (at its relative tolerance 1e-6) at other
-/// iterates and Newton (at 1e-8) at another converged solution. Bounds: relative L2 distance of the force
-/// and energy histories <= 1e-6 (measured: <= 5e-8) and total Newton iterations within 25 % of serial
-/// (measured: +10 to +15 %).
+/// the ILU(0) is factored on more, overlapping subdomains, so GMRES stops (at its relative tolerance 1e-6)
+/// at other iterates and Newton (at 1e-8) at another converged solution. Bounds: relative L2 distance of
+/// the force and energy histories <= 1e-6 (measured: <= 5e-8); the iterations those of one process: the
+/// Newton iterations within 5 % of serial (measured: equal, 64) and the Krylov iterations within 15 %
+/// (measured: +7 % and +0 %; block Jacobi, one ILU per process without overlap, took 2.3x and 1.7x, and
+/// 6 % and 13 % more Newton iterations).
 #[test]
 fn run_on_two_and_three_processes_matches_serial() {
     let base = std::env::temp_dir().join(format!("mpmc-mpi-ct-{}", std::process::id()));
@@ -219,14 +221,15 @@ fn run_on_two_and_three_processes_matches_serial() {
         for name in ["crack_length", "crack_tip_x", "crack_tip_y", "crack_bands"] {
             assert_eq!(serial[name], parallel[name], "{ranks} processes: {name}");
         }
-        let newton = |h: &std::collections::HashMap<String, Vec<f64>>| -> f64 {
-            h["newton_its"].iter().sum()
-        };
-        let (ns, np) = (newton(&serial), newton(&parallel));
-        assert!(
-            (np - ns).abs() <= 0.25 * ns,
-            "{ranks} processes: {np} Newton iterations against {ns} in serial"
-        );
+        let total =
+            |h: &std::collections::HashMap<String, Vec<f64>>, c: &str| -> f64 { h[c].iter().sum() };
+        for (column, bound) in [("newton_its", 0.05), ("linear_its", 0.15)] {
+            let (ns, np) = (total(&serial, column), total(&parallel, column));
+            assert!(
+                (np - ns).abs() <= bound * ns,
+                "{ranks} processes: {np} {column} against {ns} in serial"
+            );
+        }
     }
     // A checkpoint written by 2 processes continues on 1, one written by 1 continues on 2 (the state is
     // whole in either): both reach the same history to step 40.
