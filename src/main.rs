@@ -12,8 +12,8 @@ use clap::{CommandFactory, Parser, Subcommand};
 use mpm_concrete::app::args::{launcher_rank, misplaced_program_option, split_args};
 use mpm_concrete::app::run::{self, RunFlags};
 use mpm_concrete::app::{
-    BadInput, FailedElsewhere, bad, commands, compare, error_line, fit_material, material_driver,
-    no_petsc_options, smoke,
+    BadInput, FailedElsewhere, bad, commands, compare, error_line, fit_material, launch,
+    material_driver, no_petsc_options, smoke,
 };
 use mpm_concrete::preflight;
 use std::path::PathBuf;
@@ -134,6 +134,24 @@ fn main() -> std::process::ExitCode {
     if let Some(message) = misplaced_program_option(&petsc_args) {
         eprintln!("error: {message}");
         return std::process::ExitCode::from(2);
+    }
+    if let Command::Run(RunFlags {
+        processes: Some(n), ..
+    }) = &cli.command
+    {
+        match launch::needs_launcher(*n as usize) {
+            Ok(false) => {}
+            Ok(true) => {
+                eprintln!("error: {}", launch::relaunch(*n as usize));
+                return std::process::ExitCode::from(2);
+            }
+            Err(message) => {
+                if rank == 0 {
+                    eprintln!("error: {message}");
+                }
+                return std::process::ExitCode::from(2);
+            }
+        }
     }
     if let Command::Compare(args) = &cli.command {
         return std::process::ExitCode::from(compare::run_cli(args, &petsc_args[1..]));

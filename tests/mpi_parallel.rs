@@ -556,3 +556,38 @@ fn multigrid_on_the_coupled_system_in_2d_and_3d_and_on_two_processes_matches_the
     }
     std::fs::remove_dir_all(&base).ok();
 }
+
+/// `run --processes 2` starts the program on two processes itself: the same run as `mpirun -n 2`, bit for
+/// bit (the same decomposition and the same solvers), and a launcher that started another number of
+/// processes than `--processes` asks for is refused before any work (exit code 2).
+#[test]
+fn processes_flag_starts_the_launcher_itself() {
+    let base = std::env::temp_dir().join(format!("mpmc-mpi-flag-{}", std::process::id()));
+    let steps = 5;
+    ct_demo(2, steps, &base.join("mpirun"), &[]);
+    let err = ct_demo(1, steps, &base.join("flag"), &["--processes", "2"]);
+    assert!(err.contains("2 processes"), "{err}");
+    let (a, b) = (history(&base.join("mpirun")), history(&base.join("flag")));
+    for name in [
+        "loading_plate_fy",
+        "kinetic_energy",
+        "newton_its",
+        "linear_its",
+    ] {
+        assert_eq!(a[name], b[name], "{name}");
+    }
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/ct-demo.toml");
+    let o = Command::new(env!("CARGO_BIN_EXE_mpm-concrete"))
+        .env("OMPI_COMM_WORLD_SIZE", "3")
+        .arg("run")
+        .arg(&config)
+        .args(["--processes", "2", "--output"])
+        .arg(base.join("refused"))
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("the launcher started 3 processes"), "{err}");
+    assert!(!base.join("refused").exists());
+    std::fs::remove_dir_all(&base).ok();
+}

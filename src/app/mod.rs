@@ -11,6 +11,7 @@ pub mod bench;
 pub mod commands;
 pub mod compare;
 pub mod fit_material;
+pub mod launch;
 pub mod material_driver;
 pub mod run;
 pub mod smoke;

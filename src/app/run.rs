@@ -67,6 +67,11 @@ pub struct RunFlags {
     /// `--set shape.method=fem --set shape.kind=linear --set grid.cell_size=2.5`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Run on N processes: the program starts itself N times under `mpirun -n N` (or the launcher named
+    /// in `MPIEXEC`), each process using its share of the cores for its point loops. Under a launcher
+    /// already, N must be the number of processes it started.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub processes: Option<u32>,
 }
 
 /// How the run was invoked: the arguments (for run.json and the resume hint) and the flags that act after
