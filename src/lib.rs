@@ -11,13 +11,13 @@
 //! default; `D` = 3 for specimens of finite thickness, e.g. `Setup::extrude`).
 //!
 //! Dependencies point one way, from the application (`main.rs`, [`app`]) through the run's files
-//! ([`checkpoint`], [`rundir`], [`io`]), its construction ([`config`], [`scenario`], [`preflight`],
-//! [`solver_defaults`]) and the step ([`solver`], [`partition`]) to the model ([`model`]) and the physics
-//! ([`assembly`], [`transfer`], [`boundary`], [`contact`], [`material`], [`shape`]) on the geometry and
-//! the points; `docs/architecture.md` draws the layers. [`petsc`] holds the bindings and their safe
-//! wrappers: `unsafe` code lives only there and in the microplane model's SIMD kernel; [`assembly`]
-//! (block layouts), [`partition`] (star forests), [`solver`], [`solver_defaults`] and [`app`] (the run,
-//! the PETSc smoke problem) use its safe types.
+//! ([`checkpoint`], [`rundir`], [`io`], [`output_file`]), its construction ([`config`], [`scenario`],
+//! [`preflight`], [`solver_defaults`]) and the step ([`solver`], [`partition`]) to the model ([`model`])
+//! and the physics ([`assembly`], [`transfer`], [`boundary`], [`contact`], [`material`], [`shape`]) on the
+//! geometry and the points; `docs/architecture.md` draws the layers. [`petsc`] holds the bindings and
+//! their safe wrappers: `unsafe` code lives only there and in the microplane model's SIMD kernel;
+//! [`assembly`] (block layouts), [`partition`] (star forests), [`solver`], [`solver_defaults`] and
+//! [`app`] (the run, the PETSc smoke problem) use its safe types.
 
 #![warn(missing_docs)]
 #![deny(unsafe_op_in_unsafe_fn)]
@@ -39,6 +39,7 @@ pub mod io;
 pub mod material;
 pub mod model;
 pub mod multigrid;
+pub mod output_file;
 pub mod particles;
 pub mod partition;
 pub mod petsc;

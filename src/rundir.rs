@@ -6,7 +6,7 @@
 //! directory is refused while the first is running, also with `--overwrite` or `--resume`.
 
 use crate::input::InputProblem;
-use crate::io::{OutputError, write_atomic};
+use crate::output_file::{OutputError, write_atomic};
 use crate::schema::file;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -16,7 +16,7 @@ pub const RUN_FILE: &str = file::RUN;
 
 /// Whether `name` is a file the program writes into a run directory: `run.json`, `config.toml`,
 /// `history.csv`, `fields.xdmf`, `fields_NNNNNN.h5`, `damage_NNNNNN.png`, `force_time.png`,
-/// `force_displacement.png`, `crack.json`, `checkpoint.h5` (see [`crate::io`] and [`crate::checkpoint`]),
+/// `force_displacement.png`, `crack.json`, `checkpoint.h5` (see `io` and `checkpoint`),
 /// or the temporary copy of one of them that an interrupted write leaves behind ([`is_temporary`]).
 pub fn is_program_file(name: &str) -> bool {
     is_result_file(name) || is_temporary(name)
@@ -386,7 +386,7 @@ pub struct SnapshotRecord {
     /// The [`RunIdentity::id`] of the run that wrote it (absent: written by an earlier version of the
     /// program, before a resumption).
     pub run: Option<String>,
-    /// CRC-32 of its point fields as written (see [`crate::io::fields_checksum`]; absent as `run`).
+    /// CRC-32 of its point fields as written (see `io::fields_checksum`; absent as `run`).
     pub checksum: Option<String>,
 }
 
@@ -403,7 +403,7 @@ impl RunRecord {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use super::{RunIdentity, is_program_file};
 
     #[test]
     fn program_files_are_recognised_and_nothing_else() {

@@ -1,10 +1,11 @@
 //! The crack's records of a run: crack.json, the crack plots, the section layer of a plate whose points
 //! the crack is measured on, and the re-measurement of a finished run from its snapshots.
 
-use super::provenance::Provenance;
-use super::{OutputError, file, io_err, write_atomic};
+use super::provenance::{Provenance, unreadable};
 use crate::crack::{self, CrackCriteria, CrackState, Front};
+use crate::output_file::{OutputError, io_err, write_atomic};
 use crate::plot::LinePlot;
+use crate::schema::file;
 use crate::solver::StepReport;
 use crate::space::Frame;
 use nalgebra::Vector2;
@@ -257,20 +258,6 @@ fn refused_input(e: crate::input::InputError) -> OutputError {
     OutputError::Run {
         message: e.reason(),
         path: e.path,
-    }
-}
-
-/// A snapshot that HDF5 cannot read (not an HDF5 file, a missing dataset or attribute) is corrupt: the
-/// error of the snapshot at `path`, as a bad input.
-pub(super) fn unreadable(path: &Path, e: &hdf5_metno::Error) -> OutputError {
-    let detail = e.to_string().replace('\n', " ");
-    OutputError::Run {
-        path: path.display().to_string(),
-        message: format!(
-            "not readable as a snapshot ({}): the snapshot is corrupt, nothing was re-measured and \
-             crack.json is unchanged",
-            detail.trim()
-        ),
     }
 }
 

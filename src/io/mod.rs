@@ -15,6 +15,8 @@ mod provenance;
 
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::model::{Model, State};
+pub use crate::output_file::{OutputError, write_atomic};
+use crate::output_file::{io_err, tmp_name};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::schema::{file, history};
 use crate::solver::StepReport;
@@ -25,87 +27,6 @@ use hdf5_metno::types::VarLenUnicode;
 use nalgebra::{SVector, Vector2};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// Output failure, naming the file.
-#[derive(Debug, thiserror::Error)]
-pub enum OutputError {
-    /// File system error.
-    #[error("{path}: {source}")]
-    Io {
-        /// File.
-        path: String,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// The run directory cannot be re-measured (not a CT run, no snapshots, unreadable config).
-    #[error("{path}: {message}")]
-    Run {
-        /// File or directory.
-        path: String,
-        /// What is wrong.
-        message: String,
-    },
-    /// HDF5 error.
-    #[error("{path}: HDF5: {message}")]
-    Hdf5 {
-        /// File.
-        path: String,
-        /// Cause.
-        message: String,
-    },
-    /// Plotting error.
-    #[error("{path}: {message}")]
-    Plot {
-        /// File.
-        path: String,
-        /// Cause.
-        message: String,
-    },
-}
-
-impl OutputError {
-    /// An HDF5 error `e` on the file `path`, in one line: a failed write by the system's message (HDF5's
-    /// own spans several lines with buffer addresses), other errors with their whitespace collapsed.
-    pub fn hdf5(path: &Path, e: &hdf5_metno::Error) -> Self {
-        let text = e.to_string();
-        let system = text
-            .split_once("error message = '")
-            .and_then(|(_, rest)| rest.split_once('\''))
-            .map(|(m, _)| format!("writing failed: {m}"));
-        OutputError::Hdf5 {
-            path: path.display().to_string(),
-            message: system
-                .unwrap_or_else(|| text.split_whitespace().collect::<Vec<_>>().join(" ")),
-        }
-    }
-}
-
-fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
-    move |source| OutputError::Io {
-        path: path.display().to_string(),
-        source,
-    }
-}
-
-/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
-/// A failed write removes its temporary (a full disk leaves nothing half-written behind).
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
-    let tmp = tmp_name(path);
-    if let Err(e) = std::fs::write(&tmp, bytes) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io_err(path)(e));
-    }
-    std::fs::rename(&tmp, path).map_err(io_err(path))
-}
-
-fn tmp_name(path: &Path) -> PathBuf {
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(".tmp");
-    path.with_file_name(name)
-}
 
 /// Units system of the output files (attribute `units` of every `fields_NNNNNN.h5`).
 pub const UNITS: &str = "mm, s, N, MPa, t";

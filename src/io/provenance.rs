@@ -1,10 +1,13 @@
 //! Whether the snapshots `crack RUN` reads are the run's own, as written: each snapshot carries the
 //! identity of the run that wrote it, its step and a checksum of its point fields (attributes
 //! [`RUN_ID_ATTR`], `step`, [`CHECKSUM_ATTR`]), and run.json lists the snapshots written with the same.
-//! Snapshots of runs written before (no attributes, no list) are read unverified.
+//! Snapshots of runs written before (no attributes, no list) are read unverified. A snapshot that HDF5
+//! cannot read is corrupt ([`unreadable`]).
 
-use super::{CHECKSUM_ATTR, CONNECTIVITY, FIELDS, OutputError, RUN_ID_ATTR, fields_checksum, file};
+use super::{CHECKSUM_ATTR, CONNECTIVITY, FIELDS, RUN_ID_ATTR, fields_checksum};
+use crate::output_file::OutputError;
 use crate::rundir::{RUN_FILE, RunRecord, SnapshotRecord};
+use crate::schema::file;
 use hdf5_metno::types::VarLenUnicode;
 use std::path::Path;
 
@@ -134,7 +137,7 @@ impl Provenance {
         if in_file.is_none() && in_record.is_none() {
             return Ok(());
         }
-        let unreadable = |e: hdf5_metno::Error| super::cracks::unreadable(path, &e);
+        let unreadable = |e: hdf5_metno::Error| unreadable(path, &e);
         let connectivity: Vec<i64> = file
             .dataset(CONNECTIVITY.name)
             .and_then(|d| d.read_raw())
@@ -158,5 +161,19 @@ impl Provenance {
             }
         }
         Ok(())
+    }
+}
+
+/// A snapshot that HDF5 cannot read (not an HDF5 file, a missing dataset or attribute) is corrupt: the
+/// error of the snapshot at `path`, as a bad input.
+pub(super) fn unreadable(path: &Path, e: &hdf5_metno::Error) -> OutputError {
+    let detail = e.to_string().replace('\n', " ");
+    OutputError::Run {
+        path: path.display().to_string(),
+        message: format!(
+            "not readable as a snapshot ({}): the snapshot is corrupt, nothing was re-measured and \
+             crack.json is unchanged",
+            detail.trim()
+        ),
     }
 }

@@ -1,8 +1,10 @@
 //! Tests of the run output: the section of a 3D run's plane pictures and the HDF5 snapshots' layout and units.
 
-use super::*;
+use super::cracks::{mid_z, section_layer};
+use super::{CONNECTIVITY, FIELDS, Kind, RunOutput};
 use crate::config::RunConfig;
 use hdf5_metno::types::VarLenUnicode;
+use nalgebra::Vector2;
 
 const CONFIG: &str = r#"
 [run]

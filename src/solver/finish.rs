@@ -1,13 +1,13 @@
 //! Third phase of a step attempt: reactions, the new nodal accelerations, the work of the constraints,
 //! G2P and the commit of the material state, the motion of the rigid bodies; the report.
 
-use super::Step;
 use super::contacts::{self, Turn};
 use super::path;
 use super::prepare::StepPlan;
 use super::processes::agreed;
 use super::report::{StepError, StepReport};
 use super::solve::Solved;
+use super::step::Step;
 use crate::assembly::{Committed, Newmark};
 use crate::petsc::SessionGuard;
 use crate::space::{from_xy, rotation_xy};

@@ -1,16 +1,66 @@
 //! The assembler's view of a step ([`StepInput`]): built in one place, by the step's phases and by
-//! [`StepData`] for tests and benches that call the assembler directly.
+//! `StepData` (`data.rs`) for tests and benches that call the assembler directly; with the step's
+//! inertia and loads ([`Loading`]) and the scale of its constraint rows.
 
-use super::prepare::{Loading, StepPlan};
-use super::report::StepError;
-use super::{Step, Workspace, row_scale};
-use crate::assembly::StepInput;
+use super::step::{Step, Workspace};
+use crate::assembly::{Newmark, StepInput};
 use crate::dofs::DofMap;
-use crate::model::{Model, State};
+use crate::material::Material;
+use crate::model::Model;
 use crate::particles::Particles;
-use crate::petsc::SessionGuard;
 use crate::shape::ShapeTable;
 use crate::transfer::GridState;
+use nalgebra::SVector;
+
+/// Scale of constrained rows and of the Helmholtz rows (MPa): the largest P-wave modulus `K + 4G/3`.
+fn row_scale(materials: &[Material]) -> f64 {
+    materials
+        .iter()
+        .map(|m| {
+            let e = m.elastic_moduli();
+            e.bulk + 4.0 * e.shear / 3.0
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Inertia and applied forces of a step: what the assembler needs besides the points and the grid.
+pub(super) struct Loading<const D: usize> {
+    /// Newmark parameters (`None`: quasi-static).
+    pub(super) newmark: Option<Newmark>,
+    /// The body-force factor of a quasi-static ramp.
+    pub(super) load_factor: f64,
+    /// Applied nodal forces at `t_n+1` (N, in 2D per mm thickness, one per grid node; empty without loads).
+    pub(super) nodal_force: Vec<SVector<f64, D>>,
+}
+
+impl<const D: usize> Loading<D> {
+    /// The inertia and forces of a step of `dt` (s) reaching `t_new` (s) on `model` with the applied
+    /// `nodal_force`: Newmark unless quasi-static, the body force ramped over `body_force_ramp` in a
+    /// quasi-static run.
+    pub(super) fn new(
+        model: &Model<D>,
+        t_new: f64,
+        dt: f64,
+        nodal_force: Vec<SVector<f64, D>>,
+    ) -> Self {
+        let time = &model.params.time;
+        let newmark = (!time.quasi_static).then_some(Newmark {
+            beta: time.beta,
+            gamma: time.gamma,
+            dt,
+        });
+        let load_factor = if time.quasi_static && model.params.body_force_ramp > 0.0 {
+            (t_new / model.params.body_force_ramp).min(1.0)
+        } else {
+            1.0
+        };
+        Self {
+            newmark,
+            load_factor,
+            nodal_force,
+        }
+    }
+}
 
 impl<const D: usize> Step<'_, D> {
     /// The assembler's view of the step (borrows the simulation's parts field by field, so that the
@@ -60,64 +110,5 @@ impl<const D: usize> Workspace<D> {
         } = self;
         let input = Step::step_input(model, particles, table, dofs, grid_state, loading, partners);
         assembler.begin_step(&input);
-    }
-}
-
-/// A step's data on the grid built the solver's way from a model and a state: shape functions and P2G, the
-/// unknowns with the constraints of the model's boxes and glued bodies, the loads, the pairs between bodies
-/// and the inertia of a step of `dt`: what the step prepares before its PETSc objects. For tests and benches
-/// that call the [`Assembler`](crate::assembly::Assembler) directly ([`StepData::input`]); the solver itself
-/// never builds one.
-pub struct StepData<const D: usize = 2> {
-    /// The state the step starts from (a copy: preparing a step may reorder the points among the
-    /// processes).
-    state: State<D>,
-    /// The shape functions, grid state, unknowns and pairs of the step.
-    work: Workspace<D>,
-    /// The step's plan (inertia, loads, constraint and contact sets).
-    plan: StepPlan<D>,
-}
-
-impl<const D: usize> StepData<D> {
-    /// The data of a step of `dt` (s) from `state` on `model` (one process).
-    pub fn new(
-        session: &SessionGuard,
-        model: &Model<D>,
-        state: &State<D>,
-        dt: f64,
-    ) -> Result<Self, StepError> {
-        let mut state = state.clone();
-        let mut work = Workspace::new();
-        let (plan, _) = Step {
-            model,
-            state: &mut state,
-            work: &mut work,
-        }
-        .plan(session, dt)?;
-        Ok(Self { state, work, plan })
-    }
-
-    /// The assembler's input of the step on `model` (the model the data was built from).
-    pub fn input<'a>(&'a self, model: &'a Model<D>) -> StepInput<'a, D> {
-        Step::step_input(
-            model,
-            &self.state.particles,
-            &self.work.table,
-            &self.work.dofs,
-            &self.work.grid_state,
-            &self.plan.loading,
-            &self.work.partners,
-        )
-    }
-
-    /// The unknowns of the step and their constraints.
-    pub fn dofs(&self) -> &DofMap {
-        &self.work.dofs
-    }
-
-    /// Per node copy, its partner in contact between bodies ([`INACTIVE`](crate::dofs::INACTIVE): none;
-    /// empty: one field).
-    pub fn partners(&self) -> &[u32] {
-        &self.work.partners
     }
 }

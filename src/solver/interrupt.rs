@@ -2,7 +2,7 @@
 //! that ends soon after the request is kept; a longer one is abandoned at its next residual or Jacobian
 //! evaluation or iteration of the linear solver, on every process at the same one, and leaves the
 //! committed state as it was
-//! ([`StepError::Interrupted`](super::StepError::Interrupted)). An MPI launcher kills the processes
+//! (`StepError::Interrupted`). An MPI launcher kills the processes
 //! a second or two after it forwards Ctrl-C to them, so a slow step cannot wait to end.
 
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 pub const FINISH_WITHIN: Duration = Duration::from_millis(50);
 
 /// A request to stop, shared between the signal handler that makes it and the steps that watch it
-/// ([`Simulation::watch`](super::Simulation::watch)).
+/// (`Simulation::watch`).
 #[derive(Debug)]
 pub struct Interrupt {
     /// The origin of the time stamps.
@@ -65,7 +65,8 @@ impl Interrupt {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use super::{FINISH_WITHIN, Interrupt};
+    use std::time::Duration;
 
     #[test]
     fn a_request_becomes_overdue_after_the_time_a_step_may_still_take() {

@@ -20,9 +20,10 @@
 //! t = 0, is the model's ([`Gauge`](crate::model::Gauge), made by `Model::new` in
 //! [`crate::model::path`]).
 
-use super::Step;
+use super::problem::StepProblem;
 use super::report::{PathPoint, StepError};
-use super::system::{OwnedRows, StepProblem};
+use super::step::Step;
+use super::system::OwnedRows;
 use crate::petsc::{
     CallbackError, Matrix, NonlinearProblem, PetscError, SessionGuard, Snes, SolveInfo, Vector,
 };

@@ -1,15 +1,14 @@
 //! First phase of a step attempt: shape functions and P2G, the unknowns and their constraints, the loads,
 //! the PETSc objects and the first guess.
 
-use super::Step;
 use super::contacts::{self, Attempt, Sets};
+use super::input::Loading;
 use super::path;
 use super::processes::{agreed, largest};
 use super::report::StepError;
+use super::step::Step;
 use super::system::LinearSystem;
-use crate::assembly::Newmark;
 use crate::boundary::{Motion, prescribed_increment};
-use crate::model::Model;
 use crate::petsc::SessionGuard;
 use crate::shape::ShapeTable;
 use crate::transfer;
@@ -40,45 +39,6 @@ pub(super) struct StepPlan<const D: usize> {
     pub(super) setup_time: f64,
     /// Path following: the control of the attempt (`path.rs`).
     pub(super) path: Option<path::PathStep>,
-}
-
-/// Inertia and applied forces of a step: what the assembler needs besides the points and the grid.
-pub(super) struct Loading<const D: usize> {
-    /// Newmark parameters (`None`: quasi-static).
-    pub(super) newmark: Option<Newmark>,
-    /// The body-force factor of a quasi-static ramp.
-    pub(super) load_factor: f64,
-    /// Applied nodal forces at `t_n+1` (N, in 2D per mm thickness, one per grid node; empty without loads).
-    pub(super) nodal_force: Vec<SVector<f64, D>>,
-}
-
-impl<const D: usize> Loading<D> {
-    /// The inertia and forces of a step of `dt` (s) reaching `t_new` (s) on `model` with the applied
-    /// `nodal_force`: Newmark unless quasi-static, the body force ramped over `body_force_ramp` in a
-    /// quasi-static run.
-    pub(super) fn new(
-        model: &Model<D>,
-        t_new: f64,
-        dt: f64,
-        nodal_force: Vec<SVector<f64, D>>,
-    ) -> Self {
-        let time = &model.params.time;
-        let newmark = (!time.quasi_static).then_some(Newmark {
-            beta: time.beta,
-            gamma: time.gamma,
-            dt,
-        });
-        let load_factor = if time.quasi_static && model.params.body_force_ramp > 0.0 {
-            (t_new / model.params.body_force_ramp).min(1.0)
-        } else {
-            1.0
-        };
-        Self {
-            newmark,
-            load_factor,
-            nodal_force,
-        }
-    }
 }
 
 /// The grid at the start of an attempt besides the grid state ([`Step::grid_phase`]).
@@ -508,10 +468,9 @@ impl<const D: usize> Step<'_, D> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::grid::Grid;
     use crate::particles::Particles;
-    use crate::shape::{ShapeError, ShapeKind};
+    use crate::shape::{ShapeError, ShapeKind, ShapeTable};
     use nalgebra::Vector2;
 
     #[test]

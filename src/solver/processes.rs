@@ -1,9 +1,9 @@
 //! The process plumbing of a step: agreement on failures, residual rows completed over the processes,
 //! points shared out with their ghosts and the block rows each process owns.
 
-use super::Step;
 use super::contacts;
 use super::report::StepError;
+use super::step::Step;
 use crate::assembly::AssemblyError;
 use crate::partition::{self, NodalWindows, Partition};
 use crate::petsc::{self, CallbackError, SessionGuard};
@@ -107,7 +107,7 @@ pub(super) fn bytes_per_process(
 
 /// Completes the physical residual `r` after a solve where the step reads it beyond this process's own block
 /// rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they are zeroed and
-/// only the unknowns `read` ([`solve`](super::solve)'s constrained and contact rows) are summed over the
+/// only the unknowns `read` (`solve.rs`'s constrained and contact rows) are summed over the
 /// processes (each from its owner, the others adding zeros: the same bits on every process). Without shared
 /// points every process evaluated every row: nothing to do.
 pub(super) fn complete_read_rows(

@@ -55,7 +55,7 @@ pub enum StepError {
     /// contact between bodies on several processes, a grid node shared by three bodies).
     #[error("{0}")]
     Setup(String),
-    /// The step was abandoned on an interrupt ([`Interrupt`](super::Interrupt)) before it converged, on every
+    /// The step was abandoned on an interrupt ([`Interrupt`](super::interrupt::Interrupt)) before it converged, on every
     /// process at the same evaluation: nothing was committed, the state is that of the last finished step.
     /// Not a failure of the step: it is not retried.
     #[error(

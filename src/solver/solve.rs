@@ -5,15 +5,19 @@ use super::contacts::ContactSet;
 use super::interrupt::Interrupt;
 use super::path;
 use super::prepare::StepPlan;
+use super::problem::StepProblem;
 use super::processes::{agreed, complete_read_rows};
 use super::report::{Failure, StepError};
-use super::system::{LinearSystem, StepProblem};
-use super::{MAX_CONTACT_SOLVES, Step, Workspace};
+use super::step::{Step, Workspace};
+use super::system::LinearSystem;
 use crate::assembly::{Assembler, StepInput};
 use crate::contact::{Converged, NodeStatus};
 use crate::grid::Grid;
 use crate::petsc::{LogEvent, SessionGuard, SolveInfo, Tolerances};
 use std::time::Instant;
+
+/// Most SNES solves of one step attempt while the contact active set and the pin rotations settle.
+const MAX_CONTACT_SOLVES: usize = 30;
 
 /// What `Step::solve` hands to `Step::finish`.
 pub(super) struct Solved {

@@ -1,10 +1,10 @@
 //! The start of a dynamic run: the consistent initial acceleration.
 
-use super::Step;
 use super::contacts::{self, Attempt};
-use super::prepare::Loading;
+use super::input::Loading;
 use super::processes::{agreed, complete_rows};
 use super::report::StepError;
+use super::step::Step;
 use crate::boundary::prescribed_acceleration;
 use crate::petsc::SessionGuard;
 use crate::transfer;

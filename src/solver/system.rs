@@ -1,174 +1,21 @@
 //! The linear system of a step on PETSc: the unknowns' vector, the Jacobian with its block pattern and the
-//! SNES ([`LinearSystem`]), the block rows this process owns ([`OwnedRows`]), the nonlinear problem handed
-//! to SNES and the rigid-body modes for algebraic multigrid.
+//! SNES ([`LinearSystem`]), the block rows this process owns ([`OwnedRows`]) and the rigid-body modes for
+//! algebraic multigrid.
 
-use super::contacts::ContactSet;
-use super::interrupt::Interrupt;
-use super::processes::agree;
 use super::report::StepError;
-use crate::assembly::{Assembler, StepInput};
-use crate::contact::BlockRows;
+use crate::assembly::Assembler;
 use crate::dofs::DofMap;
 use crate::grid::Grid;
 use crate::multigrid::Hierarchy;
 use crate::petsc::{
-    self, BlockCsr, CallbackError, GatherAll, GatherRange, IndexSet, LogEvent, Matrix,
-    NonlinearProblem, PetscInt, SessionGuard, Snes, Tolerances, Vector,
+    self, BlockCsr, GatherAll, GatherRange, IndexSet, Matrix, PetscInt, SessionGuard, Snes,
+    Tolerances, Vector,
 };
 use nalgebra::SVector;
 use std::ops::Range;
-use std::time::Instant;
-
-/// The nonlinear problem of one step, handed to SNES.
-pub(super) struct StepProblem<'a, 'b, const D: usize> {
-    pub(super) input: &'a StepInput<'b, D>,
-    /// PETSc log event of the residual and Jacobian evaluations (shown by `-log_view`).
-    pub(super) event: LogEvent,
-    pub(super) assembler: &'a mut Assembler<D>,
-    /// Wall time spent in residual and Jacobian evaluations (s).
-    pub(super) assembly_time: f64,
-    /// Residual and Jacobian evaluations.
-    pub(super) residuals: usize,
-    pub(super) jacobians: usize,
-    /// The contact sets of the step (closed constraints get their own rows).
-    pub(super) contacts: &'a [Box<dyn ContactSet<D>>],
-    /// Scale of the constraint rows (MPa).
-    pub(super) row_scale: f64,
-    /// The block rows this process owns.
-    pub(super) owned: &'a OwnedRows,
-    /// For the processes' agreement on domain errors.
-    pub(super) session: &'a SessionGuard,
-    /// The residual of all unknowns (this process hands PETSc its own rows).
-    pub(super) scratch: Vec<f64>,
-    /// The request to stop that the step watches ([`Simulation::watch`](super::Simulation::watch)).
-    pub(super) interrupt: Option<&'a Interrupt>,
-    /// The processes agreed to abandon the step at an evaluation ([`StepProblem::abandon`]).
-    pub(super) abandoned: bool,
-}
-
-/// The message of the callback error that abandons a solve on an interrupt (SNES stops at once).
-const ABANDONED: &str = "the step was abandoned on an interrupt";
-
-impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
-    /// The problem of the step `input` with its `contacts`, evaluated by `assembler` on the rows
-    /// `owned` by this process (residual and Jacobian evaluations timed under `event`), abandoned on
-    /// `interrupt`.
-    pub(super) fn new(
-        input: &'a StepInput<'b, D>,
-        event: LogEvent,
-        assembler: &'a mut Assembler<D>,
-        (contacts, owned): (&'a [Box<dyn ContactSet<D>>], &'a OwnedRows),
-        session: &'a SessionGuard,
-        interrupt: Option<&'a Interrupt>,
-    ) -> Self {
-        Self {
-            input,
-            event,
-            assembler,
-            assembly_time: 0.0,
-            residuals: 0,
-            jacobians: 0,
-            contacts,
-            row_scale: input.row_scale,
-            owned,
-            session,
-            scratch: Vec::new(),
-            interrupt,
-            abandoned: false,
-        }
-    }
-
-    /// Before an evaluation and at each iteration of the linear solver: whether the step is to be
-    /// abandoned on its interrupt, agreed by every process (one reduction while an interrupt is watched;
-    /// SNES calls them on all processes in the same order, so they all leave at the same one). Once abandoned, every evaluation fails with
-    /// a fatal error, which ends the solve at once; the caller tells it from a failure by
-    /// [`StepProblem::abandoned`].
-    fn abandon(&mut self) -> Result<(), CallbackError> {
-        if !self.abandoned {
-            let Some(interrupt) = self.interrupt else {
-                return Ok(());
-            };
-            self.abandoned = self.session.any(interrupt.overdue());
-        }
-        if self.abandoned {
-            return Err(CallbackError::Fatal(ABANDONED.into()));
-        }
-        Ok(())
-    }
-}
-
-impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
-    fn residual(&mut self, x: &Vector, f: &mut Vector) -> Result<(), CallbackError> {
-        self.abandon()?;
-        let _event = self.event.begin();
-        let t = Instant::now();
-        let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
-        let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
-        let (contacts, s) = (self.contacts, self.row_scale);
-        let nf = input.dofs.unknowns_per_node();
-        let r = &mut self.scratch;
-        let xs = owned.gather(x).map_err(fatal)?;
-        // Only this process's rows: the points in their support, the rows themselves.
-        let local = asm.evaluate_owned(input, &xs).and_then(|()| {
-            r.resize(xs.len(), 0.0);
-            asm.residual_rows(input, &xs, r, false, owned.rows.clone())
-        });
-        let result = agree(self.session, local).and_then(|()| {
-            for c in contacts {
-                c.residual_rows(&xs, r, nf, s);
-            }
-            f.write(|out| out.copy_from_slice(&r[owned.scalars()]))
-                .map_err(fatal)
-        });
-        self.assembly_time += t.elapsed().as_secs_f64();
-        self.residuals += 1;
-        result
-    }
-
-    /// Between evaluations a linear solve may take long: its iterations check the interrupt too.
-    fn linear_iteration(&mut self) -> Result<(), CallbackError> {
-        self.abandon()
-    }
-
-    fn jacobian(&mut self, x: &Vector, jac: &mut Matrix) -> Result<(), CallbackError> {
-        self.abandon()?;
-        let _event = self.event.begin();
-        let t = Instant::now();
-        let fatal = |e: petsc::PetscError| CallbackError::Fatal(e.to_string());
-        let (asm, input, owned) = (&mut *self.assembler, self.input, self.owned);
-        let xs = owned.gather(x).map_err(fatal)?;
-        agree(self.session, asm.evaluate_owned(input, &xs))?;
-        let (contacts, s) = (self.contacts, self.row_scale);
-        let (pattern, own) = (owned.pattern(), owned.rows.clone());
-        let r = jac
-            .fill_block_rows(&pattern, |values, layout| {
-                asm.jacobian_into(input, own.clone(), values, layout);
-                let nf = input.dofs.unknowns_per_node();
-                let row_of = |a: usize| {
-                    let l = a.checked_sub(own.start).filter(|&l| l < own.len())?;
-                    let (lo, hi) = (pattern.row_ptr[l], pattern.row_ptr[l + 1]);
-                    let diag = pattern.cols[lo..hi]
-                        .binary_search(&(a as u32))
-                        .expect("diagonal block in the pattern");
-                    Some((lo * nf * nf, hi - lo, diag))
-                };
-                let rows = BlockRows {
-                    row_of,
-                    offset: |ncols, i, pos, k| layout.offset(ncols, nf, i, pos, k),
-                };
-                for c in contacts {
-                    c.jacobian_rows(nf, s, &rows, values);
-                }
-            })
-            .map_err(fatal);
-        self.assembly_time += t.elapsed().as_secs_f64();
-        self.jacobians += 1;
-        r
-    }
-}
 
 /// The block rows (active nodes, in [`DofMap`] order) of the Jacobian and the unknowns this process owns: a
-/// contiguous range ([`Step::own_rows`](super::Step::own_rows)). The process evaluates the points in their
+/// contiguous range (`Step::own_rows`). The process evaluates the points in their
 /// support (its own and the ghosts of MPM on several processes, all points in FEM mode) at the gathered
 /// unknowns and hands PETSc its own rows; PETSc's vectors, matrix and solvers are distributed.
 pub(super) struct OwnedRows {
@@ -185,13 +32,13 @@ pub(super) struct OwnedRows {
     /// physical residual after a solve.
     pub(super) gather: Option<GatherAll>,
     /// More than one process: the gather of the unknowns this process reads at an evaluation
-    /// ([`Step::unknowns_window`](super::Step::unknowns_window)), rebuilt when the window moves
+    /// (`Step::unknowns_window`), rebuilt when the window moves
     /// ([`OwnedRows::set_window`]).
     pub(super) window: Option<GatherRange>,
 }
 
 impl OwnedRows {
-    /// The block rows `rows` (from [`Step::own_rows`](super::Step::own_rows)) with their pattern, of `total`
+    /// The block rows `rows` (from `Step::own_rows`) with their pattern, of `total`
     /// unknowns.
     pub(super) fn new<const D: usize>(
         asm: &Assembler<D>,
@@ -250,7 +97,7 @@ impl OwnedRows {
     }
 
     /// On more than one process: the gather of the unknowns `window` (indices in [`DofMap`] order, from
-    /// [`Step::unknowns_window`](super::Step::unknowns_window)) for the evaluations of the step, built anew
+    /// `Step::unknowns_window`) for the evaluations of the step, built anew
     /// if any process's window moved (collective).
     pub(super) fn set_window(
         &mut self,

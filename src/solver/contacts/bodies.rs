@@ -8,8 +8,8 @@ use crate::contact::{BodyContact, ContactMemory, Converged, NodePair, NodeStatus
 use crate::dofs::INACTIVE;
 use crate::model::Model;
 use crate::petsc::SessionGuard;
-use crate::solver::Step;
 use crate::solver::report::StepError;
+use crate::solver::step::Step;
 use nalgebra::SVector;
 
 /// Closed pairs between bodies leave the step with one normal velocity, the mass-weighted mean of the two

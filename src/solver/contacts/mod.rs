@@ -10,8 +10,8 @@
 mod bodies;
 mod devices;
 
-use super::Step;
 use super::report::StepError;
+use super::step::Step;
 use crate::assembly::Newmark;
 use crate::contact::{ContactMemory, Converged, NodeStatus, RowMap};
 use crate::grid::Grid;
@@ -124,7 +124,7 @@ pub(super) struct Impact<'a, const D: usize> {
     pub(super) nm: &'a Newmark,
     /// Nodal mass, velocity and acceleration at the start of the step.
     pub(super) gs: &'a GridState<D>,
-    /// The grid nodes this process counts ([`Step::owned_nodes`]).
+    /// The grid nodes this process counts (`Step::owned_nodes`).
     pub(super) owned: Range<usize>,
 }
 
