@@ -91,15 +91,17 @@ const STIFFNESS_MG: &str = "-snes_lag_preconditioner 3 -snes_ksp_ew -ksp_type gm
 /// GMRES preconditioned block by block (a multiplicative field split of the interleaved unknowns): the
 /// displacements by hypre's BoomerAMG (HMIS coarsening, extended+i interpolation, at most 4 weights per
 /// row, the usual settings for 2D elasticity), eta_bar by ILU(0) per process (the Helmholtz block is
-/// mass-dominated); the split set up afresh at the first Newton iteration of a step and every second one.
-/// On the paper-size CT at 0.035 m/s (localizing activity, contact plates) it took 10.4 s of solver time
+/// mass-dominated); the split set up afresh at the first Newton iteration of a step and every third one
+/// (against every second: the half-size CT at 0.035 m/s, 2 mm cells, 1000 steps to 10 ms in 0.92x the
+/// time, 0.89-0.95 over 2 pairs of whole runs, the same Newton and 0.4 % more Krylov iterations, histories
+/// within 1.4e-9 and the same crack; `docs/benchmarks.md`, "Where the CT's step goes"). On the paper-size CT at 0.035 m/s (localizing activity, contact plates) it took 10.4 s of solver time
 /// where the lagged MUMPS LU took 16.0 (first 4 steps) and 24.2 s where the LU took 41.3 (4 steps with a
 /// 55 mm crack, same Newton iterations), in half the memory (0.78 against 1.5 GB); the coupled tangent of a
 /// softening point can be indefinite, and a step whose GMRES fails goes to the fallback solver, a fresh
 /// MUMPS LU at every Newton iteration (`docs/solvers.md`). The splits are the index sets `u` and `eta_bar`
 /// that the solver attaches to the preconditioner, so `-fieldsplit_u_*` and `-fieldsplit_eta_bar_*` options
 /// change them.
-const STIFFNESS_FIELD_SPLIT: &str = "-snes_lag_preconditioner 2 -ksp_type gmres -ksp_rtol 1e-6 \
+const STIFFNESS_FIELD_SPLIT: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 \
      -ksp_max_it 500 -pc_type fieldsplit -pc_fieldsplit_type multiplicative \
      -fieldsplit_u_ksp_type preonly -fieldsplit_u_pc_type hypre -fieldsplit_u_pc_hypre_type boomeramg \
      -fieldsplit_u_pc_hypre_boomeramg_strong_threshold 0.5 -fieldsplit_u_pc_hypre_boomeramg_agg_nl 1 \
