@@ -371,6 +371,8 @@ fn history_rows(dir: &Path) -> Vec<Vec<(String, String)>> {
 /// that) while a step of about 4 s runs: the processes abandon it at once, together, and save the last
 /// finished step before the SIGKILL; run.json says `interrupted` at that step and that the next was
 /// abandoned; the printed command resumes from it, and the resumed run matches an uninterrupted one.
+/// The step is made slow with block Jacobi (one ILU per process, about 4 s a step in a debug build; the
+/// default overlap takes 1.5 s, which ends within the second mpirun waits before its SIGTERM).
 #[test]
 fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
     let _machine = alone();
@@ -385,6 +387,7 @@ fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
         "2000",
     ];
     args.extend(FINE);
+    args.extend(["-pc_type", "bjacobi"]);
     let mut child = mpirun(&dir, &args)
         .stderr(Stdio::piped())
         .spawn()
