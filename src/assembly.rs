@@ -332,22 +332,41 @@ impl<const D: usize> Assembler<D> {
         // Per worker: a stamp per grid node (the row that last saw it), its position in that row, and the
         // row's distinct support nodes; no sorting of the ~300 raw entries of a row, no searching.
         let marker = || (vec![0u32; grid_nodes], vec![0u16; grid_nodes], Vec::new());
-        let rows: Vec<(Vec<u32>, Vec<u16>)> = dofs
+        // Each active node's positions are its own range of `inc_pos` (its incidence entries, `stride`
+        // slots each): the rows write them in place, in parallel; inactive nodes keep NO_COLUMN.
+        self.inc_pos.clear();
+        self.inc_pos
+            .resize(self.inc_entries.len() * stride, NO_COLUMN);
+        let mut row_pos: Vec<&mut [u16]> = Vec::with_capacity(dofs.active_nodes().len());
+        let mut rest = self.inc_pos.as_mut_slice();
+        let mut at = 0;
+        for &node in dofs.active_nodes() {
+            let (lo, hi) = (
+                self.inc_offsets[node as usize] * stride,
+                self.inc_offsets[node as usize + 1] * stride,
+            );
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - at);
+            let (mine, tail) = tail.split_at_mut(hi - lo);
+            row_pos.push(mine);
+            (rest, at) = (tail, hi);
+        }
+        let (inc_entries, inc_offsets) = (&self.inc_entries, &self.inc_offsets);
+        let rows: Vec<Vec<u32>> = dofs
             .active_nodes()
             .par_iter()
+            .zip(row_pos.into_par_iter())
             .enumerate()
             .map_init(
                 marker,
-                |(stamp, slot, unique): &mut (Vec<u32>, Vec<u16>, Vec<u32>), (a, &node)| {
+                |(stamp, slot, unique): &mut (Vec<u32>, Vec<u16>, Vec<u32>), (a, (&node, pos))| {
                     let row = a as u32 + 1;
                     unique.clear();
-                    let entries = &self.inc_entries
-                        [self.inc_offsets[node as usize]..self.inc_offsets[node as usize + 1]];
+                    let entries =
+                        &inc_entries[inc_offsets[node as usize]..inc_offsets[node as usize + 1]];
                     // A contact pair's rows share the union of their columns.
                     let partner = match input.partners.get(node as usize) {
                         Some(&q) if q != crate::dofs::INACTIVE => {
-                            &self.inc_entries
-                                [self.inc_offsets[q as usize]..self.inc_offsets[q as usize + 1]]
+                            &inc_entries[inc_offsets[q as usize]..inc_offsets[q as usize + 1]]
                         }
                         _ => &[],
                     };
@@ -365,7 +384,6 @@ impl<const D: usize> Assembler<D> {
                     for (c, &g) in unique.iter().enumerate() {
                         slot[g as usize] = c as u16;
                     }
-                    let mut pos = vec![NO_COLUMN; entries.len() * stride];
                     for (e, &(p, _)) in entries.iter().enumerate() {
                         for (kj, w) in table.weights(p as usize).iter().enumerate() {
                             if stamp[w.node as usize] == row {
@@ -373,18 +391,14 @@ impl<const D: usize> Assembler<D> {
                             }
                         }
                     }
-                    let cols = unique.iter().map(|&g| node_index[g as usize]).collect();
-                    (cols, pos)
+                    unique.iter().map(|&g| node_index[g as usize]).collect()
                 },
             )
             .collect();
         self.row_ptr.clear();
         self.row_ptr.push(0);
         self.cols.clear();
-        self.inc_pos.clear();
-        self.inc_pos
-            .resize(self.inc_entries.len() * stride, NO_COLUMN);
-        for ((r, pos), &node) in rows.iter().zip(dofs.active_nodes()) {
+        for r in &rows {
             assert!(
                 r.len() < NO_COLUMN as usize,
                 "a Jacobian row with {} block columns",
@@ -392,8 +406,6 @@ impl<const D: usize> Assembler<D> {
             );
             self.cols.extend_from_slice(r);
             self.row_ptr.push(self.cols.len());
-            let lo = self.inc_offsets[node as usize] * stride;
-            self.inc_pos[lo..lo + pos.len()].copy_from_slice(pos);
         }
     }
 
