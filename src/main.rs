@@ -112,6 +112,13 @@ enum Command {
 /// line is printed before the launcher stops the processes (s).
 const REPORT_GRACE: std::time::Duration = std::time::Duration::from_secs(1);
 
+/// How long a process other than process 0 waits before it ends on a failure that process 0 reports (a
+/// failed step, an interruption): the launcher aborts the job as soon as one process ends with an error,
+/// and process 0 prints its line (the resume command) only once it has left the run. Shorter than
+/// `REPORT_GRACE`: after a Ctrl-C, Open MPI's mpirun kills the processes 1 s after their SIGTERM, and a
+/// process that saved its checkpoint must end before that.
+const FAILURE_GRACE: std::time::Duration = std::time::Duration::from_millis(200);
+
 fn main() -> std::process::ExitCode {
     // Under mpirun every process takes the same decisions and meets the same warnings: process 0 logs and
     // warns, the others report only errors.
@@ -178,7 +185,7 @@ fn main() -> std::process::ExitCode {
                 let elsewhere = e.chain().any(|c| c.is::<FailedElsewhere>());
                 match rank {
                     0 => eprintln!("error: {}", error_line(&e)),
-                    _ if elsewhere => {}
+                    _ if elsewhere => std::thread::sleep(FAILURE_GRACE),
                     r => eprintln!("error (process {r}): {}", error_line(&e)),
                 }
                 std::process::ExitCode::FAILURE

@@ -335,6 +335,10 @@ fn ctrl_c_on_several_processes_stops_them_at_one_saved_step() {
 
 /// The overrides that make the tiny specimen's steps slow: 0.25 mm cells (92,160 points), about 1, 2
 /// and 4 s for steps 1, 2 and 3 on 2 processes of a 2-core machine in the test profile.
+/// PETSc options that make a step of the fine tiny CT slow in many short Krylov iterations (each checks
+/// the interrupt): block Jacobi's ILU and GMRES to a relative 1e-12.
+const SLOW_STEP: [&str; 4] = ["-pc_type", "bjacobi", "-ksp_rtol", "1e-12"];
+
 const FINE: [&str; 4] = [
     "--set",
     "grid.cell_size=0.25",
@@ -371,8 +375,9 @@ fn history_rows(dir: &Path) -> Vec<Vec<(String, String)>> {
 /// that) while a step of about 4 s runs: the processes abandon it at once, together, and save the last
 /// finished step before the SIGKILL; run.json says `interrupted` at that step and that the next was
 /// abandoned; the printed command resumes from it, and the resumed run matches an uninterrupted one.
-/// The step is made slow with block Jacobi (one ILU per process, about 4 s a step in a debug build; the
-/// default overlap takes 1.5 s, which ends within the second mpirun waits before its SIGTERM).
+/// The step is made slow with many short Krylov iterations (block Jacobi's ILU, GMRES to a relative
+/// 1e-12; each iteration checks the interrupt): the default's 1.4 s steps in a debug build may end
+/// within the second mpirun waits before its SIGTERM, and the test then finds no abandoned step.
 #[test]
 fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
     let _machine = alone();
@@ -387,7 +392,7 @@ fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
         "2000",
     ];
     args.extend(FINE);
-    args.extend(["-pc_type", "bjacobi"]);
+    args.extend(SLOW_STEP);
     let mut child = mpirun(&dir, &args)
         .stderr(Stdio::piped())
         .spawn()
@@ -466,6 +471,7 @@ fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
         &steps,
     ];
     args.extend(FINE);
+    args.extend(SLOW_STEP);
     succeeds(&mpirun(&dir, &args).output().expect("mpirun"));
     let (resumed, uninterrupted) = (history_rows(&d), history_rows(&dir.join("ref")));
     assert_eq!(resumed.len(), uninterrupted.len());
