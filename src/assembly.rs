@@ -860,6 +860,10 @@ fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]
     let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
     let (ncols, layout) = (cols.len(), ctx.layout);
     let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
+    // The same offsets as strides: entry (i, pos, k) at `pos * block + i * si + k * sk`, so that the
+    // inner loop over a point's support nodes computes one base per node and no layout branch.
+    let (block, si, sk) = (at(0, 1, 0), at(1, 0, 0), at(0, 0, 1));
+    let eta_bar = dofs.layout().eta_bar();
     row.fill(0.0);
     let node = dofs.node(a);
     let first = asm.inc_offsets[node];
@@ -873,42 +877,47 @@ fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]
         let ws = table.weights(p);
         if ev.eroded {
             // No stiffness; the lumped anchor of eta_bar on the diagonal (see `Assembler::residual`).
-            if let (Some(e), Some(d)) = (dofs.layout().eta_bar(), diag) {
+            if let (Some(e), Some(d)) = (eta_bar, diag) {
                 row[at(e, d, e)] += s * particles.vol[p] * ws[k].value;
             }
             continue;
         }
         let positions = &asm.inc_pos[(first + e) * stride..(first + e + 1) * stride];
-        let gi0 = asm.g0[p * stride + k];
-        let (si, gi) = (ws[k].value, ws[k].grad);
+        let g0 = &asm.g0[p * stride..p * stride + ws.len()];
+        let gi0 = g0[k];
+        let (s_i, gi) = (ws[k].value, ws[k].grad);
         let v0 = particles.vol0[p];
         let vn = particles.vol[p];
         // M[i][k]_L = sum_J G_I,J A_iJkL
         let m: [[SVector<f64, D>; D]; D] =
             std::array::from_fn(|i| std::array::from_fn(|kk| ev.a[i][kk].tr_mul(&gi0)));
+        // Factors of the nonlocal terms that do not depend on the column node (grouped as before:
+        // `v0 q_i S_J` = `(v0 q_i) S_J`, `s vn (S_I - ..) h_i` = `(s vn (S_I - ..)) h_i`).
         let q = ev.dp_deb * gi0;
+        let vq: [f64; D] = std::array::from_fn(|i| v0 * q[i]);
         // Evolving activity: d(c grad S_I . grad eta_bar)/d(unknowns) through c(eta, eta_bar).
         let flux = gi.dot(&ev.grad_eta_bar);
         let (c, dc_deta, dc_deb) = (ev.c, ev.dc_deta * flux, ev.dc_deb * flux);
-        for (kj, (wj, &pos)) in ws.iter().zip(positions).enumerate() {
+        let svn = s * vn;
+        let coupling = svn * (s_i - dc_deta);
+        for ((wj, &pos), gj0) in ws.iter().zip(positions).zip(g0) {
             if pos == NO_COLUMN {
                 continue;
             }
-            let pos = pos as usize;
-            let gj0 = asm.g0[p * stride + kj];
+            let base = pos as usize * block;
             for (i, mi) in m.iter().enumerate() {
                 for (kk, mik) in mi.iter().enumerate() {
-                    row[at(i, pos, kk)] += v0 * mik.dot(&gj0);
+                    row[base + i * si + kk * sk] += v0 * mik.dot(gj0);
                 }
             }
-            if let Some(e) = dofs.layout().eta_bar() {
+            if let Some(e) = eta_bar {
                 let (sj, gj) = (wj.value, wj.grad);
                 let h = ev.deta_dx * gj;
                 for i in 0..D {
-                    row[at(i, pos, e)] += v0 * q[i] * sj;
-                    row[at(e, pos, i)] -= s * vn * (si - dc_deta) * h[i];
+                    row[base + i * si + e * sk] += vq[i] * sj;
+                    row[base + e * si + i * sk] -= coupling * h[i];
                 }
-                row[at(e, pos, e)] += s * vn * (si * sj + c * gi.dot(&gj) + dc_deb * sj);
+                row[base + e * (si + sk)] += svn * (s_i * sj + c * gi.dot(&gj) + dc_deb * sj);
             }
         }
     }
