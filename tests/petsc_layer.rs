@@ -141,7 +141,8 @@ fn options_set_in_code_yield_to_the_command_line() {
 }
 
 /// A block pattern filled through each path (`seqaij` and `seqbaij` in place, `mpiaij` through
-/// `MatSetValuesBlocked`) gives the same operator as the dense matrix it describes.
+/// `MatUpdateMPIAIJWithArray`, `mpibaij` through `MatSetValuesBlocked`) gives the same operator as the
+/// dense matrix it describes.
 #[test]
 fn block_pattern_fills_every_matrix_type_alike() {
     use mpm_concrete::petsc::{BlockCsr, Matrix, Vector};
@@ -172,7 +173,7 @@ fn block_pattern_fills_every_matrix_type_alike() {
     let expected: Vec<f64> = (0..n)
         .map(|r| (0..n).map(|c| dense[r * n + c] * x[c]).sum())
         .collect();
-    for mat_type in ["aij", "baij", "mpiaij"] {
+    for mat_type in ["aij", "baij", "mpiaij", "mpibaij"] {
         let mut m = Matrix::with_type(&s, n, 3, mat_type).expect("matrix");
         m.set_block_pattern(&p).expect("pattern");
         m.fill_block_rows(&p, |v, layout| {
