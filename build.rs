@@ -50,7 +50,7 @@ fn main() {
     let functions = [
         "Petsc(Initialize|Finalize|Initialized|Finalized|ErrorMessage|PushErrorHandler|PopErrorHandler)",
         "PetscOptions(SetValue|ClearValue|HasName|GetString|GetReal|GetInt|GetBool|Left|LeftGet|LeftRestore|InsertString|Used)",
-        "PetscObject(SetName|SetOptionsPrefix|GetComm)",
+        "PetscObject(SetName|SetOptionsPrefix|GetComm|Reference)",
         "PetscLog(DefaultBegin|StageRegister|StagePush|StagePop|View|EventRegister|EventBegin|EventEnd)",
         "PetscClassIdRegister",
         "PetscViewer(ASCIIGetStdout|Destroy)",
@@ -60,8 +60,9 @@ fn main() {
         "Mat(Create|SetSizes|SetType|SetBlockSize|SetFromOptions|SetUp|Destroy|SetPreallocationCOO|SetValuesCOO)",
         "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|SetOption)",
         "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation|SetValuesBlocked)",
-        "MatSeq(AIJ|BAIJ)(GetArray|RestoreArray)|MatCreateSeqAIJWithArrays",
+        "MatSeq(AIJ|BAIJ)(GetArray|RestoreArray)|MatCreateSeqAIJWithArrays|MatSeqAIJ(GetArrayRead|RestoreArrayRead)",
         "PetscContainer(Create|SetPointer|SetUserDestroy|Destroy)|PetscObjectCompose",
+        "MatCreateShell|MatShell(SetOperation|GetContext)",
         "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray",
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix|MonitorSet)",
@@ -77,7 +78,7 @@ fn main() {
     let mut builder = bindgen::Builder::default()
         .header("wrapper.h")
         .allowlist_function(functions.join("|"))
-        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType)")
+        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType|MatOperation)")
         .blocklist_item("FP_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .layout_tests(false)

@@ -272,3 +272,78 @@ fn refilled_values_reach_the_preconditioner_for_every_matrix_type() {
         }
     }
 }
+
+#[test]
+fn the_threaded_operator_multiplies_as_the_jacobian() {
+    use mpm_concrete::petsc::{BlockCsr, Matrix, ThreadedOperator, Vector};
+    let s = Session::get().expect("PETSc session");
+    // 4 block rows of size 3 with rows of 2-4 blocks.
+    let (row_ptr, cols) = ([0, 2, 5, 7, 11], [0u32, 3, 0, 1, 2, 1, 2, 0, 1, 2, 3]);
+    let p = BlockCsr {
+        first: 0,
+        bs: 3,
+        row_ptr: &row_ptr,
+        cols: &cols,
+    };
+    let n = 12;
+    let value =
+        |r: usize, c: usize, scale: f64| scale * (1.0 + 0.37 * r as f64 - 0.11 * (r * c) as f64);
+    let fill = |scale: f64, v: &mut [f64], layout: mpm_concrete::petsc::BlockLayout| {
+        for a in 0..4 {
+            let ncols = row_ptr[a + 1] - row_ptr[a];
+            for (pos, &b) in cols[row_ptr[a]..row_ptr[a + 1]].iter().enumerate() {
+                for i in 0..3 {
+                    for k in 0..3 {
+                        let at = row_ptr[a] * 9 + layout.offset(ncols, 3, i, pos, k);
+                        v[at] = value(a * 3 + i, b as usize * 3 + k, scale);
+                    }
+                }
+            }
+        }
+    };
+    // Two threads whatever the machine, so that the operator applies.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("thread pool");
+    pool.install(|| {
+        for mat_type in ["aij", "baij"] {
+            let mut m = Matrix::with_type(&s, n, 3, mat_type).expect("matrix");
+            m.set_block_pattern(&p).expect("pattern");
+            let op = ThreadedOperator::over(&m, &p)
+                .expect("operator")
+                .expect("one process, two threads, a CSR type");
+            let mut x = Vector::new(&s, n, 3).expect("x");
+            x.write(|v| {
+                v.iter_mut()
+                    .enumerate()
+                    .for_each(|(i, r)| *r = 1.0 - 0.2 * i as f64)
+            })
+            .expect("write");
+            for scale in [1.0, -2.5] {
+                // A refill reaches the operator: it reads the Jacobian's current values.
+                m.fill_block_rows(&p, |v, l| fill(scale, v, l))
+                    .expect("fill");
+                let (mut y_mat, mut y_op) = (
+                    Vector::new(&s, n, 3).expect("y"),
+                    Vector::new(&s, n, 3).expect("y"),
+                );
+                m.mult(&x, &mut y_mat).expect("MatMult");
+                op.mult(&x, &mut y_op).expect("shell MatMult");
+                let (a, b) = (
+                    y_mat.read(|v| v.to_vec()).expect("read"),
+                    y_op.read(|v| v.to_vec()).expect("read"),
+                );
+                for (u, w) in a.iter().zip(&b) {
+                    assert!(
+                        (u - w).abs() <= 1e-13 * u.abs().max(1.0),
+                        "{mat_type}, scale {scale}: {a:?} against {b:?}"
+                    );
+                }
+                if mat_type == "baij" {
+                    assert_eq!(a, b, "the block product sums as PETSc's kernel does");
+                }
+            }
+        }
+    });
+}

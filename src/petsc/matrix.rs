@@ -27,6 +27,15 @@ pub struct Matrix {
 }
 
 impl Matrix {
+    /// Takes ownership of a matrix PETSc made (destroyed on drop).
+    pub(crate) fn from_raw(raw: sys::Mat) -> Self {
+        Self {
+            raw,
+            owned: true,
+            coo_len: None,
+        }
+    }
+
     /// A square matrix with `local_rows` rows on this process (a multiple of `block_size`), type AIJ
     /// with the block size set (GAMG/hypre accept it; `-mat_type baij` etc. override it).
     pub fn new(s: &SessionGuard, local_rows: usize, block_size: usize) -> Result<Self> {

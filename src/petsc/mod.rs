@@ -11,6 +11,7 @@
 
 mod ksp;
 mod matrix;
+mod operator;
 mod options;
 mod snes;
 pub mod sys;
@@ -18,6 +19,7 @@ mod vector;
 
 pub use ksp::LinearSolve;
 pub use matrix::{BlockCsr, BlockLayout, IndexSet, Matrix, matrix_type_for};
+pub use operator::ThreadedOperator;
 pub use options::{
     apply_default_options, has_option, option_string, set_default_option, set_option,
     unused_options,

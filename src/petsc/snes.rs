@@ -6,8 +6,8 @@
 //! both from `x` alone and commit nothing inside a callback.
 
 use super::{
-    IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, Vector, check, create, cstring, sys,
-    to_petsc_int,
+    IndexSet, LAST_ERROR, Matrix, Result, SessionGuard, ThreadedOperator, Vector, check, create,
+    cstring, sys, to_petsc_int,
 };
 use std::cell::Cell;
 use std::ffi::{CStr, c_char, c_void};
@@ -84,6 +84,8 @@ pub struct Snes {
     /// The context of the solve in progress (null between solves) for the linear solver's monitor,
     /// which is registered once with this box's address ([`linear_monitor_cb`]).
     monitored: Option<Box<Cell<*mut c_void>>>,
+    /// The Krylov solver's operator where it is not the Jacobian itself ([`Snes::set_operator`]).
+    operator: Option<ThreadedOperator>,
 }
 
 struct Context<'a> {
@@ -106,6 +108,7 @@ impl Snes {
             residual: None,
             configured: false,
             monitored: None,
+            operator: None,
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -294,6 +297,12 @@ impl Snes {
         ))
     }
 
+    /// Makes `operator` the Krylov solver's operator in later solves: its product is the Jacobian's
+    /// (computed on all threads), while the preconditioner is still built from the Jacobian.
+    pub fn set_operator(&mut self, operator: ThreadedOperator) {
+        self.operator = Some(operator);
+    }
+
     /// Solves `problem` from the initial guess in `x` (overwritten by the solution), assembling the
     /// Jacobian into `jac`. PETSc failures (bad options, errors raised in callbacks) are `Err`; a solve
     /// that simply does not converge is `Ok` with [`SolveInfo::converged`] false.
@@ -326,7 +335,13 @@ impl Snes {
             )
             .and_then(|()| {
                 check(
-                    sys::SNESSetJacobian(self.raw, jac.raw, jac.raw, Some(jacobian_cb), ctx_ptr),
+                    sys::SNESSetJacobian(
+                        self.raw,
+                        self.operator.as_ref().map_or(jac.raw, |o| o.shell.raw),
+                        jac.raw,
+                        Some(jacobian_cb),
+                        ctx_ptr,
+                    ),
                     "SNESSetJacobian",
                 )
             })

@@ -9,7 +9,7 @@ use crate::grid::Grid;
 use crate::multigrid::Hierarchy;
 use crate::petsc::{
     self, BlockCsr, GatherAll, GatherRange, IndexSet, Matrix, PetscInt, SessionGuard, Snes,
-    Tolerances, Vector,
+    ThreadedOperator, Tolerances, Vector,
 };
 use nalgebra::SVector;
 use std::ops::Range;
@@ -213,6 +213,13 @@ impl LinearSystem {
         let kind = petsc::matrix_type_for(session.size(), pc.as_deref(), sub_pc.as_deref());
         let mut jac = Matrix::with_type(session, n, nf, kind)?;
         jac.set_block_pattern(&owned.pattern())?;
+        // The Krylov solver's products on all threads of a single process (PETSc's own run on one
+        // core); not for the multigrid, whose Galerkin products need the assembled operator.
+        if session.size() == 1 && pc.as_deref() != Some("mg") && threaded_operator(session)? {
+            if let Some(op) = ThreadedOperator::over(&jac, &owned.pattern())? {
+                snes.set_operator(op);
+            }
+        }
         // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
         // 6 in 3D) for algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
         let rotations = D * (D - 1) / 2;
@@ -262,6 +269,22 @@ impl LinearSystem {
             multigrid,
         })
     }
+}
+
+/// Whether the Krylov solver multiplies by the Jacobian on all threads (`petsc::ThreadedOperator`):
+/// yes unless `-mpm_threaded_operator` says 0, false or no.
+fn threaded_operator(session: &SessionGuard) -> Result<bool, StepError> {
+    Ok(
+        match petsc::option_string(session, "mpm_threaded_operator")?.as_deref() {
+            None | Some("" | "1" | "true" | "yes") => true,
+            Some("0" | "false" | "no") => false,
+            Some(v) => {
+                return Err(StepError::Setup(format!(
+                    "-mpm_threaded_operator {v}: allowed are true, false, 1, 0, yes, no"
+                )));
+            }
+        },
+    )
 }
 
 /// The number of multigrid levels the options database asks for (`-pc_mg_levels` with the SNES prefix),

@@ -1,0 +1,337 @@
+//! The Jacobian's product with a vector on all of the process's threads: a PETSc shell matrix that GMRES
+//! uses as its operator while the preconditioner is built from the assembled Jacobian.
+//!
+//! PETSc (Debian's build has no OpenMP) multiplies a matrix on one core. On one process with several
+//! threads the point loops run on all of them but the Krylov solver's products on one; this operator
+//! reads the values of the assembled Jacobian (PETSc's own arrays, no copy) and multiplies by block rows
+//! in parallel (rayon), each row summed in the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`),
+//! so that the product has PETSc's bits for the CT's block sizes. `SNESSetJacobian(snes, operator,
+//! jacobian)`: Krylov iterations use the operator, the preconditioner (ILU, field split, ...) the
+//! Jacobian.
+
+use super::{
+    BlockCsr, BlockLayout, Matrix, PetscError, Result, Vector, check, comm_world, sys, to_petsc_int,
+};
+use rayon::prelude::*;
+use std::ffi::c_void;
+
+/// Block rows per parallel task.
+const CHUNK: usize = 256;
+
+/// What the product needs: the Jacobian (a counted reference, released when PETSc destroys the shell)
+/// and its block pattern.
+struct Product {
+    jacobian: sys::Mat,
+    rows: Rows,
+}
+
+/// The block rows of the product: how the values are laid out, the block size and the block pattern.
+struct Rows {
+    layout: BlockLayout,
+    bs: usize,
+    row_ptr: Vec<usize>,
+    cols: Vec<u32>,
+}
+
+/// A shell matrix whose product is the Jacobian's, computed on the process's threads.
+pub struct ThreadedOperator {
+    pub(crate) shell: Matrix,
+}
+
+impl ThreadedOperator {
+    /// The threaded product of `jacobian` (one process, its whole pattern `pattern`), or `None` where
+    /// it does not apply: a matrix type whose values are not PETSc's CSR arrays (`seqaij`: scalar rows,
+    /// `seqbaij`: column-major blocks), or one thread.
+    pub fn over(jacobian: &Matrix, pattern: &BlockCsr<'_>) -> Result<Option<Self>> {
+        let layout = match jacobian.type_name()?.as_str() {
+            "seqaij" => BlockLayout::Rows,
+            "seqbaij" => BlockLayout::Blocks,
+            _ => return Ok(None),
+        };
+        if rayon::current_num_threads() < 2 || pattern.first != 0 {
+            return Ok(None);
+        }
+        let n = to_petsc_int(pattern.block_rows() * pattern.bs, "MatCreateShell")?;
+        // SAFETY: PETSc takes a reference to the Jacobian; released in `destroy` with the context.
+        check(
+            unsafe { sys::PetscObjectReference(jacobian.raw.cast()) },
+            "PetscObjectReference",
+        )?;
+        let product = Box::new(Product {
+            jacobian: jacobian.raw,
+            rows: Rows {
+                layout,
+                bs: pattern.bs,
+                row_ptr: pattern.row_ptr.to_vec(),
+                cols: pattern.cols.to_vec(),
+            },
+        });
+        let ctx = Box::into_raw(product).cast::<c_void>();
+        let mut raw: sys::Mat = std::ptr::null_mut();
+        // SAFETY: out-parameter; the shell keeps `ctx` until its destroy operation frees it.
+        let made = check(
+            unsafe { sys::MatCreateShell(comm_world(), n, n, n, n, ctx, &mut raw) },
+            "MatCreateShell",
+        );
+        if let Err(e) = made {
+            // SAFETY: the shell was not made: the context and the reference are still ours.
+            unsafe { release(ctx) };
+            return Err(e);
+        }
+        let shell = Matrix::from_raw(raw);
+        // SAFETY: the callbacks match PETSc's signatures for these operations (cast to the generic
+        // `void (*)(void)` that MatShellSetOperation takes).
+        unsafe {
+            let mult: unsafe extern "C" fn(
+                sys::Mat,
+                sys::PetscVec,
+                sys::PetscVec,
+            ) -> sys::PetscErrorCode = multiply;
+            let destroy: unsafe extern "C" fn(sys::Mat) -> sys::PetscErrorCode = destroy;
+            check(
+                sys::MatShellSetOperation(
+                    shell.raw,
+                    sys::MatOperation_MATOP_DESTROY,
+                    Some(std::mem::transmute::<
+                        unsafe extern "C" fn(sys::Mat) -> sys::PetscErrorCode,
+                        unsafe extern "C" fn(),
+                    >(destroy)),
+                ),
+                "MatShellSetOperation",
+            )?;
+            check(
+                sys::MatShellSetOperation(
+                    shell.raw,
+                    sys::MatOperation_MATOP_MULT,
+                    Some(std::mem::transmute::<
+                        unsafe extern "C" fn(
+                            sys::Mat,
+                            sys::PetscVec,
+                            sys::PetscVec,
+                        ) -> sys::PetscErrorCode,
+                        unsafe extern "C" fn(),
+                    >(mult)),
+                ),
+                "MatShellSetOperation",
+            )?;
+        }
+        Ok(Some(Self { shell }))
+    }
+
+    /// `y = J x` through PETSc (`MatMult` of the shell).
+    pub fn mult(&self, x: &Vector, y: &mut Vector) -> Result<()> {
+        self.shell.mult(x, y)
+    }
+}
+
+/// Frees a context made by [`ThreadedOperator::over`] and releases its reference to the Jacobian.
+///
+/// # Safety
+/// `ctx` came from `Box::into_raw` of a [`Product`] and is not used afterwards.
+unsafe fn release(ctx: *mut c_void) -> sys::PetscErrorCode {
+    // SAFETY: the caller's contract.
+    let mut product = unsafe { Box::from_raw(ctx.cast::<Product>()) };
+    // SAFETY: the reference taken in `over`.
+    unsafe { sys::MatDestroy(&mut product.jacobian) }
+}
+
+/// The context of a shell made by [`ThreadedOperator::over`].
+///
+/// # Safety
+/// `shell` is such a shell.
+unsafe fn context(shell: sys::Mat) -> std::result::Result<*mut c_void, sys::PetscErrorCode> {
+    let mut ctx: *mut c_void = std::ptr::null_mut();
+    // SAFETY: out-parameter (PETSc 3.18 takes the address of the context pointer as `void *`).
+    let code = unsafe { sys::MatShellGetContext(shell, (&mut ctx as *mut *mut c_void).cast()) };
+    if code != 0 || ctx.is_null() {
+        return Err(if code != 0 { code } else { 1 });
+    }
+    Ok(ctx)
+}
+
+/// `MATOP_DESTROY`: frees the context when PETSc destroys the shell (its last reference).
+unsafe extern "C" fn destroy(shell: sys::Mat) -> sys::PetscErrorCode {
+    // SAFETY: PETSc calls this once, for our shell.
+    match unsafe { context(shell) } {
+        Ok(ctx) => unsafe { release(ctx) },
+        Err(code) => code,
+    }
+}
+
+/// `MATOP_MULT`: `y = J x` on the process's threads.
+unsafe extern "C" fn multiply(
+    shell: sys::Mat,
+    x: sys::PetscVec,
+    y: sys::PetscVec,
+) -> sys::PetscErrorCode {
+    // SAFETY: PETSc hands our shell and two vectors of its size for the duration of the call.
+    let ctx = match unsafe { context(shell) } {
+        Ok(c) => c,
+        Err(code) => return code,
+    };
+    // SAFETY: the context lives as long as the shell.
+    let product = unsafe { &*ctx.cast::<Product>() };
+    let rows = &product.rows;
+    let run = || -> std::result::Result<(), PetscError> {
+        let n = rows.row_ptr.len().saturating_sub(1) * rows.bs;
+        let nnz = rows.row_ptr.last().copied().unwrap_or(0) * rows.bs * rows.bs;
+        let (mut xa, mut ya, mut va): (*const f64, *mut f64, *const f64) =
+            (std::ptr::null(), std::ptr::null_mut(), std::ptr::null());
+        // SAFETY: PETSc's arrays of the vectors and of the Jacobian's values, restored below; the read
+        // accessors leave the Jacobian's state (and so its preconditioner) alone.
+        unsafe {
+            check(sys::VecGetArrayRead(x, &mut xa), "VecGetArrayRead")?;
+            check(sys::VecGetArray(y, &mut ya), "VecGetArray")?;
+            match rows.layout {
+                BlockLayout::Rows => check(
+                    sys::MatSeqAIJGetArrayRead(product.jacobian, &mut va),
+                    "MatSeqAIJGetArrayRead",
+                )?,
+                BlockLayout::Blocks => {
+                    let mut v: *mut f64 = std::ptr::null_mut();
+                    check(
+                        sys::MatSeqBAIJGetArray(product.jacobian, &mut v),
+                        "MatSeqBAIJGetArray",
+                    )?;
+                    va = v;
+                }
+            }
+            let (xs, ys, vs) = (
+                std::slice::from_raw_parts(xa, n),
+                std::slice::from_raw_parts_mut(ya, n),
+                std::slice::from_raw_parts(va, nnz),
+            );
+            rows.apply(vs, xs, ys);
+            match rows.layout {
+                BlockLayout::Rows => check(
+                    sys::MatSeqAIJRestoreArrayRead(product.jacobian, &mut va),
+                    "MatSeqAIJRestoreArrayRead",
+                )?,
+                BlockLayout::Blocks => {
+                    // MatSeqBAIJRestoreArray does not mark the values changed (see fill_block_rows).
+                    let mut v = va.cast_mut();
+                    check(
+                        sys::MatSeqBAIJRestoreArray(product.jacobian, &mut v),
+                        "MatSeqBAIJRestoreArray",
+                    )?;
+                }
+            }
+            check(sys::VecRestoreArray(y, &mut ya), "VecRestoreArray")?;
+            check(sys::VecRestoreArrayRead(x, &mut xa), "VecRestoreArrayRead")?;
+        }
+        Ok(())
+    };
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
+        Ok(Ok(())) => 0,
+        Ok(Err(e)) => e.code,
+        Err(_) => 83, // PETSC_ERR_USER
+    }
+}
+
+impl Rows {
+    /// `y = J x` with the values `v` of the Jacobian, block rows in parallel.
+    fn apply(&self, v: &[f64], x: &[f64], y: &mut [f64]) {
+        let bs = self.bs;
+        y.par_chunks_mut(CHUNK * bs)
+            .enumerate()
+            .for_each(|(c, yc)| {
+                for (l, yr) in yc.chunks_mut(bs).enumerate() {
+                    let a = c * CHUNK + l;
+                    let (lo, hi) = (self.row_ptr[a], self.row_ptr[a + 1]);
+                    let (vals, cols) = (&v[lo * bs * bs..hi * bs * bs], &self.cols[lo..hi]);
+                    match self.layout {
+                        BlockLayout::Blocks => block_row(bs, vals, cols, x, yr),
+                        BlockLayout::Rows => scalar_rows(bs, vals, cols, x, yr),
+                    }
+                }
+            });
+    }
+}
+
+/// One block row of column-major `bs x bs` blocks: `y_i = sum_blocks (sum_k V_ik x_k)`, each block's
+/// contribution summed over `k` first and then added, as PETSc's `MatMult_SeqBAIJ_2/3` do.
+#[inline(always)]
+fn block_row(bs: usize, vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
+    for (blk, &c) in vals.chunks_exact(bs * bs).zip(cols) {
+        let xb = &x[c as usize * bs..(c as usize + 1) * bs];
+        for (i, yi) in y.iter_mut().enumerate() {
+            let mut t = blk[i] * xb[0];
+            for k in 1..bs {
+                t += blk[k * bs + i] * xb[k];
+            }
+            *yi += t;
+        }
+    }
+}
+
+/// The `bs` scalar rows of one block row stored row by row (row `i`: the blocks' row `i`, columns in
+/// order), each a running sum as in PETSc's AIJ product.
+#[inline(always)]
+fn scalar_rows(bs: usize, vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
+    let n = cols.len();
+    for (i, yi) in y.iter_mut().enumerate() {
+        let row = &vals[i * n * bs..(i + 1) * n * bs];
+        let mut s = 0.0;
+        for (vb, &c) in row.chunks_exact(bs).zip(cols) {
+            let xb = &x[c as usize * bs..(c as usize + 1) * bs];
+            for k in 0..bs {
+                s += vb[k] * xb[k];
+            }
+        }
+        *yi = s;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The threaded product of a small block matrix in both layouts equals the dense product.
+    #[test]
+    fn block_rows_multiply_as_the_dense_matrix() {
+        // 3 block rows of size 2; pattern: row 0 {0, 2}, row 1 {1}, row 2 {0, 1, 2}.
+        let (bs, row_ptr, cols) = (2usize, vec![0usize, 2, 3, 6], vec![0u32, 2, 1, 0, 1, 2]);
+        let dense = |r: usize, c: usize| -> f64 {
+            let (a, b) = (r / bs, c / bs);
+            let lo = row_ptr[a];
+            if cols[lo..row_ptr[a + 1]].contains(&(b as u32)) {
+                1.0 + (7 * r + 3 * c) as f64 * 0.25 - (r * c) as f64 * 0.1
+            } else {
+                0.0
+            }
+        };
+        let x: Vec<f64> = (0..6).map(|i| 1.0 - 0.3 * i as f64).collect();
+        let expect: Vec<f64> = (0..6)
+            .map(|r| (0..6).map(|c| dense(r, c) * x[c]).sum())
+            .collect();
+        for layout in [BlockLayout::Blocks, BlockLayout::Rows] {
+            let mut v = vec![0.0; 6 * bs * bs];
+            for a in 0..3 {
+                let n = row_ptr[a + 1] - row_ptr[a];
+                for (pos, &b) in cols[row_ptr[a]..row_ptr[a + 1]].iter().enumerate() {
+                    for i in 0..bs {
+                        for k in 0..bs {
+                            let off = row_ptr[a] * bs * bs + layout.offset(n, bs, i, pos, k);
+                            v[off] = dense(a * bs + i, b as usize * bs + k);
+                        }
+                    }
+                }
+            }
+            let p = Rows {
+                layout,
+                bs,
+                row_ptr: row_ptr.clone(),
+                cols: cols.clone(),
+            };
+            let mut y = vec![f64::NAN; 6];
+            p.apply(&v, &x, &mut y);
+            for (a, b) in y.iter().zip(&expect) {
+                assert!(
+                    (a - b).abs() < 1e-12,
+                    "{layout:?}: {y:?} against {expect:?}"
+                );
+            }
+        }
+    }
+}
