@@ -249,33 +249,84 @@ impl Rows {
 }
 
 /// One block row of column-major `bs x bs` blocks: `y_i = sum_blocks (sum_k V_ik x_k)`, each block's
-/// contribution summed over `k` first and then added, as PETSc's `MatMult_SeqBAIJ_2/3` do.
+/// contribution summed over `k` first and then added, as PETSc's `MatMult_SeqBAIJ_2/3` do; the block
+/// sizes of 2D and 3D (2 to 4) with their size known to the compiler.
 #[inline(always)]
 fn block_row(bs: usize, vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
-    y.fill(0.0);
-    for (blk, &c) in vals.chunks_exact(bs * bs).zip(cols) {
-        let xb = &x[c as usize * bs..(c as usize + 1) * bs];
-        for (i, yi) in y.iter_mut().enumerate() {
-            let mut t = blk[i] * xb[0];
-            for k in 1..bs {
-                t += blk[k * bs + i] * xb[k];
+    match bs {
+        2 => block_row_of::<2>(vals, cols, x, y),
+        3 => block_row_of::<3>(vals, cols, x, y),
+        4 => block_row_of::<4>(vals, cols, x, y),
+        _ => {
+            y.fill(0.0);
+            for (blk, &c) in vals.chunks_exact(bs * bs).zip(cols) {
+                let xb = &x[c as usize * bs..(c as usize + 1) * bs];
+                for (i, yi) in y.iter_mut().enumerate() {
+                    let mut t = blk[i] * xb[0];
+                    for k in 1..bs {
+                        t += blk[k * bs + i] * xb[k];
+                    }
+                    *yi += t;
+                }
             }
-            *yi += t;
         }
     }
+}
+
+/// [`block_row`] for blocks of `B x B`.
+#[inline(always)]
+fn block_row_of<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
+    let mut sum = [0.0; B];
+    for (blk, &c) in vals.chunks_exact(B * B).zip(cols) {
+        let c = c as usize * B;
+        let xb: &[f64; B] = x[c..c + B].try_into().expect("a block of x");
+        for (i, s) in sum.iter_mut().enumerate() {
+            let mut t = blk[i] * xb[0];
+            for k in 1..B {
+                t += blk[k * B + i] * xb[k];
+            }
+            *s += t;
+        }
+    }
+    y.copy_from_slice(&sum);
 }
 
 /// The `bs` scalar rows of one block row stored row by row (row `i`: the blocks' row `i`, columns in
 /// order), each a running sum as in PETSc's AIJ product.
 #[inline(always)]
 fn scalar_rows(bs: usize, vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
+    match bs {
+        2 => scalar_rows_of::<2>(vals, cols, x, y),
+        3 => scalar_rows_of::<3>(vals, cols, x, y),
+        4 => scalar_rows_of::<4>(vals, cols, x, y),
+        _ => {
+            let n = cols.len();
+            for (i, yi) in y.iter_mut().enumerate() {
+                let row = &vals[i * n * bs..(i + 1) * n * bs];
+                let mut s = 0.0;
+                for (vb, &c) in row.chunks_exact(bs).zip(cols) {
+                    let xb = &x[c as usize * bs..(c as usize + 1) * bs];
+                    for k in 0..bs {
+                        s += vb[k] * xb[k];
+                    }
+                }
+                *yi = s;
+            }
+        }
+    }
+}
+
+/// [`scalar_rows`] for blocks of `B x B`.
+#[inline(always)]
+fn scalar_rows_of<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
     let n = cols.len();
     for (i, yi) in y.iter_mut().enumerate() {
-        let row = &vals[i * n * bs..(i + 1) * n * bs];
+        let row = &vals[i * n * B..(i + 1) * n * B];
         let mut s = 0.0;
-        for (vb, &c) in row.chunks_exact(bs).zip(cols) {
-            let xb = &x[c as usize * bs..(c as usize + 1) * bs];
-            for k in 0..bs {
+        for (vb, &c) in row.chunks_exact(B).zip(cols) {
+            let c = c as usize * B;
+            let xb: &[f64; B] = x[c..c + B].try_into().expect("a block of x");
+            for k in 0..B {
                 s += vb[k] * xb[k];
             }
         }
