@@ -27,6 +27,21 @@ pub struct Matrix {
 }
 
 impl Matrix {
+    /// Sets the block size (which divides the rows, checked by PETSc) and then the options
+    /// (`-mat_type` ...).
+    fn set_block_size_and_options(&self, block_size: usize) -> Result<()> {
+        // SAFETY: valid matrix.
+        check(
+            unsafe { sys::MatSetBlockSize(self.raw, to_petsc_int(block_size, "MatSetBlockSize")?) },
+            "MatSetBlockSize",
+        )?;
+        // SAFETY: valid matrix.
+        check(
+            unsafe { sys::MatSetFromOptions(self.raw) },
+            "MatSetFromOptions",
+        )
+    }
+
     /// Takes ownership of a matrix PETSc made (destroyed on drop).
     pub(crate) fn from_raw(raw: sys::Mat) -> Self {
         Self {
@@ -53,26 +68,14 @@ impl Matrix {
         let n = to_petsc_int(local_rows, "MatSetSizes")?;
         let decide = unsafe { sys::mpmc_petsc_decide() };
         // Later failures leave `m` to Drop.
-        let raw = create(sys::MatCreate, "MatCreate")?;
-        let m = Self {
-            raw,
-            owned: true,
-            coo_len: None,
-        };
+        let m = Self::from_raw(create(sys::MatCreate, "MatCreate")?);
         check(
             unsafe { sys::MatSetSizes(m.raw, n, n, decide, decide) },
             "MatSetSizes",
         )?;
         let t = super::cstring(mat_type)?;
         check(unsafe { sys::MatSetType(m.raw, t.as_ptr()) }, "MatSetType")?;
-        check(
-            unsafe { sys::MatSetBlockSize(m.raw, to_petsc_int(block_size, "MatSetBlockSize")?) },
-            "MatSetBlockSize",
-        )?;
-        check(
-            unsafe { sys::MatSetFromOptions(m.raw) },
-            "MatSetFromOptions",
-        )?;
+        m.set_block_size_and_options(block_size)?;
         Ok(m)
     }
 
@@ -92,12 +95,7 @@ impl Matrix {
         let n = to_petsc_int(local_cols, "MatSetSizes")?;
         let bs = to_petsc_int(block_size, "MatSetBlockSizes")?;
         let decide = unsafe { sys::mpmc_petsc_decide() };
-        let raw = create(sys::MatCreate, "MatCreate")?;
-        let mut mat = Self {
-            raw,
-            owned: true,
-            coo_len: None,
-        };
+        let mut mat = Self::from_raw(create(sys::MatCreate, "MatCreate")?);
         // SAFETY: valid matrix; sizes and block sizes checked by PETSc.
         check(
             unsafe { sys::MatSetSizes(mat.raw, m, n, decide, decide) },
@@ -272,11 +270,7 @@ impl Matrix {
         );
         // Declared before the matrix, so dropped after it on every path: the arrays outlive the matrix.
         let holder = CsrArrays::into_container(arrays)?;
-        let mut m = Self {
-            raw: std::ptr::null_mut(),
-            owned: true,
-            coo_len: None,
-        };
+        let mut m = Self::from_raw(std::ptr::null_mut());
         // SAFETY: pi has rows + 1 entries from 0, pj and pa i[rows] (columns sorted within each row); the
         // arrays stay where they are until the container frees them, after the matrix is destroyed.
         check(
@@ -292,16 +286,8 @@ impl Matrix {
             },
             "PetscObjectCompose",
         )?;
-        // SAFETY: valid matrix; the block size divides the rows (checked by PETSc).
-        check(
-            unsafe { sys::MatSetBlockSize(m.raw, to_petsc_int(p.bs, "MatSetBlockSize")?) },
-            "MatSetBlockSize",
-        )?;
-        // SAFETY: valid matrix; `-mat_type` resolves to `seqaij` again, as it did for this one.
-        check(
-            unsafe { sys::MatSetFromOptions(m.raw) },
-            "MatSetFromOptions",
-        )?;
+        // `-mat_type` resolves to `seqaij` again, as it did for this one.
+        m.set_block_size_and_options(p.bs)?;
         *self = m;
         Ok(())
     }

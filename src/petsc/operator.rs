@@ -39,16 +39,18 @@ pub struct ThreadedOperator {
 }
 
 impl ThreadedOperator {
-    /// The threaded product of `jacobian` (one process, its whole pattern `pattern`), or `None` where
-    /// it does not apply: a matrix type whose values are not PETSc's CSR arrays (`seqaij`: scalar rows,
-    /// `seqbaij`: column-major blocks), or one thread.
+    /// The threaded product of `jacobian` (its whole pattern `pattern`), or `None` where it does not
+    /// apply: a matrix type whose values are not one process's CSR arrays (`seqaij`: scalar rows,
+    /// `seqbaij`: column-major blocks; the MPI types of several processes are not), one thread, or a
+    /// block size other than the 2 to 4 unknowns per node of 2D and 3D.
     pub fn over(jacobian: &Matrix, pattern: &BlockCsr<'_>) -> Result<Option<Self>> {
         let layout = match jacobian.type_name()?.as_str() {
             "seqaij" => BlockLayout::Rows,
             "seqbaij" => BlockLayout::Blocks,
             _ => return Ok(None),
         };
-        if rayon::current_num_threads() < 2 || pattern.first != 0 {
+        if rayon::current_num_threads() < 2 || pattern.first != 0 || !(2..=4).contains(&pattern.bs)
+        {
             return Ok(None);
         }
         let n = to_petsc_int(pattern.block_rows() * pattern.bs, "MatCreateShell")?;
@@ -229,53 +231,36 @@ unsafe extern "C" fn multiply(
 }
 
 impl Rows {
-    /// `y = J x` with the values `v` of the Jacobian, block rows in parallel.
+    /// `y = J x` with the values `v` of the Jacobian, block rows in parallel, with the block size
+    /// (2 to 4: [`ThreadedOperator::over`]) known to the compiler.
     fn apply(&self, v: &[f64], x: &[f64], y: &mut [f64]) {
-        let bs = self.bs;
-        y.par_chunks_mut(CHUNK * bs)
-            .enumerate()
-            .for_each(|(c, yc)| {
-                for (l, yr) in yc.chunks_mut(bs).enumerate() {
-                    let a = c * CHUNK + l;
-                    let (lo, hi) = (self.row_ptr[a], self.row_ptr[a + 1]);
-                    let (vals, cols) = (&v[lo * bs * bs..hi * bs * bs], &self.cols[lo..hi]);
-                    match self.layout {
-                        BlockLayout::Blocks => block_row(bs, vals, cols, x, yr),
-                        BlockLayout::Rows => scalar_rows(bs, vals, cols, x, yr),
-                    }
-                }
-            });
-    }
-}
-
-/// One block row of column-major `bs x bs` blocks: `y_i = sum_blocks (sum_k V_ik x_k)`, each block's
-/// contribution summed over `k` first and then added, as PETSc's `MatMult_SeqBAIJ_2/3` do; the block
-/// sizes of 2D and 3D (2 to 4) with their size known to the compiler.
-#[inline(always)]
-fn block_row(bs: usize, vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
-    match bs {
-        2 => block_row_of::<2>(vals, cols, x, y),
-        3 => block_row_of::<3>(vals, cols, x, y),
-        4 => block_row_of::<4>(vals, cols, x, y),
-        _ => {
-            y.fill(0.0);
-            for (blk, &c) in vals.chunks_exact(bs * bs).zip(cols) {
-                let xb = &x[c as usize * bs..(c as usize + 1) * bs];
-                for (i, yi) in y.iter_mut().enumerate() {
-                    let mut t = blk[i] * xb[0];
-                    for k in 1..bs {
-                        t += blk[k * bs + i] * xb[k];
-                    }
-                    *yi += t;
-                }
-            }
+        match self.bs {
+            2 => self.apply_of::<2>(v, x, y),
+            3 => self.apply_of::<3>(v, x, y),
+            4 => self.apply_of::<4>(v, x, y),
+            bs => unreachable!("block size {bs}: the operator is made for 2 to 4 only"),
         }
     }
+
+    fn apply_of<const B: usize>(&self, v: &[f64], x: &[f64], y: &mut [f64]) {
+        y.par_chunks_mut(CHUNK * B).enumerate().for_each(|(c, yc)| {
+            for (l, yr) in yc.chunks_mut(B).enumerate() {
+                let a = c * CHUNK + l;
+                let (lo, hi) = (self.row_ptr[a], self.row_ptr[a + 1]);
+                let (vals, cols) = (&v[lo * B * B..hi * B * B], &self.cols[lo..hi]);
+                match self.layout {
+                    BlockLayout::Blocks => block_row::<B>(vals, cols, x, yr),
+                    BlockLayout::Rows => scalar_rows::<B>(vals, cols, x, yr),
+                }
+            }
+        });
+    }
 }
 
-/// [`block_row`] for blocks of `B x B`.
+/// One block row of column-major `B x B` blocks: `y_i = sum_blocks (sum_k V_ik x_k)`, each block's
+/// contribution summed over `k` first and then added, as PETSc's `MatMult_SeqBAIJ_2/3/4` do.
 #[inline(always)]
-fn block_row_of<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
+fn block_row<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
     let mut sum = [0.0; B];
     for (blk, &c) in vals.chunks_exact(B * B).zip(cols) {
         let c = c as usize * B;
@@ -291,34 +276,10 @@ fn block_row_of<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [
     y.copy_from_slice(&sum);
 }
 
-/// The `bs` scalar rows of one block row stored row by row (row `i`: the blocks' row `i`, columns in
+/// The `B` scalar rows of one block row stored row by row (row `i`: the blocks' row `i`, columns in
 /// order), each a running sum as in PETSc's AIJ product.
 #[inline(always)]
-fn scalar_rows(bs: usize, vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
-    match bs {
-        2 => scalar_rows_of::<2>(vals, cols, x, y),
-        3 => scalar_rows_of::<3>(vals, cols, x, y),
-        4 => scalar_rows_of::<4>(vals, cols, x, y),
-        _ => {
-            let n = cols.len();
-            for (i, yi) in y.iter_mut().enumerate() {
-                let row = &vals[i * n * bs..(i + 1) * n * bs];
-                let mut s = 0.0;
-                for (vb, &c) in row.chunks_exact(bs).zip(cols) {
-                    let xb = &x[c as usize * bs..(c as usize + 1) * bs];
-                    for k in 0..bs {
-                        s += vb[k] * xb[k];
-                    }
-                }
-                *yi = s;
-            }
-        }
-    }
-}
-
-/// [`scalar_rows`] for blocks of `B x B`.
-#[inline(always)]
-fn scalar_rows_of<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
+fn scalar_rows<const B: usize>(vals: &[f64], cols: &[u32], x: &[f64], y: &mut [f64]) {
     let n = cols.len();
     for (i, yi) in y.iter_mut().enumerate() {
         let row = &vals[i * n * B..(i + 1) * n * B];

@@ -213,9 +213,10 @@ impl LinearSystem {
         let kind = petsc::matrix_type_for(session.size(), pc.as_deref(), sub_pc.as_deref());
         let mut jac = Matrix::with_type(session, n, nf, kind)?;
         jac.set_block_pattern(&owned.pattern())?;
-        // The Krylov solver's products on all threads of a single process (PETSc's own run on one
-        // core); not for the multigrid, whose Galerkin products need the assembled operator.
-        if session.size() == 1 && pc.as_deref() != Some("mg") && threaded_operator(session)? {
+        // The Krylov solver's products on all threads (PETSc's own run on one core; `over` declines
+        // the matrices of several processes); not for the multigrid, whose Galerkin products need the
+        // assembled operator.
+        if pc.as_deref() != Some("mg") && threaded_operator(session)? {
             if let Some(op) = ThreadedOperator::over(&jac, &owned.pattern())? {
                 snes.set_operator(op);
             }
