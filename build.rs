@@ -66,7 +66,8 @@ fn main() {
         "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray",
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix|MonitorSet)",
-        "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType)",
+        "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType|GetOperators|SetFailedReason)",
+        "PCShell(SetContext|GetContext|SetDestroy|SetSetUp|SetApply|SetName)",
         "PCMG(SetLevels|GetLevels|SetGalerkin|SetInterpolation)|MatSetBlockSizes",
         "SNES(Create|Destroy|SetFunction|SetJacobian|SetFromOptions|SetOptionsPrefix|Solve|GetIterationNumber)",
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
@@ -78,7 +79,7 @@ fn main() {
     let mut builder = bindgen::Builder::default()
         .header("wrapper.h")
         .allowlist_function(functions.join("|"))
-        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType|MatOperation)")
+        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType|MatOperation|PCFailedReason)")
         .blocklist_item("FP_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .layout_tests(false)

@@ -34,6 +34,7 @@ pub mod csg;
 pub mod dofs;
 pub mod geometry;
 pub mod grid;
+pub mod ilu;
 pub mod input;
 pub mod io;
 pub mod material;

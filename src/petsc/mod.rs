@@ -13,6 +13,7 @@ mod ksp;
 mod matrix;
 mod operator;
 mod options;
+mod preconditioner;
 mod snes;
 pub mod sys;
 mod vector;
@@ -24,6 +25,7 @@ pub use options::{
     apply_default_options, has_option, option_string, set_default_option, set_option,
     unused_options,
 };
+pub use preconditioner::use_threaded_ilu;
 pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo, Tolerances};
 pub use vector::{GatherAll, GatherRange, Vector};
 

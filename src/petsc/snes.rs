@@ -263,7 +263,7 @@ impl Snes {
         Ok(ksp)
     }
 
-    fn pc(&self) -> Result<sys::PC> {
+    pub(super) fn pc(&self) -> Result<sys::PC> {
         let mut pc = std::ptr::null_mut();
         // SAFETY: out-parameter, borrowed reference.
         check(unsafe { sys::KSPGetPC(self.ksp()?, &mut pc) }, "KSPGetPC")?;

@@ -216,10 +216,20 @@ impl LinearSystem {
         // The Krylov solver's products on all threads (PETSc's own run on one core; `over` declines
         // the matrices of several processes); not for the multigrid, whose Galerkin products need the
         // assembled operator.
-        if pc.as_deref() != Some("mg") && threaded_operator(session)? {
+        if pc.as_deref() != Some("mg") && flag(session, "mpm_threaded_operator")? {
             if let Some(op) = ThreadedOperator::over(&jac, &owned.pattern())? {
                 snes.set_operator(op);
             }
+        }
+        // ILU(0) on all threads (`ilu::SchwarzIlu`, one overlapping subdomain per thread) in place of
+        // PETSc's one-core block Jacobi + ILU(0) of the whole matrix; declined by
+        // `petsc::use_threaded_ilu` for matrices other than one process's blocks.
+        if pc.as_deref() == Some("bjacobi")
+            && matches!(sub_pc.as_deref(), None | Some("ilu"))
+            && plain_ilu(session, prefix)?
+            && flag(session, "mpm_threaded_ilu")?
+        {
+            petsc::use_threaded_ilu(&snes, &jac, &owned.pattern())?;
         }
         // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
         // 6 in 3D) for algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
@@ -272,20 +282,33 @@ impl LinearSystem {
     }
 }
 
-/// Whether the Krylov solver multiplies by the Jacobian on all threads (`petsc::ThreadedOperator`):
-/// yes unless `-mpm_threaded_operator` says 0, false or no.
-fn threaded_operator(session: &SessionGuard) -> Result<bool, StepError> {
-    Ok(
-        match petsc::option_string(session, "mpm_threaded_operator")?.as_deref() {
-            None | Some("" | "1" | "true" | "yes") => true,
-            Some("0" | "false" | "no") => false,
-            Some(v) => {
-                return Err(StepError::Setup(format!(
-                    "-mpm_threaded_operator {v}: allowed are true, false, 1, 0, yes, no"
-                )));
-            }
-        },
-    )
+/// A switch of the options database (`-NAME`): on unless it says 0, false or no. `mpm_threaded_operator`:
+/// the Krylov solver multiplies by the Jacobian on all threads (`petsc::ThreadedOperator`);
+/// `mpm_threaded_ilu`: ILU(0) factored and applied on all threads (`petsc::use_threaded_ilu`).
+fn flag(session: &SessionGuard, name: &str) -> Result<bool, StepError> {
+    Ok(match petsc::option_string(session, name)?.as_deref() {
+        None | Some("" | "1" | "true" | "yes") => true,
+        Some("0" | "false" | "no") => false,
+        Some(v) => {
+            return Err(StepError::Setup(format!(
+                "-{name} {v}: allowed are true, false, 1, 0, yes, no"
+            )));
+        }
+    })
+}
+
+/// True if the block Jacobi preconditioner asks for nothing the threaded ILU(0) does not do: one block
+/// per process (no `-pc_bjacobi_blocks`), ILU without fill levels (`-sub_pc_factor_levels` 0) in the
+/// natural ordering.
+fn plain_ilu(session: &SessionGuard, prefix: Option<&str>) -> Result<bool, StepError> {
+    let p = prefix.unwrap_or("");
+    let opt = |name: &str| petsc::option_string(session, &format!("{p}{name}"));
+    Ok(opt("pc_bjacobi_blocks")?.is_none()
+        && matches!(opt("sub_pc_factor_levels")?.as_deref(), None | Some("0"))
+        && matches!(
+            opt("sub_pc_factor_mat_ordering_type")?.as_deref(),
+            None | Some("natural")
+        ))
 }
 
 /// The number of multigrid levels the options database asks for (`-pc_mg_levels` with the SNES prefix),

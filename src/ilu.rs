@@ -1,0 +1,571 @@
+//! ILU(0) of a block matrix on overlapping subdomains, one per thread: the restricted additive Schwarz
+//! preconditioner that GMRES uses on one process with several threads (`petsc::ThreadedIlu`).
+//!
+//! The block rows (grid nodes in [`crate::dofs::DofMap`] order, i.e. row by row of the background grid)
+//! are cut into `parts` contiguous ranges of about equal nonzeros. Each part is widened to the
+//! contiguous range of all block columns its rows touch (one layer of overlap in the graph of the
+//! matrix, about two rows of grid nodes on either side of a cut), and the matrix restricted to that range
+//! is factored by ILU(0), the block incomplete LU on the matrix's own pattern, as PETSc's
+//! `MatLUFactorNumeric_SeqBAIJ_N` does it (row by row, `L_ik = A_ik U_kk^-1`, the diagonal blocks stored
+//! inverted). The preconditioner applies every part's `(L U)^-1` to its widened range of the vector and
+//! keeps the result on its own rows only ("restricted"): with one part it is the ILU(0) of the whole
+//! matrix. The parts are factored and applied in parallel (rayon), so the factorisation and the
+//! triangular solves, which PETSc runs on one core, use all threads; the overlap keeps GMRES's
+//! iterations those of the whole matrix's ILU(0) (PETSc's additive Schwarz with the same overlap on two
+//! and four processes: `src/solver_defaults.rs`, `INERTIA_PROCESSES`).
+//!
+//! Values are PETSc's block (BAIJ) storage: one `bs x bs` block per pattern entry, each stored column by
+//! column (entry `(i, k)` of a block at `k bs + i`).
+
+use rayon::prelude::*;
+use thiserror::Error;
+
+/// The pivot put in place of an exactly zero pivot of a diagonal block, as PETSc's block kernels do with
+/// `-sub_pc_factor_shift_type nonzero` (its shift amount, 100 times the machine epsilon).
+const ZERO_PIVOT_SHIFT: f64 = 100.0 * f64::EPSILON;
+
+/// Why a preconditioner cannot be built or factored.
+#[derive(Debug, Error, PartialEq)]
+pub enum IluError {
+    /// A block row without its diagonal block.
+    #[error("block row {0} has no diagonal block")]
+    NoDiagonal(usize),
+    /// A block size without a kernel.
+    #[error("block size {0}: the threaded ILU(0) has kernels for 2 to 4 unknowns per node")]
+    BlockSize(usize),
+    /// A diagonal block whose factorisation is not finite.
+    #[error("the diagonal block of row {0} is singular or not finite after elimination")]
+    Pivot(usize),
+}
+
+/// One subdomain: the block rows `lo..hi` (its own rows `own` and the overlap) with the pattern of the
+/// matrix restricted to them, and the factors.
+#[derive(Debug)]
+struct Part {
+    /// Widened range of block rows and columns.
+    lo: usize,
+    /// Own block rows (inside `lo..hi`), whose results the preconditioner keeps.
+    own: std::ops::Range<usize>,
+    /// Local row pointers into `col` / `src`.
+    row_ptr: Vec<usize>,
+    /// Local block columns (`global - lo`), ascending within each row.
+    col: Vec<u32>,
+    /// Position of each local entry in the global pattern (its block in the matrix's values).
+    src: Vec<usize>,
+    /// Position of each row's diagonal entry.
+    diag: Vec<usize>,
+    /// The factors: `L` (unit diagonal, not stored) below, `U` above and the inverted diagonal blocks.
+    lu: Vec<f64>,
+    /// Position of each local column in the row being factored (`usize::MAX`: not in the row).
+    mark: Vec<usize>,
+    /// The local vector of the solves.
+    z: Vec<f64>,
+}
+
+/// Block ILU(0) on overlapping subdomains (restricted additive Schwarz), factored and applied in
+/// parallel. Built once per pattern ([`SchwarzIlu::new`]), factored at every preconditioner set-up
+/// ([`SchwarzIlu::factor`]), applied at every Krylov iteration ([`SchwarzIlu::apply`]).
+#[derive(Debug)]
+pub struct SchwarzIlu {
+    bs: usize,
+    /// Block rows of the matrix.
+    n: usize,
+    /// Blocks of the pattern.
+    blocks: usize,
+    parts: Vec<Part>,
+    /// The last factorisation succeeded.
+    factored: bool,
+}
+
+impl SchwarzIlu {
+    /// The subdomains of the block pattern `row_ptr` / `cols` (columns ascending within each row, every
+    /// row holding its diagonal) cut into at most `parts` pieces, with block size `bs` (2 to 4).
+    pub fn new(bs: usize, row_ptr: &[usize], cols: &[u32], parts: usize) -> Result<Self, IluError> {
+        if !(2..=4).contains(&bs) {
+            return Err(IluError::BlockSize(bs));
+        }
+        let n = row_ptr.len().saturating_sub(1);
+        let parts = parts.clamp(1, n.max(1));
+        // Own ranges of about equal nonzeros.
+        let nnz = row_ptr[n];
+        let mut cuts = vec![0usize];
+        for t in 1..parts {
+            let target = nnz * t / parts;
+            let r = row_ptr.partition_point(|&p| p < target).min(n);
+            cuts.push(r.max(*cuts.last().expect("a first cut")));
+        }
+        cuts.push(n);
+        let mut out = Vec::with_capacity(parts);
+        for w in cuts.windows(2) {
+            let own = w[0]..w[1];
+            if own.is_empty() {
+                continue;
+            }
+            let lo = own
+                .clone()
+                .map(|r| cols[row_ptr[r]] as usize)
+                .min()
+                .unwrap_or(own.start)
+                .min(own.start);
+            let hi = own
+                .clone()
+                .map(|r| cols[row_ptr[r + 1] - 1] as usize + 1)
+                .max()
+                .unwrap_or(own.end)
+                .max(own.end);
+            out.push(Part::new(bs, row_ptr, cols, lo..hi, own)?);
+        }
+        Ok(Self {
+            bs,
+            n,
+            blocks: nnz,
+            parts: out,
+            factored: false,
+        })
+    }
+
+    /// Scalar rows of the matrix.
+    pub fn rows(&self) -> usize {
+        self.n * self.bs
+    }
+
+    /// Length of the matrix's values array (one `bs x bs` block per pattern entry).
+    pub fn values_len(&self) -> usize {
+        self.blocks * self.bs * self.bs
+    }
+
+    /// Number of subdomains.
+    pub fn parts(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// Factors every subdomain from the matrix's block values `values` (in the pattern's order), in
+    /// parallel. On an error the preconditioner is marked unusable until the next successful
+    /// factorisation.
+    pub fn factor(&mut self, values: &[f64]) -> Result<(), IluError> {
+        let bs = self.bs;
+        let result = self.parts.par_iter_mut().try_for_each(|p| match bs {
+            2 => p.factor::<2>(values),
+            3 => p.factor::<3>(values),
+            4 => p.factor::<4>(values),
+            _ => Err(IluError::BlockSize(bs)),
+        });
+        self.factored = result.is_ok();
+        result
+    }
+
+    /// `y = M^-1 x`: every subdomain's `(L U)^-1` applied to its widened range of `x`, kept on its own
+    /// rows; NaN everywhere if the last factorisation failed (so that the Krylov solver stops).
+    pub fn apply(&mut self, x: &[f64], y: &mut [f64]) {
+        if !self.factored {
+            y.fill(f64::NAN);
+            return;
+        }
+        let bs = self.bs;
+        // Split y into the parts' own rows (contiguous, in order, covering all rows).
+        let mut chunks = Vec::with_capacity(self.parts.len());
+        let mut rest = y;
+        for p in &self.parts {
+            let (head, tail) = rest.split_at_mut(p.own.len() * bs);
+            chunks.push(head);
+            rest = tail;
+        }
+        self.parts
+            .par_iter_mut()
+            .zip(chunks)
+            .for_each(|(p, out)| match bs {
+                2 => p.solve::<2>(x, out),
+                3 => p.solve::<3>(x, out),
+                _ => p.solve::<4>(x, out),
+            });
+    }
+}
+
+impl Part {
+    fn new(
+        bs: usize,
+        row_ptr: &[usize],
+        cols: &[u32],
+        range: std::ops::Range<usize>,
+        own: std::ops::Range<usize>,
+    ) -> Result<Self, IluError> {
+        let (lo, hi) = (range.start, range.end);
+        let m = hi - lo;
+        let mut local_ptr = Vec::with_capacity(m + 1);
+        local_ptr.push(0);
+        let (mut col, mut src, mut diag) = (Vec::new(), Vec::new(), Vec::with_capacity(m));
+        for r in lo..hi {
+            let mut d = None;
+            for (p, &c) in cols
+                .iter()
+                .enumerate()
+                .take(row_ptr[r + 1])
+                .skip(row_ptr[r])
+            {
+                let c = c as usize;
+                if (lo..hi).contains(&c) {
+                    if c == r {
+                        d = Some(col.len());
+                    }
+                    col.push((c - lo) as u32);
+                    src.push(p);
+                }
+            }
+            diag.push(d.ok_or(IluError::NoDiagonal(r))?);
+            local_ptr.push(col.len());
+        }
+        let lu = vec![0.0; col.len() * bs * bs];
+        Ok(Self {
+            lo,
+            own,
+            row_ptr: local_ptr,
+            col,
+            src,
+            diag,
+            lu,
+            mark: vec![usize::MAX; m],
+            z: vec![0.0; m * bs],
+        })
+    }
+
+    /// ILU(0) of the local matrix, row by row (PETSc's order): each block `A_ik` left of the diagonal
+    /// becomes `L_ik = A_ik U_kk^-1` and is eliminated from the rest of row `i` where its pattern has
+    /// room; then the diagonal block is inverted.
+    fn factor<const B: usize>(&mut self, values: &[f64]) -> Result<(), IluError> {
+        let bb = B * B;
+        for (q, &s) in self.src.iter().enumerate() {
+            self.lu[q * bb..(q + 1) * bb].copy_from_slice(&values[s * bb..(s + 1) * bb]);
+        }
+        let m = self.diag.len();
+        for i in 0..m {
+            let (rs, re, di) = (self.row_ptr[i], self.row_ptr[i + 1], self.diag[i]);
+            for q in rs..re {
+                self.mark[self.col[q] as usize] = q;
+            }
+            for q in rs..di {
+                let k = self.col[q] as usize;
+                let dk = self.diag[k];
+                // L_ik = A_ik D_k^-1 (D_k^-1 stored at the diagonal of row k).
+                let l: [f64; 16] = {
+                    let mut t = [0.0; 16];
+                    mat_mul::<B>(
+                        &self.lu[q * bb..(q + 1) * bb],
+                        &self.lu[dk * bb..(dk + 1) * bb],
+                        &mut t[..bb],
+                    );
+                    t
+                };
+                self.lu[q * bb..(q + 1) * bb].copy_from_slice(&l[..bb]);
+                for q2 in dk + 1..self.row_ptr[k + 1] {
+                    let p = self.mark[self.col[q2] as usize];
+                    if p != usize::MAX {
+                        let (dst, u) = split_pair(&mut self.lu, p * bb, q2 * bb, bb);
+                        mat_mul_sub::<B>(&l, u, dst);
+                    }
+                }
+            }
+            for q in rs..re {
+                self.mark[self.col[q] as usize] = usize::MAX;
+            }
+            if !invert::<B>(&mut self.lu[di * bb..(di + 1) * bb]) {
+                return Err(IluError::Pivot(self.lo + i));
+            }
+        }
+        Ok(())
+    }
+
+    /// Forward and backward solves on the widened range of `x`; the own rows' results into `out`.
+    fn solve<const B: usize>(&mut self, x: &[f64], out: &mut [f64]) {
+        let bb = B * B;
+        let m = self.diag.len();
+        let z = &mut self.z;
+        z.copy_from_slice(&x[self.lo * B..(self.lo + m) * B]);
+        for i in 0..m {
+            let (rs, di) = (self.row_ptr[i], self.diag[i]);
+            let mut s = [0.0; B];
+            s.copy_from_slice(&z[i * B..(i + 1) * B]);
+            for (blk, &c) in self.lu[rs * bb..di * bb]
+                .chunks_exact(bb)
+                .zip(&self.col[rs..di])
+            {
+                let c = c as usize * B;
+                mat_vec_sub::<B>(blk, &z[c..c + B], &mut s);
+            }
+            z[i * B..(i + 1) * B].copy_from_slice(&s);
+        }
+        for i in (0..m).rev() {
+            let (di, re) = (self.diag[i], self.row_ptr[i + 1]);
+            let mut s = [0.0; B];
+            s.copy_from_slice(&z[i * B..(i + 1) * B]);
+            for (blk, &c) in self.lu[(di + 1) * bb..re * bb]
+                .chunks_exact(bb)
+                .zip(&self.col[di + 1..re])
+            {
+                let c = c as usize * B;
+                mat_vec_sub::<B>(blk, &z[c..c + B], &mut s);
+            }
+            let d = &self.lu[di * bb..(di + 1) * bb];
+            let zi = &mut z[i * B..(i + 1) * B];
+            zi.fill(0.0);
+            for (k, sk) in s.iter().enumerate() {
+                for (r, zr) in zi.iter_mut().enumerate() {
+                    *zr += d[k * B + r] * sk;
+                }
+            }
+        }
+        let first = self.own.start - self.lo;
+        out.copy_from_slice(&z[first * B..(first + self.own.len()) * B]);
+    }
+}
+
+/// Two disjoint blocks of `v`: `(&mut v[a..a + len], &v[b..b + len])`.
+#[inline(always)]
+fn split_pair(v: &mut [f64], a: usize, b: usize, len: usize) -> (&mut [f64], &[f64]) {
+    if a < b {
+        let (x, y) = v.split_at_mut(b);
+        (&mut x[a..a + len], &y[..len])
+    } else {
+        let (x, y) = v.split_at_mut(a);
+        (&mut y[..len], &x[b..b + len])
+    }
+}
+
+/// `c = a b` for column-major `B x B` blocks.
+#[inline(always)]
+fn mat_mul<const B: usize>(a: &[f64], b: &[f64], c: &mut [f64]) {
+    let (a, b, c) = (&a[..B * B], &b[..B * B], &mut c[..B * B]);
+    for k in 0..B {
+        for i in 0..B {
+            let mut t = 0.0;
+            for l in 0..B {
+                t += a[l * B + i] * b[k * B + l];
+            }
+            c[k * B + i] = t;
+        }
+    }
+}
+
+/// `c -= a b` for column-major `B x B` blocks.
+#[inline(always)]
+fn mat_mul_sub<const B: usize>(a: &[f64], b: &[f64], c: &mut [f64]) {
+    let (a, b, c) = (&a[..B * B], &b[..B * B], &mut c[..B * B]);
+    for k in 0..B {
+        for i in 0..B {
+            let mut t = 0.0;
+            for l in 0..B {
+                t += a[l * B + i] * b[k * B + l];
+            }
+            c[k * B + i] -= t;
+        }
+    }
+}
+
+/// `s -= a x` for a column-major `B x B` block `a` (`B * B` values) and `x` (`B` values).
+#[inline(always)]
+fn mat_vec_sub<const B: usize>(a: &[f64], x: &[f64], s: &mut [f64; B]) {
+    let (a, x) = (&a[..B * B], &x[..B]);
+    for (col, &xk) in a.chunks_exact(B).zip(x) {
+        for (si, &aik) in s.iter_mut().zip(col) {
+            *si -= aik * xk;
+        }
+    }
+}
+
+/// Inverts a column-major `B x B` block in place (Gauss-Jordan with partial pivoting; an exactly zero
+/// pivot is replaced by [`ZERO_PIVOT_SHIFT`]). False if the result is not finite.
+fn invert<const B: usize>(a: &mut [f64]) -> bool {
+    // Work on [A | I] row-major.
+    let mut m = [[0.0; 8]; 4];
+    for (r, row) in m.iter_mut().enumerate().take(B) {
+        for c in 0..B {
+            row[c] = a[c * B + r];
+        }
+        row[B + r] = 1.0;
+    }
+    for c in 0..B {
+        let p = (c..B)
+            .max_by(|&x, &y| m[x][c].abs().total_cmp(&m[y][c].abs()))
+            .unwrap_or(c);
+        m.swap(c, p);
+        if m[c][c] == 0.0 {
+            m[c][c] = ZERO_PIVOT_SHIFT;
+        }
+        let inv = 1.0 / m[c][c];
+        for v in m[c].iter_mut().take(2 * B) {
+            *v *= inv;
+        }
+        let pivot_row = m[c];
+        for (r, row) in m.iter_mut().enumerate().take(B) {
+            let f = row[c];
+            if r != c && f != 0.0 {
+                for (v, p) in row.iter_mut().zip(&pivot_row).take(2 * B) {
+                    *v -= f * p;
+                }
+            }
+        }
+    }
+    let mut finite = true;
+    for r in 0..B {
+        for c in 0..B {
+            let v = m[r][B + c];
+            finite &= v.is_finite();
+            a[c * B + r] = v;
+        }
+    }
+    finite
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A block tridiagonal-plus matrix on a 1D chain of `n` nodes with couplings to `reach` neighbours
+    /// on either side (diagonally dominant), as (row_ptr, cols, values) in BAIJ order.
+    fn chain(n: usize, bs: usize, reach: usize) -> (Vec<usize>, Vec<u32>, Vec<f64>) {
+        let (mut row_ptr, mut cols, mut vals) = (vec![0], Vec::new(), Vec::new());
+        for r in 0..n {
+            for c in r.saturating_sub(reach)..(r + reach + 1).min(n) {
+                cols.push(c as u32);
+                for k in 0..bs {
+                    for i in 0..bs {
+                        let v = if r == c {
+                            if i == k { 10.0 + i as f64 } else { 0.5 }
+                        } else {
+                            -0.3 - 0.01 * ((r * 7 + c * 3 + i + 2 * k) % 5) as f64
+                        };
+                        vals.push(v);
+                    }
+                }
+            }
+            row_ptr.push(cols.len());
+        }
+        (row_ptr, cols, vals)
+    }
+
+    fn dense(bs: usize, row_ptr: &[usize], cols: &[u32], vals: &[f64]) -> Vec<Vec<f64>> {
+        let n = (row_ptr.len() - 1) * bs;
+        let mut a = vec![vec![0.0; n]; n];
+        for r in 0..row_ptr.len() - 1 {
+            for p in row_ptr[r]..row_ptr[r + 1] {
+                let c = cols[p] as usize;
+                for k in 0..bs {
+                    for i in 0..bs {
+                        a[r * bs + i][c * bs + k] = vals[p * bs * bs + k * bs + i];
+                    }
+                }
+            }
+        }
+        a
+    }
+
+    /// With a tridiagonal block pattern ILU(0) has no fill to drop: one part is the exact inverse.
+    #[test]
+    fn one_part_on_a_pattern_without_fill_is_the_exact_solve() {
+        for bs in 2..=4 {
+            let (rp, cols, vals) = chain(9, bs, 1);
+            let mut ilu = SchwarzIlu::new(bs, &rp, &cols, 1).expect("pattern");
+            ilu.factor(&vals).expect("factor");
+            let a = dense(bs, &rp, &cols, &vals);
+            let x: Vec<f64> = (0..9 * bs).map(|i| (i as f64 * 0.37).sin()).collect();
+            let mut y = vec![0.0; x.len()];
+            ilu.apply(&x, &mut y);
+            for (r, row) in a.iter().enumerate() {
+                let ay: f64 = row.iter().zip(&y).map(|(a, y)| a * y).sum();
+                assert!(
+                    (ay - x[r]).abs() < 1e-12,
+                    "bs {bs}, row {r}: {ay} vs {}",
+                    x[r]
+                );
+            }
+        }
+    }
+
+    /// Two parts whose overlap covers the whole reach of the matrix solve a pattern without fill
+    /// exactly on their own rows, and each part's own rows partition the rows.
+    #[test]
+    fn parts_partition_the_rows_and_overlap_by_the_reach() {
+        let (rp, cols, _) = chain(40, 3, 2);
+        let ilu = SchwarzIlu::new(3, &rp, &cols, 2).expect("pattern");
+        assert_eq!(ilu.parts(), 2);
+        let (a, b) = (&ilu.parts[0], &ilu.parts[1]);
+        assert_eq!(a.own.start, 0);
+        assert_eq!(a.own.end, b.own.start);
+        assert_eq!(b.own.end, 40);
+        assert_eq!(a.lo, 0);
+        assert_eq!(
+            a.diag.len(),
+            a.own.end + 2,
+            "part 0 reaches 2 rows past its cut"
+        );
+        assert_eq!(
+            b.lo,
+            b.own.start - 2,
+            "part 1 reaches 2 rows before its cut"
+        );
+    }
+
+    /// Restricted additive Schwarz with two parts is a good preconditioner: GMRES-free check by a
+    /// stationary iteration x <- x + M^-1 (b - A x), which converges fast when M^-1 A is near I.
+    #[test]
+    fn two_parts_precondition_as_well_as_one() {
+        let (rp, cols, vals) = chain(60, 3, 2);
+        let a = dense(3, &rp, &cols, &vals);
+        let n = a.len();
+        let b: Vec<f64> = (0..n).map(|i| 1.0 + (i as f64 * 0.11).cos()).collect();
+        let mut errors = Vec::new();
+        for parts in [1, 2, 4] {
+            let mut ilu = SchwarzIlu::new(3, &rp, &cols, parts).expect("pattern");
+            ilu.factor(&vals).expect("factor");
+            let mut x = vec![0.0; n];
+            let (mut r, mut dx) = (vec![0.0; n], vec![0.0; n]);
+            for _ in 0..8 {
+                for (i, row) in a.iter().enumerate() {
+                    r[i] = b[i] - row.iter().zip(&x).map(|(a, x)| a * x).sum::<f64>();
+                }
+                ilu.apply(&r, &mut dx);
+                x.iter_mut().zip(&dx).for_each(|(x, d)| *x += d);
+            }
+            for (i, row) in a.iter().enumerate() {
+                r[i] = b[i] - row.iter().zip(&x).map(|(a, x)| a * x).sum::<f64>();
+            }
+            errors.push(r.iter().map(|v| v * v).sum::<f64>().sqrt());
+        }
+        assert!(errors[0] < 1e-10, "{errors:?}");
+        assert!(errors[1] < 1e-8 && errors[2] < 1e-8, "{errors:?}");
+    }
+
+    #[test]
+    fn a_singular_diagonal_block_fails_the_factorisation_and_poisons_the_solve() {
+        let (rp, cols, mut vals) = chain(5, 2, 1);
+        // Row 2's diagonal block made NaN.
+        let d = rp[2] + 1;
+        vals[d * 4..d * 4 + 4].fill(f64::NAN);
+        let mut ilu = SchwarzIlu::new(2, &rp, &cols, 1).expect("pattern");
+        assert_eq!(ilu.factor(&vals), Err(IluError::Pivot(2)));
+        let mut y = vec![0.0; 10];
+        ilu.apply(&[1.0; 10], &mut y);
+        assert!(y.iter().all(|v| v.is_nan()));
+        assert_eq!(
+            SchwarzIlu::new(5, &rp, &cols, 1).err(),
+            Some(IluError::BlockSize(5))
+        );
+    }
+
+    #[test]
+    fn blocks_invert() {
+        let mut a = [4.0, 1.0, 0.0, 2.0, 5.0, 1.0, 0.0, 1.0, 3.0];
+        let orig = a;
+        assert!(invert::<3>(&mut a));
+        let mut c = [0.0; 9];
+        mat_mul::<3>(&orig, &a, &mut c);
+        for k in 0..3 {
+            for i in 0..3 {
+                let e = if i == k { 1.0 } else { 0.0 };
+                assert!((c[k * 3 + i] - e).abs() < 1e-14);
+            }
+        }
+        // A zero pivot with a zero column is shifted, not a division by zero.
+        let mut z = [0.0, 0.0, 0.0, 1.0];
+        assert!(invert::<2>(&mut z));
+    }
+}
