@@ -360,14 +360,18 @@ fn mat_mul_sub<const B: usize>(a: &[f64], b: &[f64], c: &mut [f64]) {
     }
 }
 
-/// `s -= a x` for a column-major `B x B` block `a` (`B * B` values) and `x` (`B` values).
+/// `s -= a x` for a column-major `B x B` block `a` (`B * B` values) and `x` (`B` values): each row's
+/// product summed first and then subtracted, as PETSc's `MatSolve_SeqBAIJ_N` kernels do, so that the
+/// running sums `s` wait on one operation per block instead of `B`.
 #[inline(always)]
 fn mat_vec_sub<const B: usize>(a: &[f64], x: &[f64], s: &mut [f64; B]) {
     let (a, x) = (&a[..B * B], &x[..B]);
-    for (col, &xk) in a.chunks_exact(B).zip(x) {
-        for (si, &aik) in s.iter_mut().zip(col) {
-            *si -= aik * xk;
+    for (i, si) in s.iter_mut().enumerate() {
+        let mut t = a[i] * x[0];
+        for k in 1..B {
+            t += a[k * B + i] * x[k];
         }
+        *si -= t;
     }
 }
 

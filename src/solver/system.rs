@@ -222,11 +222,15 @@ impl LinearSystem {
             }
         }
         // ILU(0) on all threads (`ilu::SchwarzIlu`, one overlapping subdomain per thread) in place of
-        // PETSc's one-core block Jacobi + ILU(0) of the whole matrix; declined by
-        // `petsc::use_threaded_ilu` for matrices other than one process's blocks.
-        if pc.as_deref() == Some("bjacobi")
-            && matches!(sub_pc.as_deref(), None | Some("ilu"))
-            && plain_ilu(session, prefix)?
+        // PETSc's one-core ILU(0) of the whole matrix (`ilu`, or block Jacobi with one block per
+        // process); declined by `petsc::use_threaded_ilu` for matrices other than one process's blocks.
+        let ilu_options = match (pc.as_deref(), sub_pc.as_deref()) {
+            (Some("bjacobi"), None | Some("ilu")) => Some("sub_"),
+            (Some("ilu"), _) => Some(""),
+            _ => None,
+        };
+        if let Some(sub) = ilu_options
+            && plain_ilu(session, prefix, sub)?
             && flag(session, "mpm_threaded_ilu")?
         {
             petsc::use_threaded_ilu(&snes, &jac, &owned.pattern())?;
@@ -297,16 +301,19 @@ fn flag(session: &SessionGuard, name: &str) -> Result<bool, StepError> {
     })
 }
 
-/// True if the block Jacobi preconditioner asks for nothing the threaded ILU(0) does not do: one block
-/// per process (no `-pc_bjacobi_blocks`), ILU without fill levels (`-sub_pc_factor_levels` 0) in the
-/// natural ordering.
-fn plain_ilu(session: &SessionGuard, prefix: Option<&str>) -> Result<bool, StepError> {
+/// True if the ILU(0) preconditioner (options `-{sub}pc_factor_*`: `sub_` under block Jacobi) asks for
+/// nothing the threaded ILU(0) does not do: one block per process (no `-pc_bjacobi_blocks`), no fill
+/// levels (`-{sub}pc_factor_levels` 0), the natural ordering.
+fn plain_ilu(session: &SessionGuard, prefix: Option<&str>, sub: &str) -> Result<bool, StepError> {
     let p = prefix.unwrap_or("");
     let opt = |name: &str| petsc::option_string(session, &format!("{p}{name}"));
     Ok(opt("pc_bjacobi_blocks")?.is_none()
-        && matches!(opt("sub_pc_factor_levels")?.as_deref(), None | Some("0"))
         && matches!(
-            opt("sub_pc_factor_mat_ordering_type")?.as_deref(),
+            opt(&format!("{sub}pc_factor_levels"))?.as_deref(),
+            None | Some("0")
+        )
+        && matches!(
+            opt(&format!("{sub}pc_factor_mat_ordering_type"))?.as_deref(),
             None | Some("natural")
         ))
 }
