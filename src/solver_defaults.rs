@@ -48,7 +48,9 @@ const NEWTON: &str = "-snes_rtol 1e-8 -snes_atol 1e-8 -snes_max_it 25";
 /// and reusing it within the step pays: the half-resolution CT at 4.3 m/s to 1 ms took 356 s instead of
 /// 399 s (0.89x) for 1.29x the Krylov iterations, 40 cracked steps 0.92x (`docs/benchmarks.md`, "Reusing the
 /// factorisation within a step"). With the former point-wise storage and the stale-factorisation bug of
-/// the block storage, the same lag had measured as a loss.
+/// the block storage, the same lag had measured as a loss. With several threads the solver replaces this
+/// ILU(0) by its own on one overlapping part of the grid per thread (`ilu::SchwarzIlu`; `solver::system`,
+/// `-mpm_threaded_ilu 0` keeps PETSc's).
 const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
      -pc_type bjacobi -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
 
