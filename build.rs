@@ -60,7 +60,7 @@ fn main() {
         "Mat(Create|SetSizes|SetType|SetBlockSize|SetFromOptions|SetUp|Destroy|SetPreallocationCOO|SetValuesCOO)",
         "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|SetOption)",
         "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation|SetValuesBlocked)",
-        "MatSeq(AIJ|BAIJ)(GetArray|RestoreArray)|MatCreateSeqAIJWithArrays|MatSeqAIJ(GetArrayRead|RestoreArrayRead)",
+        "MatSeq(AIJ|BAIJ)(GetArray|RestoreArray)|MatSeqBAIJSetColumnIndices|MatCreateSeqAIJWithArrays|MatSeqAIJ(GetArrayRead|RestoreArrayRead)",
         "PetscContainer(Create|SetPointer|SetUserDestroy|Destroy)|PetscObjectCompose",
         "MatCreateShell|MatShell(SetOperation|GetContext)",
         "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray",
