@@ -1,5 +1,5 @@
 //! ILU(0) of a block matrix on overlapping subdomains, one per thread: the restricted additive Schwarz
-//! preconditioner that GMRES uses on one process with several threads (`petsc::ThreadedIlu`).
+//! preconditioner that GMRES uses on one process with several threads (`petsc::use_threaded_ilu`).
 //!
 //! The block rows (grid nodes in [`crate::dofs::DofMap`] order, i.e. row by row of the background grid)
 //! are cut into `parts` contiguous ranges of about equal nonzeros. Each part is widened to the
@@ -14,14 +14,19 @@
 //! iterations those of the whole matrix's ILU(0) (PETSc's additive Schwarz with the same overlap on two
 //! and four processes: `src/solver_defaults.rs`, `INERTIA_PROCESSES`).
 //!
-//! Values are PETSc's block (BAIJ) storage: one `bs x bs` block per pattern entry, each stored column by
-//! column (entry `(i, k)` of a block at `k bs + i`).
+//! Values are PETSc's block (BAIJ) storage, one `bs x bs` block per pattern entry, each stored column by
+//! column (entry `(i, k)` of a block at `k bs + i`), factored on the node blocks ([`SchwarzIlu::blocks`]);
+//! or PETSc's point-wise (AIJ) storage of the same pattern, factored on single unknowns with PETSc's
+//! restarted diagonal shift ([`SchwarzIlu::points`], the storage of turned set-ups, whose slivers of
+//! support make small pivots).
 
 use rayon::prelude::*;
 use thiserror::Error;
 
-/// The pivot put in place of an exactly zero pivot of a diagonal block, as PETSc's block kernels do with
-/// `-sub_pc_factor_shift_type nonzero` (its shift amount, 100 times the machine epsilon).
+/// PETSc's shift amount and zero-pivot tolerance of `-sub_pc_factor_shift_type nonzero` (100 times the
+/// machine epsilon): the pivot put in place of an exactly zero pivot of a diagonal block (block storage),
+/// the first shift of the diagonal and the relative size below which a point pivot counts as zero (point
+/// storage).
 const ZERO_PIVOT_SHIFT: f64 = 100.0 * f64::EPSILON;
 
 /// Why a preconditioner cannot be built or factored.
@@ -62,28 +67,72 @@ struct Part {
     z: Vec<f64>,
 }
 
-/// Block ILU(0) on overlapping subdomains (restricted additive Schwarz), factored and applied in
-/// parallel. Built once per pattern ([`SchwarzIlu::new`]), factored at every preconditioner set-up
+/// ILU(0) on overlapping subdomains (restricted additive Schwarz), factored and applied in parallel. Built once per pattern ([`SchwarzIlu::blocks`], [`SchwarzIlu::points`]), factored at every preconditioner set-up
 /// ([`SchwarzIlu::factor`]), applied at every Krylov iteration ([`SchwarzIlu::apply`]).
 #[derive(Debug)]
 pub struct SchwarzIlu {
-    bs: usize,
-    /// Block rows of the matrix.
-    n: usize,
-    /// Blocks of the pattern.
-    blocks: usize,
+    /// Size of the blocks the factorisation pivots on: the node blocks (2 to 4) or single unknowns (1).
+    kernel: usize,
+    /// Unknowns (scalar rows) of the matrix.
+    unknowns: usize,
+    /// Length of the matrix's values array.
+    values: usize,
     parts: Vec<Part>,
     /// The last factorisation succeeded.
     factored: bool,
 }
 
 impl SchwarzIlu {
-    /// The subdomains of the block pattern `row_ptr` / `cols` (columns ascending within each row, every
-    /// row holding its diagonal) cut into at most `parts` pieces, with block size `bs` (2 to 4).
-    pub fn new(bs: usize, row_ptr: &[usize], cols: &[u32], parts: usize) -> Result<Self, IluError> {
+    /// Block ILU(0) for PETSc's block (BAIJ) storage: the subdomains of the block pattern `row_ptr` /
+    /// `cols` (columns ascending within each row, every row holding its diagonal) cut into at most
+    /// `parts` pieces, with block size `bs` (2 to 4). A diagonal block's exactly zero pivot is shifted.
+    pub fn blocks(
+        bs: usize,
+        row_ptr: &[usize],
+        cols: &[u32],
+        parts: usize,
+    ) -> Result<Self, IluError> {
         if !(2..=4).contains(&bs) {
             return Err(IluError::BlockSize(bs));
         }
+        Self::build(bs, row_ptr, cols, parts)
+    }
+
+    /// Point ILU(0) for PETSc's point-wise (AIJ) storage of the same block pattern (each block row's
+    /// scalar rows stored one after the other, columns ascending): the factorisation pivots on single
+    /// unknowns and, as PETSc's with `-sub_pc_factor_shift_type nonzero`, starts again with a shift of
+    /// the diagonal (100 machine epsilons, doubled at every new start) when a pivot is not larger than
+    /// 100 machine epsilons times the sum of its row's other factor entries.
+    pub fn points(
+        bs: usize,
+        row_ptr: &[usize],
+        cols: &[u32],
+        parts: usize,
+    ) -> Result<Self, IluError> {
+        let n = row_ptr.len().saturating_sub(1);
+        let mut scalar_ptr = Vec::with_capacity(n * bs + 1);
+        scalar_ptr.push(0);
+        let mut scalar_cols = Vec::with_capacity(row_ptr[n] * bs * bs);
+        for a in 0..n {
+            for _ in 0..bs {
+                for &c in &cols[row_ptr[a]..row_ptr[a + 1]] {
+                    for k in 0..bs {
+                        scalar_cols.push(c * bs as u32 + k as u32);
+                    }
+                }
+                scalar_ptr.push(scalar_cols.len());
+            }
+        }
+        Self::build(1, &scalar_ptr, &scalar_cols, parts)
+    }
+
+    /// The parts of the pattern `row_ptr` / `cols` for factorisation blocks of size `kernel`.
+    fn build(
+        kernel: usize,
+        row_ptr: &[usize],
+        cols: &[u32],
+        parts: usize,
+    ) -> Result<Self, IluError> {
         let n = row_ptr.len().saturating_sub(1);
         let parts = parts.clamp(1, n.max(1));
         // Own ranges of about equal nonzeros.
@@ -113,25 +162,25 @@ impl SchwarzIlu {
                 .max()
                 .unwrap_or(own.end)
                 .max(own.end);
-            out.push(Part::new(bs, row_ptr, cols, lo..hi, own)?);
+            out.push(Part::new(kernel, row_ptr, cols, lo..hi, own)?);
         }
         Ok(Self {
-            bs,
-            n,
-            blocks: nnz,
+            kernel,
+            unknowns: n * kernel,
+            values: nnz * kernel * kernel,
             parts: out,
             factored: false,
         })
     }
 
-    /// Scalar rows of the matrix.
+    /// Unknowns (scalar rows) of the matrix.
     pub fn rows(&self) -> usize {
-        self.n * self.bs
+        self.unknowns
     }
 
-    /// Length of the matrix's values array (one `bs x bs` block per pattern entry).
+    /// Length of the matrix's values array.
     pub fn values_len(&self) -> usize {
-        self.blocks * self.bs * self.bs
+        self.values
     }
 
     /// Number of subdomains.
@@ -143,12 +192,13 @@ impl SchwarzIlu {
     /// parallel. On an error the preconditioner is marked unusable until the next successful
     /// factorisation.
     pub fn factor(&mut self, values: &[f64]) -> Result<(), IluError> {
-        let bs = self.bs;
-        let result = self.parts.par_iter_mut().try_for_each(|p| match bs {
-            2 => p.factor::<2>(values),
-            3 => p.factor::<3>(values),
-            4 => p.factor::<4>(values),
-            _ => Err(IluError::BlockSize(bs)),
+        let kernel = self.kernel;
+        let result = self.parts.par_iter_mut().try_for_each(|p| match kernel {
+            1 => p.factor_points(values),
+            2 => p.factor::<2>(values, 0.0).map(drop),
+            3 => p.factor::<3>(values, 0.0).map(drop),
+            4 => p.factor::<4>(values, 0.0).map(drop),
+            _ => Err(IluError::BlockSize(kernel)),
         });
         self.factored = result.is_ok();
         result
@@ -161,19 +211,20 @@ impl SchwarzIlu {
             y.fill(f64::NAN);
             return;
         }
-        let bs = self.bs;
+        let kernel = self.kernel;
         // Split y into the parts' own rows (contiguous, in order, covering all rows).
         let mut chunks = Vec::with_capacity(self.parts.len());
         let mut rest = y;
         for p in &self.parts {
-            let (head, tail) = rest.split_at_mut(p.own.len() * bs);
+            let (head, tail) = rest.split_at_mut(p.own.len() * kernel);
             chunks.push(head);
             rest = tail;
         }
         self.parts
             .par_iter_mut()
             .zip(chunks)
-            .for_each(|(p, out)| match bs {
+            .for_each(|(p, out)| match kernel {
+                1 => p.solve::<1>(x, out),
                 2 => p.solve::<2>(x, out),
                 3 => p.solve::<3>(x, out),
                 _ => p.solve::<4>(x, out),
@@ -183,7 +234,7 @@ impl SchwarzIlu {
 
 impl Part {
     fn new(
-        bs: usize,
+        kernel: usize,
         row_ptr: &[usize],
         cols: &[u32],
         range: std::ops::Range<usize>,
@@ -214,7 +265,7 @@ impl Part {
             diag.push(d.ok_or(IluError::NoDiagonal(r))?);
             local_ptr.push(col.len());
         }
-        let lu = vec![0.0; col.len() * bs * bs];
+        let lu = vec![0.0; col.len() * kernel * kernel];
         Ok(Self {
             lo,
             own,
@@ -224,17 +275,43 @@ impl Part {
             diag,
             lu,
             mark: vec![usize::MAX; m],
-            z: vec![0.0; m * bs],
+            z: vec![0.0; m * kernel],
         })
     }
 
-    /// ILU(0) of the local matrix, row by row (PETSc's order): each block `A_ik` left of the diagonal
-    /// becomes `L_ik = A_ik U_kk^-1` and is eliminated from the rest of row `i` where its pattern has
-    /// room; then the diagonal block is inverted.
-    fn factor<const B: usize>(&mut self, values: &[f64]) -> Result<(), IluError> {
+    /// Point ILU(0) with PETSc's nonzero shift: started again with a larger shift of the diagonal while
+    /// a pivot is too small against its row ([`SchwarzIlu::points`]).
+    fn factor_points(&mut self, values: &[f64]) -> Result<(), IluError> {
+        let mut shift = 0.0;
+        while !self.factor::<1>(values, shift)? {
+            shift = if shift == 0.0 {
+                ZERO_PIVOT_SHIFT
+            } else {
+                2.0 * shift
+            };
+            if !shift.is_finite() {
+                return Err(IluError::Pivot(self.lo));
+            }
+        }
+        Ok(())
+    }
+
+    /// ILU(0) of the local matrix with `shift` added to its diagonal, row by row (PETSc's order): each
+    /// block `A_ik` left of the diagonal becomes `L_ik = A_ik U_kk^-1` and is eliminated from the rest of
+    /// row `i` where its pattern has room; then the diagonal block is inverted. False (point pivots,
+    /// `B = 1`) where a pivot is not larger than [`ZERO_PIVOT_SHIFT`] times the sum of the magnitudes of
+    /// its row's other factor entries: the caller starts again with a larger shift.
+    fn factor<const B: usize>(&mut self, values: &[f64], shift: f64) -> Result<bool, IluError> {
         let bb = B * B;
         for (q, &s) in self.src.iter().enumerate() {
             self.lu[q * bb..(q + 1) * bb].copy_from_slice(&values[s * bb..(s + 1) * bb]);
+        }
+        if shift != 0.0 {
+            for &d in &self.diag {
+                for r in 0..B {
+                    self.lu[d * bb + r * B + r] += shift;
+                }
+            }
         }
         let m = self.diag.len();
         for i in 0..m {
@@ -267,11 +344,21 @@ impl Part {
             for q in rs..re {
                 self.mark[self.col[q] as usize] = usize::MAX;
             }
+            if B == 1 {
+                let others: f64 = (rs..re)
+                    .filter(|&q| q != di)
+                    .map(|q| self.lu[q].abs())
+                    .sum();
+                let pivot = self.lu[di].abs();
+                if pivot <= ZERO_PIVOT_SHIFT * others || pivot == 0.0 {
+                    return Ok(false);
+                }
+            }
             if !invert::<B>(&mut self.lu[di * bb..(di + 1) * bb]) {
                 return Err(IluError::Pivot(self.lo + i));
             }
         }
-        Ok(())
+        Ok(true)
     }
 
     /// Forward and backward solves on the widened range of `x`; the own rows' results into `out`.
@@ -467,7 +554,7 @@ mod tests {
     fn one_part_on_a_pattern_without_fill_is_the_exact_solve() {
         for bs in 2..=4 {
             let (rp, cols, vals) = chain(9, bs, 1);
-            let mut ilu = SchwarzIlu::new(bs, &rp, &cols, 1).expect("pattern");
+            let mut ilu = SchwarzIlu::blocks(bs, &rp, &cols, 1).expect("pattern");
             ilu.factor(&vals).expect("factor");
             let a = dense(bs, &rp, &cols, &vals);
             let x: Vec<f64> = (0..9 * bs).map(|i| (i as f64 * 0.37).sin()).collect();
@@ -489,7 +576,7 @@ mod tests {
     #[test]
     fn parts_partition_the_rows_and_overlap_by_the_reach() {
         let (rp, cols, _) = chain(40, 3, 2);
-        let ilu = SchwarzIlu::new(3, &rp, &cols, 2).expect("pattern");
+        let ilu = SchwarzIlu::blocks(3, &rp, &cols, 2).expect("pattern");
         assert_eq!(ilu.parts(), 2);
         let (a, b) = (&ilu.parts[0], &ilu.parts[1]);
         assert_eq!(a.own.start, 0);
@@ -518,7 +605,7 @@ mod tests {
         let b: Vec<f64> = (0..n).map(|i| 1.0 + (i as f64 * 0.11).cos()).collect();
         let mut errors = Vec::new();
         for parts in [1, 2, 4] {
-            let mut ilu = SchwarzIlu::new(3, &rp, &cols, parts).expect("pattern");
+            let mut ilu = SchwarzIlu::blocks(3, &rp, &cols, parts).expect("pattern");
             ilu.factor(&vals).expect("factor");
             let mut x = vec![0.0; n];
             let (mut r, mut dx) = (vec![0.0; n], vec![0.0; n]);
@@ -544,15 +631,59 @@ mod tests {
         // Row 2's diagonal block made NaN.
         let d = rp[2] + 1;
         vals[d * 4..d * 4 + 4].fill(f64::NAN);
-        let mut ilu = SchwarzIlu::new(2, &rp, &cols, 1).expect("pattern");
+        let mut ilu = SchwarzIlu::blocks(2, &rp, &cols, 1).expect("pattern");
         assert_eq!(ilu.factor(&vals), Err(IluError::Pivot(2)));
         let mut y = vec![0.0; 10];
         ilu.apply(&[1.0; 10], &mut y);
         assert!(y.iter().all(|v| v.is_nan()));
         assert_eq!(
-            SchwarzIlu::new(5, &rp, &cols, 1).err(),
+            SchwarzIlu::blocks(5, &rp, &cols, 1).err(),
             Some(IluError::BlockSize(5))
         );
+    }
+
+    /// Point ILU(0) of a block tridiagonal matrix keeps every fill inside the pattern (each scalar row's
+    /// pattern is its whole envelope): one part is the exact inverse, as for the blocks.
+    #[test]
+    fn one_part_of_point_ilu_on_a_block_tridiagonal_pattern_is_the_exact_solve() {
+        let bs = 3;
+        let (rp, cols, blocks) = chain(8, bs, 1);
+        // The same matrix in point-wise storage: scalar rows one after the other.
+        let mut points = Vec::with_capacity(blocks.len());
+        for a in 0..8 {
+            let n = rp[a + 1] - rp[a];
+            for i in 0..bs {
+                for pos in 0..n {
+                    for k in 0..bs {
+                        points.push(blocks[(rp[a] + pos) * bs * bs + k * bs + i]);
+                    }
+                }
+            }
+        }
+        let mut ilu = SchwarzIlu::points(bs, &rp, &cols, 1).expect("pattern");
+        assert_eq!(ilu.values_len(), points.len());
+        ilu.factor(&points).expect("factor");
+        let a = dense(bs, &rp, &cols, &blocks);
+        let x: Vec<f64> = (0..8 * bs).map(|i| (i as f64 * 0.37).cos()).collect();
+        let mut y = vec![0.0; x.len()];
+        ilu.apply(&x, &mut y);
+        for (r, row) in a.iter().enumerate() {
+            let ay: f64 = row.iter().zip(&y).map(|(a, y)| a * y).sum();
+            assert!((ay - x[r]).abs() < 1e-12, "row {r}: {ay} vs {}", x[r]);
+        }
+    }
+
+    /// A zero point pivot starts the factorisation again with a shifted diagonal instead of failing.
+    #[test]
+    fn a_zero_point_pivot_is_shifted() {
+        // One node of 2 unknowns: [[0, 1], [1, 0]].
+        let (rp, cols) = (vec![0usize, 1], vec![0u32]);
+        let mut ilu = SchwarzIlu::points(2, &rp, &cols, 1).expect("pattern");
+        ilu.factor(&[0.0, 1.0, 1.0, 0.0])
+            .expect("a shifted factorisation");
+        let mut y = [0.0; 2];
+        ilu.apply(&[1.0, 1.0], &mut y);
+        assert!(y.iter().all(|v| v.is_finite()), "{y:?}");
     }
 
     #[test]

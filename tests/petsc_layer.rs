@@ -400,8 +400,8 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
             }
         }
     };
-    let options =
-        "-ksp_type gmres -ksp_rtol 1e-10 -ksp_max_it 200 -pc_type bjacobi -sub_pc_type ilu";
+    let options = "-ksp_type gmres -ksp_rtol 1e-10 -ksp_max_it 200 -pc_type bjacobi \
+         -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
     for prefix in ["petsc_ilu_", "threaded_ilu_"] {
         for t in options.split_whitespace().collect::<Vec<_>>().chunks(2) {
             let name = format!("{prefix}{}", &t[0][1..]);
@@ -413,65 +413,67 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
         .build()
         .expect("thread pool");
     pool.install(|| {
-        let mut rhs = Vector::new(&s, n, 3).expect("rhs");
-        rhs.write(|v| {
-            v.iter_mut()
-                .enumerate()
-                .for_each(|(i, r)| *r = 1.0 + (0.3 * i as f64).sin())
-        })
-        .expect("write");
-        let mut results = Vec::new();
-        for (prefix, threaded) in [("petsc_ilu_", false), ("threaded_ilu_", true)] {
-            let mut m = Matrix::with_type(&s, n, 3, "baij").expect("matrix");
-            m.set_block_pattern(&p).expect("pattern");
-            let mut snes = Snes::new(&s, Some(prefix)).expect("snes");
-            snes.set_from_options().expect("options");
-            if threaded {
+        for mat_type in ["baij", "aij"] {
+            let mut rhs = Vector::new(&s, n, 3).expect("rhs");
+            rhs.write(|v| {
+                v.iter_mut()
+                    .enumerate()
+                    .for_each(|(i, r)| *r = 1.0 + (0.3 * i as f64).sin())
+            })
+            .expect("write");
+            let mut results = Vec::new();
+            for (prefix, threaded) in [("petsc_ilu_", false), ("threaded_ilu_", true)] {
+                let mut m = Matrix::with_type(&s, n, 3, mat_type).expect("matrix");
+                m.set_block_pattern(&p).expect("pattern");
+                let mut snes = Snes::new(&s, Some(prefix)).expect("snes");
+                snes.set_from_options().expect("options");
+                if threaded {
+                    assert!(
+                        petsc::use_threaded_ilu(&snes, &m, &p).expect("shell"),
+                        "one process, two threads, blocks of 3: the threaded ILU applies"
+                    );
+                    assert!(snes.describe().expect("describe").ends_with("shell"));
+                }
+                let mut solve = |m: &Matrix| {
+                    let mut x = Vector::new(&s, n, 3).expect("x");
+                    let r = snes.linear_solve(m, &rhs, &mut x).expect("solve");
+                    (r, x.read(|v| v.to_vec()).expect("read"))
+                };
+                m.fill_block_rows(&p, |v, l| fill(1.0, false, v, l))
+                    .expect("fill");
+                let (r1, x1) = solve(&m);
+                assert!(r1.converged(), "{mat_type} {prefix}: {}", r1.reason_name);
+                m.fill_block_rows(&p, |v, l| fill(2.0, false, v, l))
+                    .expect("refill");
+                let (r2, x2) = solve(&m);
+                assert!(r2.converged(), "{prefix}: {}", r2.reason_name);
+                for (a, b) in x1.iter().zip(&x2) {
+                    assert!(
+                        (a - 2.0 * b).abs() <= 1e-8 * a.abs().max(1.0),
+                        "{mat_type} {prefix}: the solve after the refill used the old factorisation"
+                    );
+                }
+                m.fill_block_rows(&p, |v, l| fill(1.0, true, v, l))
+                    .expect("poisoned fill");
+                let (r3, _) = solve(&m);
                 assert!(
-                    petsc::use_threaded_ilu(&snes, &m, &p).expect("shell"),
-                    "one process, two threads, blocks of 3: the threaded ILU applies"
+                    !r3.converged(),
+                    "{mat_type} {prefix}: a NaN diagonal block must fail the solve, got {}",
+                    r3.reason_name
                 );
-                assert!(snes.describe().expect("describe").ends_with("shell"));
+                results.push((r1.iterations, x1));
             }
-            let mut solve = |m: &Matrix| {
-                let mut x = Vector::new(&s, n, 3).expect("x");
-                let r = snes.linear_solve(m, &rhs, &mut x).expect("solve");
-                (r, x.read(|v| v.to_vec()).expect("read"))
-            };
-            m.fill_block_rows(&p, |v, l| fill(1.0, false, v, l))
-                .expect("fill");
-            let (r1, x1) = solve(&m);
-            assert!(r1.converged(), "{prefix}: {}", r1.reason_name);
-            m.fill_block_rows(&p, |v, l| fill(2.0, false, v, l))
-                .expect("refill");
-            let (r2, x2) = solve(&m);
-            assert!(r2.converged(), "{prefix}: {}", r2.reason_name);
-            for (a, b) in x1.iter().zip(&x2) {
+            let ((its_petsc, x_petsc), (its_threaded, x_threaded)) = (&results[0], &results[1]);
+            for (a, b) in x_petsc.iter().zip(x_threaded) {
                 assert!(
-                    (a - 2.0 * b).abs() <= 1e-8 * a.abs().max(1.0),
-                    "{prefix}: the solve after the refill used the old factorisation"
+                    (a - b).abs() <= 1e-8 * a.abs().max(1.0),
+                    "{mat_type}: solutions differ: {a} vs {b}"
                 );
             }
-            m.fill_block_rows(&p, |v, l| fill(1.0, true, v, l))
-                .expect("poisoned fill");
-            let (r3, _) = solve(&m);
             assert!(
-                !r3.converged(),
-                "{prefix}: a NaN diagonal block must fail the solve, got {}",
-                r3.reason_name
-            );
-            results.push((r1.iterations, x1));
-        }
-        let ((its_petsc, x_petsc), (its_threaded, x_threaded)) = (&results[0], &results[1]);
-        for (a, b) in x_petsc.iter().zip(x_threaded) {
-            assert!(
-                (a - b).abs() <= 1e-8 * a.abs().max(1.0),
-                "solutions differ: {a} vs {b}"
+                its_threaded.abs_diff(*its_petsc) <= 2,
+                "{mat_type}: GMRES iterations: threaded ILU {its_threaded}, PETSc's {its_petsc}"
             );
         }
-        assert!(
-            its_threaded.abs_diff(*its_petsc) <= 2,
-            "GMRES iterations: threaded ILU {its_threaded}, PETSc's {its_petsc}"
-        );
     });
 }

@@ -1,47 +1,50 @@
 //! GMRES's ILU(0) on all of the process's threads: a PETSc shell preconditioner over
-//! [`crate::ilu::SchwarzIlu`] (block ILU(0) on overlapping subdomains, one per thread).
+//! [`crate::ilu::SchwarzIlu`] (ILU(0) on overlapping subdomains, one per thread).
 //!
 //! PETSc (Debian's build has no OpenMP) factors and applies ILU(0) on one core; with the threaded
 //! Jacobian product (`ThreadedOperator`) the triangular solves and the factorisations were the largest
-//! part of a one-process run left on one core. The shell reads the assembled block (BAIJ) Jacobian's own
-//! values at each set-up of the preconditioner (which SNES's lag decides as for PETSc's ILU) and factors
+//! part of a one-process run left on one core. The shell reads the assembled Jacobian's own values (block
+//! or point-wise storage) at each set-up of the preconditioner (which SNES's lag decides as for PETSc's ILU) and factors
 //! and applies the subdomains in parallel. A factorisation that meets a non-finite pivot marks the
 //! preconditioner failed, so that the linear solve stops and the step goes to the fallback solver as with
 //! PETSc's ILU.
 
-use super::{BlockCsr, Matrix, PetscError, Result, Snes, check, cstring, sys};
+use super::{BlockCsr, BlockLayout, Matrix, PetscError, Result, Snes, check, cstring, sys};
 use crate::ilu::SchwarzIlu;
 use std::ffi::c_void;
 
-/// The shell's context: the subdomains and their factors.
+/// The shell's context: the subdomains and their factors, and the storage of the values they read.
 struct Context {
     ilu: SchwarzIlu,
+    layout: BlockLayout,
 }
 
-/// Makes the preconditioner of `snes` block ILU(0) on one overlapping subdomain per thread for the
-/// block Jacobian `jacobian` with pattern `pattern` (the whole matrix on one process). Returns false,
-/// changing nothing, where it does not apply: a matrix other than one process's `seqbaij`, one thread, a
-/// block size other than 2 to 4.
+/// Makes the preconditioner of `snes` ILU(0) on one overlapping subdomain per thread for the Jacobian
+/// `jacobian` with block pattern `pattern` (the whole matrix on one process): block ILU(0) for the
+/// block storage (`seqbaij`), point ILU(0) for the point-wise one (`seqaij`). Returns false, changing
+/// nothing, where it does not apply: the matrices of several processes, one thread, a block size other
+/// than 2 to 4.
 pub fn use_threaded_ilu(snes: &Snes, jacobian: &Matrix, pattern: &BlockCsr<'_>) -> Result<bool> {
-    if jacobian.type_name()? != "seqbaij"
-        || rayon::current_num_threads() < 2
-        || pattern.first != 0
-        || !(2..=4).contains(&pattern.bs)
-    {
+    let layout = match jacobian.type_name()?.as_str() {
+        "seqbaij" => BlockLayout::Blocks,
+        "seqaij" => BlockLayout::Rows,
+        _ => return Ok(false),
+    };
+    let threads = rayon::current_num_threads();
+    if threads < 2 || pattern.first != 0 || !(2..=4).contains(&pattern.bs) {
         return Ok(false);
     }
-    let ilu = match SchwarzIlu::new(
-        pattern.bs,
-        pattern.row_ptr,
-        pattern.cols,
-        rayon::current_num_threads(),
-    ) {
-        Ok(ilu) => ilu,
-        Err(_) => return Ok(false),
+    let (bs, row_ptr, cols) = (pattern.bs, pattern.row_ptr, pattern.cols);
+    let ilu = match layout {
+        BlockLayout::Blocks => SchwarzIlu::blocks(bs, row_ptr, cols, threads),
+        BlockLayout::Rows => SchwarzIlu::points(bs, row_ptr, cols, threads),
+    };
+    let Ok(ilu) = ilu else {
+        return Ok(false);
     };
     let pc = snes.pc()?;
-    let ctx = Box::into_raw(Box::new(Context { ilu })).cast::<c_void>();
-    let name = cstring("block ILU(0) on overlapping subdomains, one per thread")?;
+    let ctx = Box::into_raw(Box::new(Context { ilu, layout })).cast::<c_void>();
+    let name = cstring("ILU(0) on overlapping subdomains, one per thread")?;
     // SAFETY: valid PC; the shell keeps `ctx` until its destroy callback frees it. The callbacks match
     // PETSc's signatures for the shell's operations.
     unsafe {
@@ -115,29 +118,45 @@ unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
         let (mut amat, mut pmat): (sys::Mat, sys::Mat) =
             (std::ptr::null_mut(), std::ptr::null_mut());
         let mut values: *mut f64 = std::ptr::null_mut();
-        // SAFETY: borrowed references to the operators; the values array is restored below (the read
-        // does not change the matrix's state).
+        let mut read: *const f64 = std::ptr::null();
+        // SAFETY: borrowed references to the operators; the values array is restored below (the reads
+        // do not change the matrix's state).
         unsafe {
             check(
                 sys::PCGetOperators(pc, &mut amat, &mut pmat),
                 "PCGetOperators",
             )?;
-            check(
-                sys::MatSeqBAIJGetArray(pmat, &mut values),
-                "MatSeqBAIJGetArray",
-            )?;
+            match ctx.layout {
+                BlockLayout::Blocks => {
+                    check(
+                        sys::MatSeqBAIJGetArray(pmat, &mut values),
+                        "MatSeqBAIJGetArray",
+                    )?;
+                    read = values;
+                }
+                BlockLayout::Rows => check(
+                    sys::MatSeqAIJGetArrayRead(pmat, &mut read),
+                    "MatSeqAIJGetArrayRead",
+                )?,
+            }
         }
         let len = ctx.ilu.values_len();
-        // SAFETY: the Jacobian's block values, one block per entry of the pattern the shell was made for.
+        // SAFETY: the Jacobian's values, in the storage and pattern the shell was made for.
         let factored = ctx
             .ilu
-            .factor(unsafe { std::slice::from_raw_parts(values, len) });
+            .factor(unsafe { std::slice::from_raw_parts(read, len) });
         // SAFETY: as above.
         unsafe {
-            check(
-                sys::MatSeqBAIJRestoreArray(pmat, &mut values),
-                "MatSeqBAIJRestoreArray",
-            )?;
+            match ctx.layout {
+                BlockLayout::Blocks => check(
+                    sys::MatSeqBAIJRestoreArray(pmat, &mut values),
+                    "MatSeqBAIJRestoreArray",
+                )?,
+                BlockLayout::Rows => check(
+                    sys::MatSeqAIJRestoreArrayRead(pmat, &mut read),
+                    "MatSeqAIJRestoreArrayRead",
+                )?,
+            }
             if factored.is_err() {
                 check(
                     sys::PCSetFailedReason(pc, sys::PCFailedReason_PC_FACTOR_NUMERIC_ZEROPIVOT),

@@ -222,10 +222,11 @@ impl LinearSystem {
             }
         }
         // ILU(0) on all threads (`ilu::SchwarzIlu`, one overlapping subdomain per thread) in place of
-        // PETSc's one-core ILU(0) of the whole matrix (`ilu`, or block Jacobi with one block per
-        // process); declined by `petsc::use_threaded_ilu` for matrices other than one process's blocks.
+        // PETSc's one-core ILU(0) of the whole matrix (`ilu`, or block Jacobi or additive Schwarz with
+        // one block per process); declined by `petsc::use_threaded_ilu` for the matrices of several
+        // processes.
         let ilu_options = match (pc.as_deref(), sub_pc.as_deref()) {
-            (Some("bjacobi"), None | Some("ilu")) => Some("sub_"),
+            (Some("bjacobi" | "asm"), None | Some("ilu")) => Some("sub_"),
             (Some("ilu"), _) => Some(""),
             _ => None,
         };
@@ -301,13 +302,16 @@ fn flag(session: &SessionGuard, name: &str) -> Result<bool, StepError> {
     })
 }
 
-/// True if the ILU(0) preconditioner (options `-{sub}pc_factor_*`: `sub_` under block Jacobi) asks for
-/// nothing the threaded ILU(0) does not do: one block per process (no `-pc_bjacobi_blocks`), no fill
-/// levels (`-{sub}pc_factor_levels` 0), the natural ordering.
+/// True if the ILU(0) preconditioner (options `-{sub}pc_factor_*`: `sub_` under block Jacobi and
+/// additive Schwarz) asks for nothing the threaded ILU(0) does not do: one block per process (no
+/// `-pc_bjacobi_blocks`, `-pc_asm_blocks`, `-pc_asm_local_blocks`), no fill levels
+/// (`-{sub}pc_factor_levels` 0), the natural ordering.
 fn plain_ilu(session: &SessionGuard, prefix: Option<&str>, sub: &str) -> Result<bool, StepError> {
     let p = prefix.unwrap_or("");
     let opt = |name: &str| petsc::option_string(session, &format!("{p}{name}"));
     Ok(opt("pc_bjacobi_blocks")?.is_none()
+        && opt("pc_asm_blocks")?.is_none()
+        && opt("pc_asm_local_blocks")?.is_none()
         && matches!(
             opt(&format!("{sub}pc_factor_levels"))?.as_deref(),
             None | Some("0")
