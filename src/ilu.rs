@@ -420,21 +420,24 @@ fn split_pair(v: &mut [f64], a: usize, b: usize, len: usize) -> (&mut [f64], &[f
 /// `c = a b` for column-major `B x B` blocks.
 #[inline(always)]
 fn mat_mul<const B: usize>(a: &[f64], b: &[f64], c: &mut [f64]) {
-    let (a, b, c) = (&a[..B * B], &b[..B * B], &mut c[..B * B]);
-    for k in 0..B {
-        for i in 0..B {
-            let mut t = 0.0;
-            for l in 0..B {
-                t += a[l * B + i] * b[k * B + l];
-            }
-            c[k * B + i] = t;
-        }
-    }
+    block_product::<B>(a, b, c, |c, t| *c = t);
 }
 
 /// `c -= a b` for column-major `B x B` blocks.
 #[inline(always)]
 fn mat_mul_sub<const B: usize>(a: &[f64], b: &[f64], c: &mut [f64]) {
+    block_product::<B>(a, b, c, |c, t| *c -= t);
+}
+
+/// Each entry `t = (a b)_ik` of the product of column-major `B x B` blocks handed to `store` with the
+/// entry `c_ik`.
+#[inline(always)]
+fn block_product<const B: usize>(
+    a: &[f64],
+    b: &[f64],
+    c: &mut [f64],
+    store: impl Fn(&mut f64, f64),
+) {
     let (a, b, c) = (&a[..B * B], &b[..B * B], &mut c[..B * B]);
     for k in 0..B {
         for i in 0..B {
@@ -442,7 +445,7 @@ fn mat_mul_sub<const B: usize>(a: &[f64], b: &[f64], c: &mut [f64]) {
             for l in 0..B {
                 t += a[l * B + i] * b[k * B + l];
             }
-            c[k * B + i] -= t;
+            store(&mut c[k * B + i], t);
         }
     }
 }
