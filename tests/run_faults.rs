@@ -337,7 +337,14 @@ fn ctrl_c_on_several_processes_stops_them_at_one_saved_step() {
 /// and 4 s for steps 1, 2 and 3 on 2 processes of a 2-core machine in the test profile.
 /// PETSc options that make a step of the fine tiny CT slow in many short Krylov iterations (each checks
 /// the interrupt): block Jacobi's ILU and GMRES to a relative 1e-12.
-const SLOW_STEP: [&str; 4] = ["-pc_type", "bjacobi", "-ksp_rtol", "1e-12"];
+const SLOW_STEP: [&str; 6] = [
+    "-pc_type",
+    "bjacobi",
+    "-ksp_rtol",
+    "1e-12",
+    "-snes_rtol",
+    "1e-8",
+];
 
 const FINE: [&str; 4] = [
     "--set",
@@ -376,8 +383,9 @@ fn history_rows(dir: &Path) -> Vec<Vec<(String, String)>> {
 /// finished step before the SIGKILL; run.json says `interrupted` at that step and that the next was
 /// abandoned; the printed command resumes from it, and the resumed run matches an uninterrupted one.
 /// The step is made slow with many short Krylov iterations (block Jacobi's ILU, GMRES to a relative
-/// 1e-12; each iteration checks the interrupt): the default's 1.4 s steps in a debug build may end
-/// within the second mpirun waits before its SIGTERM, and the test then finds no abandoned step.
+/// 1e-12; each iteration checks the interrupt, and Newton to 1e-8, three iterations): the default's 1.4 s
+/// steps in a debug build may end within the second mpirun waits before its SIGTERM, and the test then
+/// finds no abandoned step.
 #[test]
 fn ctrl_c_on_several_processes_abandons_a_slow_step_and_saves_the_last_one() {
     let _machine = alone();
