@@ -552,6 +552,16 @@ mod tests {
         a
     }
 
+    /// Asserts that the factored `ilu` applied to `x` gives `y` with `a y = x` to 1e-12: an exact solve.
+    fn assert_solves_exactly(ilu: &mut SchwarzIlu, a: &[Vec<f64>], x: &[f64], case: &str) {
+        let mut y = vec![0.0; x.len()];
+        ilu.apply(x, &mut y);
+        for (r, row) in a.iter().enumerate() {
+            let ay: f64 = row.iter().zip(&y).map(|(a, y)| a * y).sum();
+            assert!((ay - x[r]).abs() < 1e-12, "{case}row {r}: {ay} vs {}", x[r]);
+        }
+    }
+
     /// With a tridiagonal block pattern ILU(0) has no fill to drop: one part is the exact inverse.
     #[test]
     fn one_part_on_a_pattern_without_fill_is_the_exact_solve() {
@@ -561,16 +571,7 @@ mod tests {
             ilu.factor(&vals).expect("factor");
             let a = dense(bs, &rp, &cols, &vals);
             let x: Vec<f64> = (0..9 * bs).map(|i| (i as f64 * 0.37).sin()).collect();
-            let mut y = vec![0.0; x.len()];
-            ilu.apply(&x, &mut y);
-            for (r, row) in a.iter().enumerate() {
-                let ay: f64 = row.iter().zip(&y).map(|(a, y)| a * y).sum();
-                assert!(
-                    (ay - x[r]).abs() < 1e-12,
-                    "bs {bs}, row {r}: {ay} vs {}",
-                    x[r]
-                );
-            }
+            assert_solves_exactly(&mut ilu, &a, &x, &format!("bs {bs}, "));
         }
     }
 
@@ -668,12 +669,7 @@ mod tests {
         ilu.factor(&points).expect("factor");
         let a = dense(bs, &rp, &cols, &blocks);
         let x: Vec<f64> = (0..8 * bs).map(|i| (i as f64 * 0.37).cos()).collect();
-        let mut y = vec![0.0; x.len()];
-        ilu.apply(&x, &mut y);
-        for (r, row) in a.iter().enumerate() {
-            let ay: f64 = row.iter().zip(&y).map(|(a, y)| a * y).sum();
-            assert!((ay - x[r]).abs() < 1e-12, "row {r}: {ay} vs {}", x[r]);
-        }
+        assert_solves_exactly(&mut ilu, &a, &x, "");
     }
 
     /// A zero point pivot starts the factorisation again with a shifted diagonal instead of failing.
