@@ -796,12 +796,14 @@ fn evaluate_point<const D: usize>(
     if nonlocal {
         material
             .update(
-                PointUpdate::new(&f3, ebp, h_n, h_trial).with_start(&f3_n),
+                PointUpdate::new(&f3, ebp, h_n, h_trial)
+                    .with_start(&f3_n)
+                    .in_plane(D == 2),
                 &mut r,
             )
             .map_err(err)?;
     } else {
-        local_update(material, (&f3, &f3_n), h_n, h_trial, &mut r).map_err(err)?;
+        local_update(material, (&f3, &f3_n), h_n, h_trial, D == 2, &mut r).map_err(err)?;
         ebp = r.eta;
     }
     Ok(PointEval {
@@ -955,20 +957,26 @@ fn tangent_blocks<const D: usize>(r: &Response) -> [[SMatrix<f64, D, D>; D]; D] 
 /// The local model (`eta_bar = eta`, no Helmholtz field): evaluates the law with `eta_bar` set to its
 /// own `eta` and completes the tangent with the chain rule `A + dP/d eta_bar (x) d eta/dF` (eta does not
 /// depend on eta_bar). Elastic laws return zero for both, so this is exact for them too. `(F, F_n)`: the
-/// deformation gradient and its value at the start of the step (for the trapezoidal dissipation).
+/// deformation gradient and its value at the start of the step (for the trapezoidal dissipation);
+/// `in_plane`: only the in-plane entries of `A` are needed ([`PointUpdate::in_plane`]).
 pub fn local_update(
     material: &Material,
     (f, f_n): (&Matrix3<f64>, &Matrix3<f64>),
     h_n: &[f64],
     h_trial: &mut [f64],
+    in_plane: bool,
     out: &mut Response,
 ) -> Result<(), MaterialError> {
-    material.update(PointUpdate::new(f, 0.0, h_n, h_trial), out)?;
+    material.update(
+        PointUpdate::new(f, 0.0, h_n, h_trial).in_plane(in_plane),
+        out,
+    )?;
     if out.dp_deta_bar.iter().all(|v| *v == 0.0) && out.eta == 0.0 {
         return Ok(());
     }
     let eta = out.eta;
-    material.update(PointUpdate::new(f, eta, h_n, h_trial).with_start(f_n), out)?;
+    let update = PointUpdate::new(f, eta, h_n, h_trial).with_start(f_n);
+    material.update(update.in_plane(in_plane), out)?;
     for ij in 0..9 {
         for kl in 0..9 {
             out.a[(ij, kl)] += out.dp_deta_bar[(ij / 3, ij % 3)] * out.deta_df[(kl / 3, kl % 3)];

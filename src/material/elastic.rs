@@ -223,7 +223,7 @@ impl ElasticLaw for StVenantKirchhoff {
             }
             row[a] += if a < 3 { 2.0 * mu } else { mu };
         }
-        first_piola_from_pk2(f, &s, &d, &mut out.p, &mut out.a);
+        first_piola_from_pk2::<3>(f, &s, &d, &mut out.p, &mut out.a);
         let ee = e[0] * e[0]
             + e[1] * e[1]
             + e[2] * e[2]

@@ -248,7 +248,7 @@ impl Constitutive for IsotropicDamage {
                 }
             }
         } else {
-            first_piola_from_pk2(f, &s, &dmat, &mut out.p, &mut out.a);
+            first_piola_from_pk2::<3>(f, &s, &dmat, &mut out.p, &mut out.a);
         }
         out.dp_deta_bar = fk * sym_to_matrix(&s0) * (-chi * dd);
         out.eta = eta;

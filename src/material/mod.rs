@@ -245,6 +245,11 @@ pub struct PointUpdate<'a> {
     /// Deformation gradient `F_n` at the start of the step, for the trapezoidal dissipation
     /// ([`Response::dissipation_trapezoidal`]); `None` takes the end-point rule.
     pub f_n: Option<&'a Matrix3<f64>>,
+    /// The caller reads only the in-plane entries of the tangent [`Response::a`] (every index `< 2`:
+    /// plane strain, whose `F` has `F33 = 1` and no out-of-plane shear). A law may then leave the other
+    /// entries untouched; the microplane law does, its push-forward to `A` being then a fifth of the
+    /// work, with the in-plane entries the same to the bit. False: the whole `A`.
+    pub in_plane: bool,
 }
 
 impl<'a> PointUpdate<'a> {
@@ -256,7 +261,14 @@ impl<'a> PointUpdate<'a> {
             h_n,
             h_trial,
             f_n: None,
+            in_plane: false,
         }
+    }
+
+    /// The same arguments, asking for the in-plane entries of `A` only where `in_plane`
+    /// ([`PointUpdate::in_plane`]).
+    pub fn in_plane(self, in_plane: bool) -> Self {
+        Self { in_plane, ..self }
     }
 
     /// The same arguments with the step's starting deformation gradient `F_n` (3x3), from which the
@@ -422,6 +434,7 @@ impl Constitutive for Material {
         let (f, eta_bar) = (p.f, p.eta_bar);
         let law = PointUpdate {
             f_n: p.f_n,
+            in_plane: p.in_plane,
             ..PointUpdate::new(f, eta_bar, law_n, law_trial)
         };
         match self {
@@ -577,9 +590,12 @@ pub(crate) fn sym_to_matrix(s: &Sym6) -> Matrix3<f64> {
 ///
 /// `d[a][b] = C_IJKL` with `(I, J) = PAIRS[a]`, `(K, L) = PAIRS[b]`, minor-symmetric in both pairs
 /// (need not be major-symmetric). Then `P = F S` and
-/// `A_iJkL = delta_ik S_JL + F_iI C_IJML F_kM`.
+/// `A_iJkL = delta_ik S_JL + F_iI C_IJML F_kM`, for every index below `N`: `N = 3` forms the whole
+/// `A`; `N = 2` only its in-plane entries (the others are left as they were), which for a plane-strain
+/// `F` (`F_i2 = F_2i = 0` for `i < 2`) equal those of `N = 3` to the bit: the terms it leaves out are
+/// exact zeros added last.
 #[inline(always)]
-pub(crate) fn first_piola_from_pk2(
+pub(crate) fn first_piola_from_pk2<const N: usize>(
     f: &Matrix3<f64>,
     s: &Sym6,
     d: &[[f64; 6]; 6],
@@ -591,22 +607,22 @@ pub(crate) fn first_piola_from_pk2(
     // b[a][k][l] = sum_M C_{pair a, M l} F_kM
     let mut b = [[[0.0; 3]; 3]; 6];
     for (ab, row) in d.iter().enumerate() {
-        for k in 0..3 {
-            for l in 0..3 {
+        for k in 0..N {
+            for l in 0..N {
                 let mut acc = 0.0;
-                for m in 0..3 {
+                for m in 0..N {
                     acc += row[PAIR_INDEX[m][l]] * f[(k, m)];
                 }
                 b[ab][k][l] = acc;
             }
         }
     }
-    for i in 0..3 {
-        for jj in 0..3 {
-            for k in 0..3 {
-                for l in 0..3 {
+    for i in 0..N {
+        for jj in 0..N {
+            for k in 0..N {
+                for l in 0..N {
                     let mut acc = if i == k { sm[(jj, l)] } else { 0.0 };
-                    for ii in 0..3 {
+                    for ii in 0..N {
                         acc += f[(i, ii)] * b[PAIR_INDEX[ii][jj]][k][l];
                     }
                     a[(3 * i + jj, 3 * k + l)] = acc;

@@ -243,11 +243,18 @@ impl Microplane {
     /// The update for the padded plane set of the rule; inputs already checked.
     #[inline(always)]
     pub(super) fn update_any(&self, p: PointUpdate<'_>, out: &mut Response) {
-        match &self.planes {
+        let (f, in_plane) = (p.f, p.in_plane);
+        let (s, d) = match &self.planes {
             PlaneSet::P24(planes) => self.update_planes(planes, p, out),
             PlaneSet::P28(planes) => self.update_planes(planes, p, out),
             PlaneSet::P36(planes) => self.update_planes(planes, p, out),
             PlaneSet::P64(planes) => self.update_planes(planes, p, out),
+        };
+        // The push-forward to `P` and `A`, once here rather than in each plane count's kernel.
+        if in_plane {
+            first_piola_from_pk2::<2>(f, &s, &d, &mut out.p, &mut out.a);
+        } else {
+            first_piola_from_pk2::<3>(f, &s, &d, &mut out.p, &mut out.a);
         }
     }
 
@@ -286,19 +293,21 @@ impl Microplane {
     /// `s_I = K_mic E_V/3 I + 2 G_mic t_I` and `g_I = a_I I + b_I u_I` (`t_I`, `u_I` the `Dev^T . E_D` of
     /// the stress and of the equivalent-strain measure, equal for Green-Lagrange), is expanded into
     /// `I (x) I`, `I (x) u`, `t (x) I` and `t (x) u` sums, so no per-plane 6 x 6 update is needed.
+    /// Returns `S` and `dS/dE`, which the caller pushes forward to `P` and `A`.
     #[inline(always)]
     fn update_planes<const N: usize>(
         &self,
         p: &Planes<N>,
         point: PointUpdate<'_>,
         out: &mut Response,
-    ) {
+    ) -> (Sym6, [[f64; 6]; 6]) {
         let PointUpdate {
             f,
             eta_bar,
             h_n,
             h_trial,
             f_n,
+            in_plane: _,
         } = point;
         let nd = p.count;
         let (k1, k2, k_mic, g_mic) = (self.k1, self.k2, self.k_mic, self.g_mic);
@@ -507,7 +516,6 @@ impl Microplane {
             }
         }
 
-        first_piola_from_pk2(f, &s_tot, &d_tot, &mut out.p, &mut out.a);
         out.dp_deta_bar = f * crate::material::sym_to_matrix(&ds_deb);
         out.eta = eta;
         out.deta_df = f * crate::material::sym_to_matrix(&g_eta);
@@ -517,5 +525,6 @@ impl Microplane {
         out.dissipation_trapezoidal =
             self.trapezoidal(p, f_n.filter(|_| any_loading), &released, end_point);
         out.damage = if psi0 > 0.0 { 1.0 - psi / psi0 } else { d_mean };
+        (s_tot, d_tot)
     }
 }

@@ -112,6 +112,53 @@ fn instruction_sets_give_the_same_bits() {
     }
 }
 
+/// Asking for the in-plane tangent only (the 2D assembly's request) must give the whole tangent's
+/// in-plane entries to the bit for a plane-strain `F`, in every state of the law, and the same stress,
+/// history and nonlocal terms.
+#[test]
+fn in_plane_tangent_is_the_whole_tangent_restricted() {
+    let m = paper();
+    for (label, f, eb, h) in states(&m, 2.5e-3) {
+        let mut f2 = Matrix3::identity();
+        f2.fixed_view_mut::<2, 2>(0, 0)
+            .copy_from(&f.fixed_view::<2, 2>(0, 0));
+        let (mut full, mut part) = (Response::zeros(), Response::zeros());
+        let (mut h1, mut h2) = (h.clone(), h.clone());
+        m.update(PointUpdate::new(&f2, eb, &h, &mut h1), &mut full)
+            .unwrap();
+        m.update(
+            PointUpdate::new(&f2, eb, &h, &mut h2).in_plane(true),
+            &mut part,
+        )
+        .unwrap();
+        assert_eq!(h1, h2, "{label}");
+        assert_eq!(
+            (full.p, full.dp_deta_bar),
+            (part.p, part.dp_deta_bar),
+            "{label}"
+        );
+        assert_eq!(
+            (full.eta, full.deta_df, full.damage),
+            (part.eta, part.deta_df, part.damage)
+        );
+        let mut nonzero_out_of_plane = 0;
+        for r in 0..9 {
+            for c in 0..9 {
+                let in_plane = r % 3 < 2 && r / 3 < 2 && c % 3 < 2 && c / 3 < 2;
+                if in_plane {
+                    assert_eq!(full.a[(r, c)], part.a[(r, c)], "{label}: A[{r}, {c}]");
+                } else {
+                    assert_eq!(part.a[(r, c)], 0.0, "{label}: A[{r}, {c}] formed");
+                    nonzero_out_of_plane += usize::from(full.a[(r, c)] != 0.0);
+                }
+            }
+        }
+        // The whole tangent has out-of-plane entries (S_33 and the Poisson coupling), so the request
+        // did change what was formed.
+        assert!(nonzero_out_of_plane > 0, "{label}");
+    }
+}
+
 #[test]
 fn damage_law_limits() {
     let m = paper();
