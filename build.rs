@@ -73,6 +73,7 @@ fn main() {
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",
         "SNES(GetConvergedReasonString|SetUp|GetLinearSolveFailures|GetTolerances|GetLagPreconditioner|SetLagPreconditioner)|KSPGetConvergedReasonString|MatNullSpaceCreateRigidBody",
+        "SNES(SetConvergenceTest|ConvergedDefault)",
         "IS(CreateGeneral|CreateStride|Destroy|SetBlockSize)",
         "mpmc_.*",
     ];

@@ -477,3 +477,83 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
         }
     });
 }
+
+/// `R(x) = x - 1` on 9 unknowns with the Jacobian `scale I` (block rows of 3, each coupled to itself).
+struct Scaled {
+    scale: f64,
+}
+
+static ROW_PTR: [usize; 4] = [0, 1, 2, 3];
+static COLS: [u32; 3] = [0, 1, 2];
+
+fn diagonal_blocks() -> mpm_concrete::petsc::BlockCsr<'static> {
+    mpm_concrete::petsc::BlockCsr {
+        first: 0,
+        bs: 3,
+        row_ptr: &ROW_PTR,
+        cols: &COLS,
+    }
+}
+
+impl mpm_concrete::petsc::NonlinearProblem for Scaled {
+    fn residual(
+        &mut self,
+        x: &mpm_concrete::petsc::Vector,
+        f: &mut mpm_concrete::petsc::Vector,
+    ) -> Result<(), mpm_concrete::petsc::CallbackError> {
+        let fatal = |e: petsc::PetscError| mpm_concrete::petsc::CallbackError::Fatal(e.to_string());
+        let v = x.read(|v| v.to_vec()).map_err(fatal)?;
+        f.write(|r| r.iter_mut().zip(&v).for_each(|(r, x)| *r = x - 1.0))
+            .map_err(fatal)
+    }
+
+    fn jacobian(
+        &mut self,
+        _x: &mpm_concrete::petsc::Vector,
+        jac: &mut mpm_concrete::petsc::Matrix,
+    ) -> Result<(), mpm_concrete::petsc::CallbackError> {
+        let scale = self.scale;
+        jac.fill_block_rows(&diagonal_blocks(), |v, layout| {
+            for a in 0..3 {
+                for i in 0..3 {
+                    for k in 0..3 {
+                        v[a * 9 + layout.offset(1, 3, i, 0, k)] = if i == k { scale } else { 0.0 };
+                    }
+                }
+            }
+        })
+        .map_err(|e| mpm_concrete::petsc::CallbackError::Fatal(e.to_string()))
+    }
+}
+
+/// A Newton iteration that leaves the residual norm unchanged ends the solve at once as a linear-solver
+/// failure (`DIVERGED_LINEAR_SOLVE`, so that the step's fallback solver is tried) instead of running to
+/// the iteration limit: here a Jacobian 1e12 times too stiff makes every step change nothing. A Newton
+/// that converges slowly (a Jacobian 1.25 times too stiff: the residual falls by 5 per iteration) is not
+/// stopped.
+#[test]
+fn a_newton_iteration_that_changes_nothing_ends_the_solve() {
+    use mpm_concrete::petsc::{Matrix, Snes, Vector};
+    let s = Session::get().expect("PETSc session");
+    let options = "-stall_ksp_type preonly -stall_pc_type lu -stall_snes_linesearch_type basic \
+                   -stall_snes_max_it 25 -stall_snes_rtol 1e-8";
+    petsc::apply_default_options(&s, options).expect("options");
+    for (scale, stalls) in [(1e12, true), (1.25, false)] {
+        let mut jac = Matrix::with_type(&s, 9, 3, "baij").expect("matrix");
+        jac.set_block_pattern(&diagonal_blocks()).expect("pattern");
+        let mut snes = Snes::new(&s, Some("stall_")).expect("snes");
+        snes.set_from_options().expect("options");
+        let mut x = Vector::new(&s, 9, 3).expect("x");
+        x.set_all(0.0).expect("x");
+        let info = snes
+            .solve(&mut Scaled { scale }, &mut x, &mut jac)
+            .expect("solve");
+        if stalls {
+            assert_eq!(info.reason_name, "DIVERGED_LINEAR_SOLVE", "{info:?}");
+            assert_eq!(info.iterations, 1, "{info:?}");
+        } else {
+            assert!(info.converged(), "{info:?}");
+            assert!(info.iterations > 5, "{info:?}");
+        }
+    }
+}

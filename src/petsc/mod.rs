@@ -26,7 +26,7 @@ pub use options::{
     unused_options,
 };
 pub use preconditioner::use_threaded_ilu;
-pub use snes::{CallbackError, NonlinearProblem, Snes, SolveInfo, Tolerances};
+pub use snes::{CallbackError, NonlinearProblem, STALLED, Snes, SolveInfo, Tolerances};
 pub use vector::{GatherAll, GatherRange, Vector};
 
 use std::ffi::{CStr, CString, c_char, c_int, c_void};

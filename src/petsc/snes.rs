@@ -86,7 +86,14 @@ pub struct Snes {
     monitored: Option<Box<Cell<*mut c_void>>>,
     /// The Krylov solver's operator where it is not the Jacobian itself ([`Snes::set_operator`]).
     operator: Option<ThreadedOperator>,
+    /// The residual norm of the solve's previous iteration, for the stall test of [`converged_cb`]
+    /// (registered once with this box's address).
+    previous_norm: Box<Cell<f64>>,
 }
+
+/// Relative change of the residual norm below which a Newton iteration made no progress: the solve
+/// stops there as a linear-solver failure ([`converged_cb`]).
+pub const STALLED: f64 = 1e-10;
 
 struct Context<'a> {
     problem: &'a mut dyn NonlinearProblem,
@@ -109,6 +116,7 @@ impl Snes {
             configured: false,
             monitored: None,
             operator: None,
+            previous_norm: Box::new(Cell::new(f64::NAN)),
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -129,6 +137,19 @@ impl Snes {
                 )
             },
             "SNESSetConvergenceHistory",
+        )?;
+        // PETSc's tests, and a stalled iteration ended at once (the box lives as long as the SNES).
+        let previous: *const Cell<f64> = &*snes.previous_norm;
+        check(
+            unsafe {
+                sys::SNESSetConvergenceTest(
+                    snes.raw,
+                    Some(converged_cb),
+                    previous.cast_mut().cast(),
+                    None,
+                )
+            },
+            "SNESSetConvergenceTest",
         )?;
         Ok(snes)
     }
@@ -520,6 +541,41 @@ unsafe extern "C" fn linear_monitor_cb(
             ERR_USER
         }
     }
+}
+
+/// PETSc's default convergence test, and one more: an iteration that leaves the residual norm unchanged
+/// to a relative [`STALLED`] ends the solve as `DIVERGED_LINEAR_SOLVE`. Newton's next iteration would start
+/// from the same state with the same Jacobian and preconditioner and so change nothing either: GMRES
+/// preconditioned from the left can "converge" through an ILU(0) with a tiny pivot to a step that changes
+/// nothing (the paper-size CT at 4.3 m/s, step 373), and until now Newton ran to its 25 iterations before
+/// the caller saw the stall. Another linear solver (the step's fallback) may then succeed at the same dt.
+unsafe extern "C" fn converged_cb(
+    snes: sys::SNES,
+    it: sys::PetscInt,
+    xnorm: sys::PetscReal,
+    snorm: sys::PetscReal,
+    fnorm: sys::PetscReal,
+    reason: *mut sys::SNESConvergedReason,
+    previous: *mut c_void,
+) -> sys::PetscErrorCode {
+    // SAFETY: PETSc passes a valid SNES and reason; `previous` is the box registered in `Snes::new`,
+    // alive as long as the SNES.
+    unsafe {
+        let code =
+            sys::SNESConvergedDefault(snes, it, xnorm, snorm, fnorm, reason, std::ptr::null_mut());
+        if code != 0 {
+            return code;
+        }
+        let previous = &*previous.cast::<Cell<f64>>();
+        if it > 0
+            && *reason == sys::SNESConvergedReason_SNES_CONVERGED_ITERATING
+            && (fnorm - previous.get()).abs() <= STALLED * fnorm.abs()
+        {
+            *reason = sys::SNESConvergedReason_SNES_DIVERGED_LINEAR_SOLVE;
+        }
+        previous.set(fnorm);
+    }
+    0
 }
 
 unsafe extern "C" fn residual_cb(

@@ -13,7 +13,7 @@ use super::system::LinearSystem;
 use crate::assembly::{Assembler, StepInput};
 use crate::contact::{Converged, NodeStatus};
 use crate::grid::Grid;
-use crate::petsc::{LogEvent, SessionGuard, SolveInfo, Tolerances};
+use crate::petsc::{LogEvent, STALLED, SessionGuard, SolveInfo, Tolerances};
 use std::time::Instant;
 
 /// Most SNES solves of one step attempt while the contact active set and the pin rotations settle.
@@ -67,12 +67,13 @@ impl Solves {
 }
 
 /// The failure of a solve that did not converge: a linear-solver failure (another linear solver may
-/// succeed at the same time step) or Newton's own. A Newton that stalled (its last iteration left the
-/// residual norm unchanged to [`STALLED`]) counts as a linear-solver failure too: GMRES preconditioned
-/// from the left stops on the preconditioned residual, and an ILU(0) with a tiny pivot lets it "converge"
-/// in one iteration to a step that changes nothing, so Newton runs to its iteration limit at every dt
-/// (the paper-size CT at 4.3 m/s stopped at step 373 so, down to dt = 1.6e-8 s, where the fallback's LU
-/// converges in 3 iterations at the first dt).
+/// succeed at the same time step) or Newton's own. A Newton that stalled (an iteration left the residual
+/// norm unchanged to [`STALLED`]) is a linear-solver failure too: GMRES preconditioned from the left stops
+/// on the preconditioned residual, and an ILU(0) with a tiny pivot lets it "converge" in one iteration to
+/// a step that changes nothing (the paper-size CT at 4.3 m/s stopped at step 373 so, halving dt down to
+/// 1.6e-8 s, where the fallback's LU converges in 3 iterations at the first dt). SNES's convergence test
+/// ends such a solve at the stalled iteration as `DIVERGED_LINEAR_SOLVE` (`petsc::snes`); the residual
+/// history names it here.
 fn diverged(info: &SolveInfo) -> Failure {
     let why = info.domain_errors.last().cloned().unwrap_or_default();
     let stalled = stalled(&info.residual_norms);
@@ -94,9 +95,6 @@ fn diverged(info: &SolveInfo) -> Failure {
             ),
     }
 }
-
-/// Relative change of the residual norm below which a Newton iteration made no progress.
-const STALLED: f64 = 1e-10;
 
 /// Whether the last Newton iteration of `norms` (the residual norms from the first guess on) left the
 /// norm unchanged to a relative [`STALLED`].
