@@ -240,6 +240,25 @@ impl Microplane {
         self.update_any(p, out);
     }
 
+    /// `(m0, dS/dE)` of a point none of whose planes is damaged: `m0 = sum_I 6 w_I` and the elastic
+    /// tangent summed over the planes, by the same sums as [`Microplane::update_planes`] forms for
+    /// such a point (there `6 w_I (1 - d_I)` is `6 w_I` to the bit), so the same bits.
+    pub(super) fn undamaged_tangent(&self) -> (f64, [[f64; 6]; 6]) {
+        fn of<const N: usize>(m: &Microplane, p: &Planes<N>) -> (f64, [[f64; 6]; 6]) {
+            let mm = lane_dots(&p.w6, p.nn.each_ref());
+            let m0 = lane_sum(&p.w6);
+            let mut d = [[0.0; 6]; 6];
+            m.add_elastic_tangent(m0, &mm, &mut d);
+            (m0, d)
+        }
+        match &self.planes {
+            PlaneSet::P24(p) => of(self, p),
+            PlaneSet::P28(p) => of(self, p),
+            PlaneSet::P36(p) => of(self, p),
+            PlaneSet::P64(p) => of(self, p),
+        }
+    }
+
     /// The update for the padded plane set of the rule; inputs already checked.
     #[inline(always)]
     pub(super) fn update_any(&self, p: PointUpdate<'_>, out: &mut Response) {
@@ -400,6 +419,14 @@ impl Microplane {
                 + g_mic * (ed[0][i] * ed[0][i] + ed[1][i] * ed[1][i] + ed[2][i] * ed[2][i]);
         }
 
+        // A point that stays undamaged: every plane's history and `eta_bar_mic` at `gamma_0` or below, so
+        // no plane is damaged or loading. It skips pass 2 and takes the precomputed elastic tangent; its
+        // sums below are those of the general path, whose `6 w_I (1 - d_I)` is then `6 w_I` to the bit.
+        let undamaged = h_n[..nd].iter().all(|&g| g <= gamma_0)
+            && eta_mic[..nd]
+                .iter()
+                .all(|&em| (if ratio_mode { q * em } else { eta_bar }) <= gamma_0);
+
         // Pass 2 (one exp per damaged plane): history, integrity, loading coefficients, dissipation.
         let mut omd = [0.0; N]; // 1 - d_I (0 on the padding planes, whose weight is 0)
         let mut c = [0.0; N]; // 6 w_I d'(gamma_I) on loading planes, else 0
@@ -407,7 +434,11 @@ impl Microplane {
         let mut any_loading = false;
         let (mut dis_tension, mut dis_compression) = (0.0, 0.0);
         let mut released = [0.0; N]; // 6 w_I (d_I - d_I^n) on loading planes, else 0
-        for i in 0..nd {
+        if undamaged {
+            h_trial[..nd].fill(gamma_0);
+        }
+        let pass_2 = if undamaged { 0..0 } else { 0..nd };
+        for i in pass_2 {
             let eb_mic = if ratio_mode { q * eta_mic[i] } else { eta_bar };
             let g_n = h_n[i];
             let loading = eb_mic > g_n && eb_mic > gamma_0;
@@ -440,17 +471,25 @@ impl Microplane {
         }
 
         // Pass 3: the sums over the planes.
-        let mut wd = [0.0; N]; // 6 w_I (1 - d_I)
-        let mut dw = [0.0; N]; // 2 w_I d_I
-        for i in 0..N {
-            wd[i] = p.w6[i] * omd[i];
-            dw[i] = p.w2[i] * (1.0 - omd[i]);
+        let (mut wd, mut dw) = (p.w6, [0.0; N]); // 6 w_I (1 - d_I), 2 w_I d_I
+        if !undamaged {
+            for i in 0..N {
+                wd[i] = p.w6[i] * omd[i];
+                dw[i] = p.w2[i] * (1.0 - omd[i]);
+            }
         }
         let [psi, t0, t1, t2, t3, t4, t5] =
             lane_dots(&wd, [&p0, &t[0], &t[1], &t[2], &t[3], &t[4], &t[5]]);
-        let mm = lane_dots(&wd, p.nn.each_ref());
-        let [psi0] = lane_dots(&p.w6, [&p0]);
-        let (m0, d_mean) = (lane_sum(&wd), lane_sum(&dw));
+        let (m0, d_mean, psi0, mut d_tot) = if undamaged {
+            (self.undamaged.0, 0.0, psi, self.undamaged.1)
+        } else {
+            let mm = lane_dots(&wd, p.nn.each_ref());
+            let [psi0] = lane_dots(&p.w6, [&p0]);
+            let mut d_tot = [[0.0; 6]; 6];
+            let m0 = lane_sum(&wd);
+            self.add_elastic_tangent(m0, &mm, &mut d_tot);
+            (m0, lane_sum(&dw), psi0, d_tot)
+        };
         let vol = k_mic * ev / 3.0;
         let s_tot: Sym6 = [
             vol * m0 + 2.0 * g_mic * t0,
@@ -460,8 +499,6 @@ impl Microplane {
             2.0 * g_mic * t4,
             2.0 * g_mic * t5,
         ];
-        let mut d_tot = [[0.0; 6]; 6];
-        self.add_elastic_tangent(m0, &mm, &mut d_tot);
         let mut ds_deb: Sym6 = [0.0; 6];
         if any_loading {
             // sum_I c_I rel_I s_I: dS/d eta_bar = -it, and the ratio term of dS/dE is q it (x) d eta/dE.

@@ -296,6 +296,9 @@ pub struct Microplane {
     k_mic: f64,
     g_mic: f64,
     planes: PlaneSet,
+    /// `sum_I 6 w_I` and the elastic tangent `dS/dE` of the undamaged planes (pair form): what the
+    /// kernel sums for a point none of whose planes is damaged or loading, formed once.
+    undamaged: (f64, [[f64; 6]; 6]),
 }
 
 impl Microplane {
@@ -306,14 +309,17 @@ impl Microplane {
         let k_r = params.k_r;
         let k_mic = 3.0 * params.bulk_modulus;
         let g_mic = params.shear_modulus;
-        Ok(Self {
+        let mut m = Self {
             params,
             k1: (k_r - 1.0) / (2.0 * k_r * (1.0 - 2.0 * nu)),
             k2: 3.0 / (k_r * (1.0 + nu) * (1.0 + nu)),
             k_mic,
             g_mic,
             planes: PlaneSet::new(params.quadrature),
-        })
+            undamaged: (0.0, [[0.0; 6]; 6]),
+        };
+        m.undamaged = m.undamaged_tangent();
+        Ok(m)
     }
 
     /// The validated parameters.

@@ -30,6 +30,20 @@ fn undamaged_stress_is_isotropic_hooke_in_green_strain() {
         })
         .unwrap();
         let (kk, gg) = (18750.0, 15254.0);
+        // The tangent of the undamaged planes, formed once for the kernel's undamaged points: Hooke's
+        // C_IJKL = (K - 2G/3) d_IJ d_KL + G (d_IK d_JL + d_IL d_JK).
+        let kd = |i: usize, j: usize| f64::from(u8::from(i == j));
+        for (a, &(i, j)) in crate::material::PAIRS.iter().enumerate() {
+            for (b, &(k, l)) in crate::material::PAIRS.iter().enumerate() {
+                let c = (kk - 2.0 * gg / 3.0) * kd(i, j) * kd(k, l)
+                    + gg * (kd(i, k) * kd(j, l) + kd(i, l) * kd(j, k));
+                let got = m.undamaged.1[a][b];
+                assert!(
+                    (got - c).abs() <= 1e-10 * kk,
+                    "{q:?}: C[{a}][{b}] = {got} vs {c}"
+                );
+            }
+        }
         for scale in [1e-4, 0.2] {
             let f = generic_f(scale);
             // eta_bar = 0 keeps every plane undamaged whatever the strain.
