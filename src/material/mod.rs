@@ -592,8 +592,8 @@ pub(crate) fn sym_to_matrix(s: &Sym6) -> Matrix3<f64> {
 /// (need not be major-symmetric). Then `P = F S` and
 /// `A_iJkL = delta_ik S_JL + F_iI C_IJML F_kM`, for every index below `N`: `N = 3` forms the whole
 /// `A`; `N = 2` only its in-plane entries (the others are left as they were), which for a plane-strain
-/// `F` (`F_i2 = F_2i = 0` for `i < 2`) equal those of `N = 3` to the bit: the terms it leaves out are
-/// exact zeros added last.
+/// `F` (`F_i2 = 0` for `i < 2`) equal those of `N = 3` to the bit: the terms it leaves out are exact
+/// zeros added last.
 #[inline(always)]
 pub(crate) fn first_piola_from_pk2<const N: usize>(
     f: &Matrix3<f64>,

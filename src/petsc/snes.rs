@@ -86,9 +86,17 @@ pub struct Snes {
     monitored: Option<Box<Cell<*mut c_void>>>,
     /// The Krylov solver's operator where it is not the Jacobian itself ([`Snes::set_operator`]).
     operator: Option<ThreadedOperator>,
-    /// The residual norm of the solve's previous iteration, for the stall test of [`converged_cb`]
-    /// (registered once with this box's address).
-    previous_norm: Box<Cell<f64>>,
+    /// The state of the stall test of [`converged_cb`] (registered once with this box's address).
+    stall: Box<Stall>,
+}
+
+/// What [`converged_cb`] keeps between the iterations of a solve.
+#[derive(Default)]
+struct Stall {
+    /// The residual norm of the previous iteration.
+    previous: Cell<f64>,
+    /// Iterations in a row that left the residual norm unchanged.
+    unchanged: Cell<sys::PetscInt>,
 }
 
 /// Relative change of the residual norm below which a Newton iteration made no progress: the solve
@@ -116,7 +124,7 @@ impl Snes {
             configured: false,
             monitored: None,
             operator: None,
-            previous_norm: Box::new(Cell::new(f64::NAN)),
+            stall: Box::default(),
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -139,13 +147,13 @@ impl Snes {
             "SNESSetConvergenceHistory",
         )?;
         // PETSc's tests, and a stalled iteration ended at once (the box lives as long as the SNES).
-        let previous: *const Cell<f64> = &*snes.previous_norm;
+        let stall: *const Stall = &*snes.stall;
         check(
             unsafe {
                 sys::SNESSetConvergenceTest(
                     snes.raw,
                     Some(converged_cb),
-                    previous.cast_mut().cast(),
+                    stall.cast_mut().cast(),
                     None,
                 )
             },
@@ -543,12 +551,15 @@ unsafe extern "C" fn linear_monitor_cb(
     }
 }
 
-/// PETSc's default convergence test, and one more: an iteration that leaves the residual norm unchanged
-/// to a relative [`STALLED`] ends the solve as `DIVERGED_LINEAR_SOLVE`. Newton's next iteration would start
-/// from the same state with the same Jacobian and preconditioner and so change nothing either: GMRES
-/// preconditioned from the left can "converge" through an ILU(0) with a tiny pivot to a step that changes
-/// nothing (the paper-size CT at 4.3 m/s, step 373), and until now Newton ran to its 25 iterations before
-/// the caller saw the stall. Another linear solver (the step's fallback) may then succeed at the same dt.
+/// PETSc's default convergence test, and for Newton with line search (`newtonls`, the default) one more:
+/// iterations that leave the residual norm unchanged to a relative [`STALLED`], as many in a row as the
+/// preconditioner's lag (so that one of them had a preconditioner built at the stalled state), end the
+/// solve as `DIVERGED_LINEAR_SOLVE`. Newton's next iteration would start from the same state with the same
+/// Jacobian and preconditioner and change nothing either: GMRES preconditioned from the left can
+/// "converge" through an ILU(0) with a tiny pivot to a step that changes nothing (the paper-size CT at
+/// 4.3 m/s, step 373), and Newton used to run to its 25 iterations before the caller saw the stall.
+/// Another linear solver (the step's fallback) may then succeed at the same dt. Other SNES types are
+/// left to PETSc's test: the trust region asks it again after a rejected step, at an unchanged norm.
 unsafe extern "C" fn converged_cb(
     snes: sys::SNES,
     it: sys::PetscInt,
@@ -556,24 +567,41 @@ unsafe extern "C" fn converged_cb(
     snorm: sys::PetscReal,
     fnorm: sys::PetscReal,
     reason: *mut sys::SNESConvergedReason,
-    previous: *mut c_void,
+    stall: *mut c_void,
 ) -> sys::PetscErrorCode {
-    // SAFETY: PETSc passes a valid SNES and reason; `previous` is the box registered in `Snes::new`,
-    // alive as long as the SNES.
+    // SAFETY: PETSc passes a valid SNES and reason; `stall` is the box registered in `Snes::new`, alive
+    // as long as the SNES.
     unsafe {
         let code =
             sys::SNESConvergedDefault(snes, it, xnorm, snorm, fnorm, reason, std::ptr::null_mut());
         if code != 0 {
             return code;
         }
-        let previous = &*previous.cast::<Cell<f64>>();
-        if it > 0
-            && *reason == sys::SNESConvergedReason_SNES_CONVERGED_ITERATING
-            && (fnorm - previous.get()).abs() <= STALLED * fnorm.abs()
-        {
+        let stall = &*stall.cast::<Stall>();
+        let unchanged = it > 0 && (fnorm - stall.previous.get()).abs() <= STALLED * fnorm.abs();
+        stall.unchanged.set(if unchanged {
+            stall.unchanged.get() + 1
+        } else {
+            0
+        });
+        stall.previous.set(fnorm);
+        if !unchanged || *reason != sys::SNESConvergedReason_SNES_CONVERGED_ITERATING {
+            return 0;
+        }
+        let mut kind: sys::SNESType = std::ptr::null();
+        let mut lag: sys::PetscInt = 1;
+        let code = sys::SNESGetType(snes, &mut kind);
+        if code != 0 {
+            return code;
+        }
+        let code = sys::SNESGetLagPreconditioner(snes, &mut lag);
+        if code != 0 {
+            return code;
+        }
+        let newton = !kind.is_null() && CStr::from_ptr(kind).to_bytes() == b"newtonls";
+        if newton && stall.unchanged.get() >= lag.max(1) {
             *reason = sys::SNESConvergedReason_SNES_DIVERGED_LINEAR_SOLVE;
         }
-        previous.set(fnorm);
     }
     0
 }

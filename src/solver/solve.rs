@@ -72,8 +72,10 @@ impl Solves {
 /// on the preconditioned residual, and an ILU(0) with a tiny pivot lets it "converge" in one iteration to
 /// a step that changes nothing (the paper-size CT at 4.3 m/s stopped at step 373 so, halving dt down to
 /// 1.6e-8 s, where the fallback's LU converges in 3 iterations at the first dt). SNES's convergence test
-/// ends such a solve at the stalled iteration as `DIVERGED_LINEAR_SOLVE` (`petsc::snes`); the residual
-/// history names it here.
+/// (`petsc::snes`, Newton with line search) ends such a solve as `DIVERGED_LINEAR_SOLVE` after as many
+/// unchanged iterations in a row as the preconditioner's lag; the residual history names it here, and
+/// also catches a stall that ran to the iteration limit (another SNES type, or a user's
+/// `-snes_convergence_test`).
 fn diverged(info: &SolveInfo) -> Failure {
     let why = info.domain_errors.last().cloned().unwrap_or_default();
     let stalled = stalled(&info.residual_norms);
