@@ -5,18 +5,22 @@
 use mpm_concrete::app::smoke::{self, SmokeParams};
 use mpm_concrete::petsc::{self, Session};
 
-/// Sets `options` under `prefix` and solves; returns the result.
-fn solve_with(prefix: &str, options: &str) -> smoke::SmokeResult {
-    let s = Session::get().expect("PETSc session");
-    let prefixed: String = options
+/// `options` (`-name value ...`) with every option name under `prefix`.
+fn under_prefix(prefix: &str, options: &str) -> String {
+    options
         .split_whitespace()
         .map(|t| match t.strip_prefix('-') {
             Some(name) => format!("-{prefix}{name}"),
             None => t.to_owned(),
         })
         .collect::<Vec<_>>()
-        .join(" ");
-    petsc::apply_default_options(&s, &prefixed).expect("options");
+        .join(" ")
+}
+
+/// Sets `options` under `prefix` and solves; returns the result.
+fn solve_with(prefix: &str, options: &str) -> smoke::SmokeResult {
+    let s = Session::get().expect("PETSc session");
+    petsc::apply_default_options(&s, &under_prefix(prefix, options)).expect("options");
     smoke::solve(&s, params(), Some(prefix)).unwrap_or_else(|e| panic!("{prefix}: {e}"))
 }
 
@@ -550,15 +554,8 @@ fn newton_iterations_that_change_nothing_end_the_solve() {
         ("slowtr_", "-snes_type newtontr", 1.25, None),
     ];
     for (prefix, options, scale, stops_after) in cases {
-        let prefixed: String = format!("{common} {options}")
-            .split_whitespace()
-            .map(|t| match t.strip_prefix('-') {
-                Some(name) => format!("-{prefix}{name}"),
-                None => t.to_owned(),
-            })
-            .collect::<Vec<_>>()
-            .join(" ");
-        petsc::apply_default_options(&s, &prefixed).expect("options");
+        let options = under_prefix(prefix, &format!("{common} {options}"));
+        petsc::apply_default_options(&s, &options).expect("options");
         let mut jac = Matrix::with_type(&s, 9, 3, "baij").expect("matrix");
         jac.set_block_pattern(&diagonal_blocks()).expect("pattern");
         let mut snes = Snes::new(&s, Some(prefix)).expect("snes");
