@@ -49,10 +49,21 @@ fn is_result_file(name: &str) -> bool {
 
 /// Whether `name` is the temporary copy of a program file that a write in progress (or one interrupted by
 /// a kill or a full disk) leaves: `NAME.tmp` (files written through [`write_atomic`]) or
-/// `.STEM.tmp-PID.png` (the plots, [`crate::plot`]).
+/// `.STEM.tmp-PID.png` (the plots, [`crate::plot`]), or a file of the fallback solver's out-of-core factors
+/// that a killed run leaves, `mumps_RANK_XXXXXX` (`solver_defaults::out_of_core_directory`).
 pub fn is_temporary(name: &str) -> bool {
     if let Some(base) = name.strip_suffix(".tmp") {
         return is_result_file(base);
+    }
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    let factors = name
+        .strip_prefix("mumps_")
+        .and_then(|r| r.split_once('_'))
+        .is_some_and(|(rank, tag)| {
+            digits(rank) && tag.len() == 6 && tag.bytes().all(|b| b.is_ascii_alphanumeric())
+        });
+    if factors {
+        return true;
     }
     let plot = name
         .strip_prefix('.')
@@ -422,6 +433,8 @@ mod tests {
             "checkpoint.h5.tmp",
             ".crack_length.tmp-4711.png",
             ".damage_000002.tmp-12.png",
+            "mumps_0_IjXPaZ",
+            "mumps_12_a1B2c3",
         ] {
             assert!(is_program_file(name), "{name}");
         }
@@ -436,6 +449,10 @@ mod tests {
             ".notes.tmp-12.png",
             "notes.tmp",
             ".crack_length.tmp-.png",
+            "mumps_0_IjXPa",
+            "mumps__IjXPaZ",
+            "mumps_0_IjX.aZ",
+            "mumps_notes.txt",
         ] {
             assert!(!is_program_file(name), "{name}");
         }

@@ -159,9 +159,40 @@ pub const FALLBACK_PREFIX: &str = "fallback_";
 /// (MUMPS `INFOG(1) = -10`) and the step failed down to dt = 1.6e-8 s; with the detection the same step
 /// converged in 3 Newton iterations at 0.25 us and the run went on (`docs/results.md`). Newton still
 /// judges convergence on the true residual.
+///
+/// The factors are kept out of core (`ICNTL(22) = 1`, in the run's output directory:
+/// [`out_of_core_directory`]). In core they set a run's peak memory: at the end of the paper-size CT at
+/// 4.3 m/s (120,534 unknowns, 73 nonzeros per row) MUMPS allocates 907 MB for 82 M factor entries against
+/// 151 MB out of core, and three steps that went to the fallback peaked at 2166 MB against 972 MB (the main
+/// solver's steps alone: 687 MB), for about 1.5 s more per fallback step (`docs/benchmarks.md`, "The
+/// fallback's factors out of core"). The fallback solves a few steps per run, so the time does not count
+/// and the memory does.
 pub const FALLBACK: &str = "-fallback_snes_rtol 1e-8 -fallback_snes_atol 1e-8 -fallback_snes_max_it 25 \
      -fallback_ksp_type preonly -fallback_pc_type lu -fallback_pc_factor_mat_solver_type mumps \
-     -fallback_mat_mumps_icntl_24 1";
+     -fallback_mat_mumps_icntl_24 1 -fallback_mat_mumps_icntl_22 1";
+
+/// The option naming the directory of the fallback's out-of-core factors (without its dash).
+const OUT_OF_CORE_DIRECTORY: &str = "fallback_mat_mumps_ooc_tmpdir";
+
+/// MUMPS keeps at most this many bytes of a directory name (`OOC_TMPDIR`).
+const OUT_OF_CORE_DIRECTORY_LEN: usize = 255;
+
+/// Puts the fallback's out-of-core factors ([`FALLBACK`]) in `dir` (the run's output directory once it
+/// exists, a disk the user chose for the results; MUMPS's own default is `/tmp`, which is memory on systems
+/// that mount it as tmpfs) unless the option is set already or the name is too long for MUMPS, in which
+/// case its default stays. MUMPS removes its files when the solver is destroyed; those of a killed run are removed with the
+/// run's other temporaries (`rundir::is_temporary`). Returns the option's name if it set it.
+pub fn out_of_core_directory(
+    session: &SessionGuard,
+    dir: &std::path::Path,
+) -> Result<Option<String>, petsc::PetscError> {
+    let name = dir.to_string_lossy();
+    if name.len() > OUT_OF_CORE_DIRECTORY_LEN || petsc::has_option(session, OUT_OF_CORE_DIRECTORY)? {
+        return Ok(None);
+    }
+    petsc::set_option(session, OUT_OF_CORE_DIRECTORY, Some(&name))?;
+    Ok(Some(format!("-{OUT_OF_CORE_DIRECTORY}")))
+}
 
 /// The ratio `r = rho h^2 / (beta dt^2 M)` of the model, or `None` for a quasi-static model: the smallest
 /// over the bodies of their own `rho / M` (density, P-wave modulus `M = K + 4G/3`), so that a stiff and

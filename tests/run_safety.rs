@@ -706,12 +706,37 @@ fn crack_remeasures_a_ct_run_from_its_snapshots_and_refuses_other_runs() {
 
 /// A numerical failure raised inside PETSc's solve (here SNES told to raise an error when it does not
 /// converge, as MUMPS does when it fails on a nearly singular matrix) fails the attempt, not the run: the
-/// step is retried with the fallback solver and reported.
+/// step is retried with the fallback solver and reported. The fallback keeps its factors out of core
+/// (MUMPS's statistics say so) and leaves none of their files in the output directory.
 #[test]
 fn a_petsc_error_inside_a_solve_fails_the_attempt_not_the_run() {
     let dir = scratch("safety", "petsc-error", &[("block.toml", BLOCK)]);
-    let o = run_tiny(&dir, &["-snes_max_it", "1", "-snes_error_if_not_converged"]);
+    let o = run_tiny(
+        &dir,
+        &[
+            "-snes_max_it",
+            "1",
+            "-snes_error_if_not_converged",
+            "-fallback_mat_mumps_icntl_4",
+            "2",
+        ],
+    );
     succeeds(&o);
+    let out_of_core = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .filter(|l| l.contains("ICNTL(22)"))
+        .map(|l| l.split_whitespace().last().unwrap_or_default().to_owned())
+        .collect::<Vec<_>>();
+    assert!(
+        !out_of_core.is_empty() && out_of_core.iter().all(|v| v == "1"),
+        "MUMPS's out-of-core option: {out_of_core:?}"
+    );
+    let left: Vec<String> = std::fs::read_dir(dir.join("d"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("mumps_"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
     let err = stderr(&o);
     assert!(
         err.contains("PETSc error 91") && err.contains("retrying with the fallback solver"),

@@ -288,7 +288,7 @@ fn simulate<const D: usize>(
     let lock = prepared.lock.take();
     let (cfg, file) = (&prepared.cfg, &invocation.file);
     let root = session.rank() == 0;
-    let (mut sim, defaults) = build(session, setup, file)?;
+    let (mut sim, mut defaults) = build(session, setup, file)?;
     if shared {
         share_out(session, &mut sim)?;
     }
@@ -321,6 +321,12 @@ fn simulate<const D: usize>(
     let initial = whole_initial(session, built, root)?;
     let opened = open_output(invocation, &prepared, &sim, (root, lock), initial.as_ref());
     let mut records = agreed(session, opened)?;
+    // The output directory exists from here on: the fallback's factors go there from the next step on
+    // (in the first step, before anything is written, to MUMPS's default directory).
+    defaults.extend(solver_defaults::out_of_core_directory(
+        session,
+        &prepared.dir,
+    )?);
     let hint = resume_command(invocation.own, invocation.petsc, &prepared.dir);
     // The starting state: a fresh run's step 0 (its checkpoint, then its fields), or a resumed run's
     // checkpoint state if the fields of that step are missing.
