@@ -187,7 +187,8 @@ pub fn out_of_core_directory(
     dir: &std::path::Path,
 ) -> Result<Option<String>, petsc::PetscError> {
     let name = dir.to_string_lossy();
-    if name.len() > OUT_OF_CORE_DIRECTORY_LEN || petsc::has_option(session, OUT_OF_CORE_DIRECTORY)? {
+    if name.len() > OUT_OF_CORE_DIRECTORY_LEN || petsc::has_option(session, OUT_OF_CORE_DIRECTORY)?
+    {
         return Ok(None);
     }
     petsc::set_option(session, OUT_OF_CORE_DIRECTORY, Some(&name))?;
