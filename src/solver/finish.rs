@@ -4,7 +4,6 @@
 use super::contacts::{self, Turn};
 use super::path;
 use super::prepare::StepPlan;
-use super::processes::agreed;
 use super::report::{StepError, StepReport};
 use super::solve::Solved;
 use super::step::Step;
@@ -70,10 +69,9 @@ impl<const D: usize> Step<'_, D> {
             out.contact_loss,
             transfer,
         ];
-        if self.state.distributed {
-            session.sum(&mut energies)?;
-            session.sum(&mut books)?;
-        }
+        let processes = self.processes(session);
+        processes.sum(&mut energies)?;
+        processes.sum(&mut books)?;
         let b = &mut self.state.counters.books;
         b.damage += books[0];
         // The points eroded in the last step carry no stress from this step on.
@@ -188,11 +186,9 @@ impl<const D: usize> Step<'_, D> {
                 work += self.work.grid_state.mass[node] * bf.dot(&out.du_nodes[node]);
             }
         }
-        if self.state.distributed {
-            let mut sum = [work];
-            session.sum(&mut sum)?;
-            work = sum[0];
-        }
+        let mut sum = [work];
+        self.processes(session).sum(&mut sum)?;
+        work = sum[0];
         for (k, (r, du)) in out.reactions.iter().zip(&out.displacements).enumerate() {
             for c in 0..D {
                 work += 0.5 * (r[c] + self.state.counters.last_reactions[k][c]) * du[c];
@@ -224,6 +220,7 @@ impl<const D: usize> Step<'_, D> {
             },
             dt: plan.dt,
         };
+        let processes = self.processes(session);
         let ps = &mut self.state.particles;
         // Eroded points (material `erosion_damage`) move with the grid but keep their deformation
         // gradient, volume and domain: a void does not deform, so it never inverts.
@@ -241,11 +238,7 @@ impl<const D: usize> Step<'_, D> {
             })
             .collect();
         let g2p = transfer::grid_to_particles(&self.work.table, &model.params.grid, &sol, ps);
-        agreed(
-            session,
-            self.state.distributed,
-            g2p.map_err(StepError::from),
-        )?;
+        processes.agreed(g2p.map_err(StepError::from))?;
         for (p, x, f, r, vol, corners) in frozen {
             let shift = ps.x[p] - x;
             ps.f[p] = f;

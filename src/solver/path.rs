@@ -70,10 +70,9 @@ impl<const D: usize> Step<'_, D> {
                 }
             }
         }
-        if self.state.distributed {
-            session.sum(&mut coefficients)?;
-            session.sum(&mut found)?;
-        }
+        let processes = self.processes(session);
+        processes.sum(&mut coefficients)?;
+        processes.sum(&mut found)?;
         if found != [1.0, 1.0] {
             return Err(StepError::Setup(format!(
                 "path following: the measured points {:?} are not among the points (eroded or lost?)",
@@ -106,9 +105,7 @@ impl<const D: usize> Step<'_, D> {
                 sum[0] += sign * gauge.direction.dot(&ps.x[p]);
             }
         }
-        if self.state.distributed {
-            session.sum(&mut sum)?;
-        }
+        self.processes(session).sum(&mut sum)?;
         Ok(Some(PathPoint {
             lambda: self.state.counters.accumulated[set][c] / v,
             opening: sum[0] - gauge.initial,

@@ -4,7 +4,7 @@
 use super::contacts::{self, Attempt, Sets};
 use super::input::Loading;
 use super::path;
-use super::processes::{agreed, largest};
+use super::processes::largest;
 use super::report::StepError;
 use super::step::Step;
 use super::system::LinearSystem;
@@ -87,13 +87,7 @@ impl<const D: usize> Step<'_, D> {
         session: &SessionGuard,
         dt: f64,
     ) -> Result<(StepPlan<D>, Vec<f64>), StepError> {
-        if session.size() > 1 && self.model.num_fields() > 1 {
-            return Err(StepError::Setup(
-                "contact between bodies (a body with its own velocity field) runs on one process: \
-                 its contact rows combine the rows of two node copies, which a process may not both own"
-                    .into(),
-            ));
-        }
+        self.refuse_what_processes_cannot_share(session)?;
         let (t, t_new) = (self.state.counters.time, self.state.counters.time + dt);
         let g = self.grid_phase(session, t_new, |v, rise| {
             prescribed_increment(v, rise, t, dt)
@@ -239,12 +233,9 @@ impl<const D: usize> Step<'_, D> {
     /// over the processes, so every process holds the whole grid state.
     pub(super) fn project_to_grid(&mut self, session: &SessionGuard) -> Result<(), StepError> {
         let model = self.model;
-        if session.size() > 1 && model.fem.is_none() {
-            self.share_points(session)?;
-        }
+        self.share_points(session)?;
         let ps = &self.state.particles;
         let counted = self.own_point_count();
-        let shared = self.state.distributed;
         let local = match &model.fem {
             None => self
                 .work
@@ -253,13 +244,8 @@ impl<const D: usize> Step<'_, D> {
             Some(fem) => self.work.table.push_forward(&fem.points, &ps.f),
         }
         .map_err(|e| StepError::from(e.renumbered(&ps.id)))
-        .and_then(|()| match (&self.work.partition, shared) {
-            (Some(part), true) => part
-                .check_reach(&self.work.table, ps, counted)
-                .map_err(StepError::Setup),
-            _ => Ok(()),
-        });
-        agreed(session, shared, local)?;
+        .and_then(|()| self.check_reach());
+        self.processes(session).agreed(local)?;
         let fields = model.num_fields();
         if fields > 1 {
             let (nodes, body) = (model.params.grid.num_nodes(), &ps.body);
@@ -267,10 +253,8 @@ impl<const D: usize> Step<'_, D> {
                 model.params.fields[body[p] as usize] as usize
             });
         }
-        self.work.windows = match (&self.work.partition, shared) {
-            (Some(part), true) => Some(self.nodal_windows(session, part)?),
-            _ => None,
-        };
+        self.plan_windows(session)?;
+        let ps = &self.state.particles;
         let windows = self.work.windows.as_ref();
         transfer::particles_to_grid_shared(
             &self.work.table,

@@ -1,5 +1,10 @@
-//! The process plumbing of a step: agreement on failures, residual rows completed over the processes,
-//! points shared out with their ghosts and the block rows each process owns.
+//! The process layer of a step: the one place where the step's phases meet the other processes.
+//! [`Processes`] carries the exchanges of results (sums, minima, agreement on failures, residual rows
+//! completed), each a no-op where every process holds every point; the `Step` methods here share the
+//! points out with their ghosts, plan the nodal sums between neighbouring bands and give the block rows
+//! each process owns. The physics of the other phases (`prepare`, `solve`, `finish`, the contacts and path
+//! following) does not ask how many processes there are; the linear system (`system.rs`) chooses its
+//! storage and gathers from it.
 
 use super::contacts;
 use super::report::StepError;
@@ -27,42 +32,89 @@ pub(super) fn agree(
     }
 }
 
-/// A result of this process's points agreed on by every process before the next collective call: with
-/// the points shared out (`shared`), a point's failure (it left the grid, its domain inverted) is met
-/// only by the processes that hold it. The failing processes keep their error, the others return
-/// [`StepError::OtherProcess`], so that all leave the step together.
-pub(super) fn agreed<T>(
-    session: &SessionGuard,
+/// The exchanges of a step's results between the processes, through which the step's phases reach the
+/// other processes: sums and minima over the processes, agreement on a failure, residual rows completed.
+/// Where every process holds every point (one process, or points not shared out) every process computed
+/// everything itself, and each exchange is a no-op: the phases never ask how many processes there are.
+#[derive(Clone, Copy)]
+pub(super) struct Processes<'s> {
+    session: &'s SessionGuard,
+    /// The points are shared out: each process holds its own points and their ghosts.
     shared: bool,
-    local: Result<T, StepError>,
-) -> Result<T, StepError> {
-    if !shared {
-        return local;
-    }
-    let failed = session.any(local.is_err());
-    match local {
-        Ok(_) if failed => Err(StepError::OtherProcess),
-        r => r,
-    }
 }
 
-/// Completes a residual `r` over all unknowns that this process evaluated from its own points and
-/// ghosts (`shared`): its own block rows `rows` are complete, the others partial; they are zeroed and
-/// the vectors summed over the processes, so that every process holds every row (the same bits on
-/// each). Without shared points every process evaluated every row: nothing to do.
-pub(super) fn complete_rows(
-    session: &SessionGuard,
-    shared: bool,
-    rows: Range<usize>,
-    nf: usize,
-    r: &mut [f64],
-) -> Result<(), StepError> {
-    if !shared {
-        return Ok(());
+impl<'s> Processes<'s> {
+    /// Sums `v` element-wise over the processes (collective where the points are shared out).
+    pub(super) fn sum(&self, v: &mut [f64]) -> Result<(), petsc::PetscError> {
+        match self.shared {
+            true => self.session.sum(v),
+            false => Ok(()),
+        }
     }
-    zero_foreign_rows(rows, nf, r);
-    session.sum(r)?;
-    Ok(())
+
+    /// The element-wise minimum of `v` over the processes (collective where the points are shared
+    /// out).
+    pub(super) fn min(&self, v: &mut [f64]) -> Result<(), petsc::PetscError> {
+        match self.shared {
+            true => self.session.min(v),
+            false => Ok(()),
+        }
+    }
+
+    /// A result of this process's points agreed on by every process before the next collective call:
+    /// with the points shared out, a point's failure (it left the grid, its domain inverted) is met only
+    /// by the processes that hold it. The failing processes keep their error, the others return
+    /// [`StepError::OtherProcess`], so that all leave the step together.
+    pub(super) fn agreed<T>(&self, local: Result<T, StepError>) -> Result<T, StepError> {
+        if !self.shared {
+            return local;
+        }
+        let failed = self.session.any(local.is_err());
+        match local {
+            Ok(_) if failed => Err(StepError::OtherProcess),
+            r => r,
+        }
+    }
+
+    /// Completes a residual `r` over all unknowns that this process evaluated from its own points and
+    /// ghosts: its own block rows `rows` are complete, the others partial; they are zeroed and the
+    /// vectors summed over the processes, so that every process holds every row (the same bits on
+    /// each).
+    pub(super) fn complete_rows(
+        &self,
+        rows: Range<usize>,
+        nf: usize,
+        r: &mut [f64],
+    ) -> Result<(), StepError> {
+        if !self.shared {
+            return Ok(());
+        }
+        zero_foreign_rows(rows, nf, r);
+        self.session.sum(r)?;
+        Ok(())
+    }
+
+    /// Completes the physical residual `r` after a solve where the step reads it beyond this process's
+    /// own block rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they
+    /// are zeroed and only the unknowns `read` (`solve.rs`'s constrained and contact rows) are summed over
+    /// the processes (each from its owner, the others adding zeros: the same bits on every process).
+    pub(super) fn complete_read_rows(
+        &self,
+        (rows, nf): (Range<usize>, usize),
+        read: &[usize],
+        r: &mut [f64],
+    ) -> Result<(), StepError> {
+        if !self.shared {
+            return Ok(());
+        }
+        zero_foreign_rows(rows, nf, r);
+        let mut values: Vec<f64> = read.iter().map(|&d| r[d]).collect();
+        self.session.sum(&mut values)?;
+        for (&d, v) in read.iter().zip(values) {
+            r[d] = v;
+        }
+        Ok(())
+    }
 }
 
 /// Zeroes the partial rows of `r` outside this process's own block rows `rows` (`nf` unknowns per row).
@@ -105,34 +157,39 @@ pub(super) fn bytes_per_process(
     Ok([of(0), of(1)])
 }
 
-/// Completes the physical residual `r` after a solve where the step reads it beyond this process's own block
-/// rows `rows` (`nf` unknowns per row): its own rows are complete, the others partial; they are zeroed and
-/// only the unknowns `read` (`solve.rs`'s constrained and contact rows) are summed over the
-/// processes (each from its owner, the others adding zeros: the same bits on every process). Without shared
-/// points every process evaluated every row: nothing to do.
-pub(super) fn complete_read_rows(
-    session: &SessionGuard,
-    shared: bool,
-    (rows, nf): (Range<usize>, usize),
-    read: &[usize],
-    r: &mut [f64],
-) -> Result<(), StepError> {
-    if !shared {
-        return Ok(());
-    }
-    zero_foreign_rows(rows, nf, r);
-    let mut values: Vec<f64> = read.iter().map(|&d| r[d]).collect();
-    session.sum(&mut values)?;
-    for (&d, v) in read.iter().zip(values) {
-        r[d] = v;
-    }
-    Ok(())
-}
-
 impl<const D: usize> Step<'_, D> {
+    /// The exchanges of this step with the other processes ([`Processes`]).
+    pub(super) fn processes<'s>(&self, session: &'s SessionGuard) -> Processes<'s> {
+        Processes {
+            session,
+            shared: self.state.distributed,
+        }
+    }
+
+    /// What runs on one process only, refused on several: contact between bodies (a body with its own
+    /// velocity field), whose contact rows combine the rows of two node copies that a process may not
+    /// both own.
+    pub(super) fn refuse_what_processes_cannot_share(
+        &self,
+        session: &SessionGuard,
+    ) -> Result<(), StepError> {
+        if session.size() > 1 && self.model.num_fields() > 1 {
+            return Err(StepError::Setup(
+                "contact between bodies (a body with its own velocity field) runs on one process: \
+                 its contact rows combine the rows of two node copies, which a process may not both own"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
     /// MPM on several processes: the points shared out (at the first step: each process keeps those of
-    /// its band; later: the points that left a band migrate), then the ghosts appended.
+    /// its band; later: the points that left a band migrate), then the ghosts appended. Nothing on one
+    /// process or in FEM mode (each process holds every point).
     pub(super) fn share_points(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        if session.size() == 1 || self.model.fem.is_some() {
+            return Ok(());
+        }
         let st = &mut *self.state;
         if self.work.partition.is_none() {
             let p = Partition::balanced(
@@ -158,6 +215,31 @@ impl<const D: usize> Step<'_, D> {
         session.sum(&mut moved)?;
         // Points that migrated in any attempt of the step; the ghosts of the last attempt.
         self.work.moved = [self.work.moved[0] + moved[0] as usize, moved[1] as usize];
+        Ok(())
+    }
+
+    /// With the points shared out: each own point's support lies within the node rows its process reads
+    /// (`Partition::check_reach`).
+    pub(super) fn check_reach(&self) -> Result<(), StepError> {
+        match (&self.work.partition, self.state.distributed) {
+            (Some(part), true) => part
+                .check_reach(
+                    &self.work.table,
+                    &self.state.particles,
+                    self.own_point_count(),
+                )
+                .map_err(StepError::Setup),
+            _ => Ok(()),
+        }
+    }
+
+    /// The node rows of the step's nodal sums ([`Step::nodal_windows`]) with the points shared out, none
+    /// otherwise (every process sums all of its nodes itself).
+    pub(super) fn plan_windows(&mut self, session: &SessionGuard) -> Result<(), StepError> {
+        self.work.windows = match (&self.work.partition, self.state.distributed) {
+            (Some(part), true) => Some(self.nodal_windows(session, part)?),
+            _ => None,
+        };
         Ok(())
     }
 

@@ -6,7 +6,7 @@ use super::interrupt::Interrupt;
 use super::path;
 use super::prepare::StepPlan;
 use super::problem::StepProblem;
-use super::processes::{agreed, complete_read_rows};
+use super::processes::Processes;
 use super::report::{Failure, StepError};
 use super::step::{Step, Workspace};
 use super::system::LinearSystem;
@@ -214,31 +214,27 @@ fn physical_residual<const D: usize>(
     assembler: &mut Assembler<D>,
     input: &StepInput<'_, D>,
     sys: &LinearSystem,
-    (session, shared, read): (&SessionGuard, bool, &[usize]),
+    (processes, read): (Processes<'_>, &[usize]),
     phys: &mut [f64],
 ) -> Result<Vec<f64>, StepError> {
     let xs = sys.owned.gather_all(&sys.x)?;
     let local = assembler
         .evaluate(input, &xs)
         .and_then(|()| assembler.residual(input, &xs, phys, true));
-    agreed(session, shared, local.map_err(StepError::from))?;
+    processes.agreed(local.map_err(StepError::from))?;
     let nf = input.dofs.unknowns_per_node();
-    complete_read_rows(session, shared, (sys.owned.rows.clone(), nf), read, phys)?;
+    processes.complete_read_rows((sys.owned.rows.clone(), nf), read, phys)?;
     Ok(xs)
 }
 
 /// The unknowns whose rows of the physical residual every process reads after a solve: the constrained
 /// ones of `sets` (the reactions) and those the contact sets read ([`ContactSet::read_rows`]: their
-/// forces and statuses); none unless the points are `shared` out.
+/// forces and statuses).
 fn read_rows<const D: usize>(
-    shared: bool,
     sets: &[Vec<usize>],
     contacts: &[Box<dyn ContactSet<D>>],
     nf: usize,
 ) -> Vec<usize> {
-    if !shared {
-        return Vec::new();
-    }
     let mut rows: Vec<usize> = sets.iter().flatten().copied().collect();
     for c in contacts {
         c.read_rows(nf, &mut rows);
@@ -319,7 +315,8 @@ impl<const D: usize> Step<'_, D> {
         assembly_event: LogEvent,
     ) -> Result<Result<Solved, Failure>, StepError> {
         let t1 = Instant::now();
-        let (step, model, shared) = (self.state.counters.step, self.model, self.state.distributed);
+        let (step, model) = (self.state.counters.step, self.model);
+        let processes = self.processes(session);
         let Workspace {
             table,
             dofs,
@@ -351,8 +348,8 @@ impl<const D: usize> Step<'_, D> {
         let in_contact = contacts.iter().any(|c| c.in_play());
         let mut solves = Solves::default();
         let mut phys = vec![0.0; dofs.len()];
-        let read = read_rows(shared, sets, contacts, nf);
-        let procs = (session, shared, read.as_slice());
+        let read = read_rows(sets, contacts, nf);
+        let procs = (processes, read.as_slice());
         // During the solves each process evaluates the points of its own rows; the physical residual
         // after each solve and the commit evaluate them all.
         let rows = system

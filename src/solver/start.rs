@@ -2,7 +2,6 @@
 
 use super::contacts::{self, Attempt};
 use super::input::Loading;
-use super::processes::{agreed, complete_rows};
 use super::report::StepError;
 use super::step::Step;
 use crate::boundary::prescribed_acceleration;
@@ -83,13 +82,9 @@ impl<const D: usize> Step<'_, D> {
             .assembler
             .evaluate(&input, &x)
             .and_then(|()| self.work.assembler.residual(&input, &x, &mut r, true));
-        agreed(
-            session,
-            self.state.distributed,
-            local.map_err(StepError::from),
-        )?;
-        let rows = self.own_rows(session);
-        complete_rows(session, self.state.distributed, rows, nf, &mut r)?;
+        let processes = self.processes(session);
+        processes.agreed(local.map_err(StepError::from))?;
+        processes.complete_rows(self.own_rows(session), nf, &mut r)?;
         Ok(r)
     }
 

@@ -457,12 +457,10 @@ impl<const D: usize> Step<'_, D> {
                 }
             }
         }
-        if self.state.distributed {
-            let mut gaps: Vec<f64> = nodes.iter().map(|c| c.gap).collect();
-            session.min(&mut gaps)?;
-            for (c, g) in nodes.iter_mut().zip(gaps) {
-                c.gap = g;
-            }
+        let mut gaps: Vec<f64> = nodes.iter().map(|c| c.gap).collect();
+        self.processes(session).min(&mut gaps)?;
+        for (c, g) in nodes.iter_mut().zip(gaps) {
+            c.gap = g;
         }
         // A negative gap in the constraint would move the node out by |g| within one step, work that no
         // reaction force accounts for (it made the kinetic and stored energy exceed the device's work in
