@@ -65,8 +65,8 @@ const NEWTON_RTOL_INERTIA: &str = "-snes_rtol 1e-6 -snes_stol 0";
 const NEWTON_RTOL: &str = "-snes_rtol 1e-8";
 
 /// On one process: GMRES preconditioned by ILU(0) (pivots shifted away from zero), factored at the first Newton
-/// iteration of a step and every third one. With the Jacobian stored by node blocks (one process,
-/// `petsc::matrix_type_for`) a factorisation of the widened CPDI pattern costs about five GMRES iterations,
+/// iteration of a step and every third one. With the Jacobian stored by node blocks
+/// (`petsc::matrix_type_for`) a factorisation of the widened CPDI pattern costs about five GMRES iterations,
 /// and reusing it within the step pays: the half-resolution CT at 4.3 m/s to 1 ms took 356 s instead of
 /// 399 s (0.89x) for 1.29x the Krylov iterations, 40 cracked steps 0.92x (`docs/benchmarks.md`, "Reusing the
 /// factorisation within a step"). With the former point-wise storage and the stale-factorisation bug of
@@ -135,7 +135,7 @@ const STIFFNESS_FIELD_SPLIT: &str = "-snes_lag_preconditioner 3 -ksp_type gmres 
      -fieldsplit_eta_bar_sub_pc_type ilu";
 
 /// On a set-up turned inside the grid (`grid.rotation`): the Jacobian stored point-wise, so that ILU(0)
-/// factors scalar pivots (`petsc::matrix_type_for` would choose node blocks on one process), and GMRES
+/// factors scalar pivots (`petsc::matrix_type_for` would choose node blocks), and GMRES
 /// preconditioned from the right, so that it stops on the true residual. The oblique faces leave nodes
 /// with a sliver of support, whose small pivots make ILU(0) poor there: with the block storage the
 /// factorisation fails (the half-size CT at 1 mm cells turned by 30 deg sent 28 of its first 97 steps to

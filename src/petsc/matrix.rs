@@ -678,28 +678,25 @@ fn orthonormalise(vectors: &mut [Vector]) -> Result<()> {
     Ok(())
 }
 
-/// The storage of the Jacobian (`-mat_type` overrides it): on one process, under a point-block ILU
-/// (`bjacobi` with `sub_pc_type ilu`, the default of inertia-dominated 2D steps, or `ilu`), BAIJ, whose
-/// kernels work on the node's `bs x bs` blocks: on the first 200 steps of the half-resolution CT at
-/// 4.3 m/s (38,900 points, 3 unknowns per node) the factorisations took 24.7 against 35.6 ms and a
-/// triangular solve 2.2 against 4.1 ms, for the same Krylov iterations (2736 against 2737), and whole runs
-/// took 0.86x the time. Block ILU(0) shifts a pivot only when it is exactly zero: in 5 of the 1000 steps
-/// of that CT, after the crack branched, it failed where point ILU(0) passed and the fallback solved the
-/// step (about 3 % of the run); docs/benchmarks.md, "Block storage for the CT's ILU".
-/// Everywhere else AIJ with the block size set: GAMG, hypre and the field split need it, and on several
-/// processes PETSc's parallel BAIJ has no in-place update of the values (filling it block by block made
-/// the half-resolution CT's assembly 1.5x slower on two processes).
-pub fn matrix_type_for(processes: usize, pc: Option<&str>, sub_pc: Option<&str>) -> &'static str {
+/// The storage of the Jacobian (`-mat_type` overrides it): under an ILU (`ilu`, or block Jacobi or
+/// additive Schwarz with ILU on the blocks: the defaults of inertia-dominated steps in 2D and 3D, on any
+/// number of processes) BAIJ, whose kernels work on the node's `bs x bs` blocks. On the first 200 steps of
+/// the half-resolution CT at 4.3 m/s (38,900 points, 3 unknowns per node, one process) the factorisations
+/// took 24.7 against 35.6 ms and a triangular solve 2.2 against 4.1 ms, for the same Krylov iterations
+/// (2736 against 2737), and whole runs took 0.86x the time; on two processes (additive Schwarz, whose
+/// overlapping blocks PETSc extracts as BAIJ too) the half-resolution CT's first 150 steps took 0.65x and
+/// the 3D demo's first 30 steps 0.69x the time, with the same iterations (`docs/benchmarks.md`, "Block
+/// storage on several processes"). Block ILU(0) shifts a pivot only when it is exactly zero: in 5 of the
+/// 1000 steps of that CT, after the crack branched, it failed where point ILU(0) passed and the fallback
+/// solved the step (about 3 % of the run); docs/benchmarks.md, "Block storage for the CT's ILU".
+/// Everywhere else AIJ with the block size set: GAMG, hypre and the field split need it.
+pub fn matrix_type_for(pc: Option<&str>, sub_pc: Option<&str>) -> &'static str {
     let point_block_ilu = match pc {
         Some("ilu") => true,
-        Some("bjacobi") => sub_pc.is_none_or(|s| s == "ilu"),
+        Some("bjacobi" | "asm") => sub_pc.is_none_or(|s| s == "ilu"),
         _ => false,
     };
-    if processes == 1 && point_block_ilu {
-        "baij"
-    } else {
-        "aij"
-    }
+    if point_block_ilu { "baij" } else { "aij" }
 }
 
 impl Drop for Matrix {
@@ -761,15 +758,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn block_storage_only_under_a_point_block_ilu_on_one_process() {
-        assert_eq!(matrix_type_for(1, Some("bjacobi"), None), "baij");
-        assert_eq!(matrix_type_for(1, Some("bjacobi"), Some("ilu")), "baij");
-        assert_eq!(matrix_type_for(1, Some("ilu"), None), "baij");
-        assert_eq!(matrix_type_for(2, Some("bjacobi"), Some("ilu")), "aij");
-        assert_eq!(matrix_type_for(1, Some("bjacobi"), Some("lu")), "aij");
-        for pc in ["gamg", "hypre", "fieldsplit", "mg", "lu", "asm"] {
-            assert_eq!(matrix_type_for(1, Some(pc), None), "aij", "{pc}");
+    fn block_storage_only_under_a_point_block_ilu() {
+        for pc in ["bjacobi", "asm"] {
+            assert_eq!(matrix_type_for(Some(pc), None), "baij", "{pc}");
+            assert_eq!(matrix_type_for(Some(pc), Some("ilu")), "baij", "{pc}");
+            assert_eq!(matrix_type_for(Some(pc), Some("lu")), "aij", "{pc}");
         }
-        assert_eq!(matrix_type_for(1, None, None), "aij");
+        assert_eq!(matrix_type_for(Some("ilu"), None), "baij");
+        for pc in ["gamg", "hypre", "fieldsplit", "mg", "lu"] {
+            assert_eq!(matrix_type_for(Some(pc), None), "aij", "{pc}");
+        }
+        assert_eq!(matrix_type_for(None, None), "aij");
     }
 }

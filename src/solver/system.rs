@@ -210,7 +210,7 @@ impl LinearSystem {
         let pc = snes.pc_type()?;
         let sub_pc =
             petsc::option_string(session, &format!("{}sub_pc_type", prefix.unwrap_or("")))?;
-        let kind = petsc::matrix_type_for(session.size(), pc.as_deref(), sub_pc.as_deref());
+        let kind = petsc::matrix_type_for(pc.as_deref(), sub_pc.as_deref());
         let mut jac = Matrix::with_type(session, n, nf, kind)?;
         jac.set_block_pattern(&owned.pattern())?;
         // The Krylov solver's products on all threads (PETSc's own run on one core; `over` declines
