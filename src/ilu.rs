@@ -14,12 +14,6 @@
 //! iterations those of the whole matrix's ILU(0) (PETSc's additive Schwarz with the same overlap on two
 //! and four processes: `src/solver_defaults.rs`, `INERTIA_PROCESSES`).
 //!
-//! The factors are computed in double precision and kept for the solves rounded to single precision: the
-//! triangular solves are bound by memory bandwidth, and a preconditioner need not be exact, only the same
-//! linear map at every Krylov iteration (the paper-size CT's first 60 steps: the same Newton and Krylov
-//! iterations, the PETSc time 0.87x, the whole run 0.95x; `docs/benchmarks.md`, "The ILU's factors in
-//! single precision").
-//!
 //! Values are PETSc's block (BAIJ) storage, one `bs x bs` block per pattern entry, each stored column by
 //! column (entry `(i, k)` of a block at `k bs + i`), factored on the node blocks ([`SchwarzIlu::blocks`]);
 //! or PETSc's point-wise (AIJ) storage of the same pattern, factored on single unknowns with PETSc's
@@ -65,13 +59,8 @@ struct Part {
     src: Vec<usize>,
     /// Position of each row's diagonal entry.
     diag: Vec<usize>,
-    /// The factors: `L` (unit diagonal, not stored) below, `U` above and the inverted diagonal blocks,
-    /// computed in double precision.
+    /// The factors: `L` (unit diagonal, not stored) below, `U` above and the inverted diagonal blocks.
     lu: Vec<f64>,
-    /// The factors rounded to single precision, which the triangular solves read: the solves are bound
-    /// by memory bandwidth, and the preconditioner need not be exact, only the same at every Krylov
-    /// iteration.
-    lu32: Vec<f32>,
     /// Position of each local column in the row being factored (`usize::MAX`: not in the row).
     mark: Vec<usize>,
     /// The local vector of the solves.
@@ -277,7 +266,6 @@ impl Part {
             local_ptr.push(col.len());
         }
         let lu = vec![0.0; col.len() * kernel * kernel];
-        let lu32 = vec![0.0; lu.len()];
         Ok(Self {
             lo,
             own,
@@ -286,7 +274,6 @@ impl Part {
             src,
             diag,
             lu,
-            lu32,
             mark: vec![usize::MAX; m],
             z: vec![0.0; m * kernel],
         })
@@ -371,9 +358,6 @@ impl Part {
                 return Err(IluError::Pivot(self.lo + i));
             }
         }
-        for (s, d) in self.lu32.iter_mut().zip(&self.lu) {
-            *s = *d as f32;
-        }
         Ok(true)
     }
 
@@ -387,7 +371,7 @@ impl Part {
             let (rs, di) = (self.row_ptr[i], self.diag[i]);
             let mut s = [0.0; B];
             s.copy_from_slice(&z[i * B..(i + 1) * B]);
-            for (blk, &c) in self.lu32[rs * bb..di * bb]
+            for (blk, &c) in self.lu[rs * bb..di * bb]
                 .chunks_exact(bb)
                 .zip(&self.col[rs..di])
             {
@@ -400,19 +384,19 @@ impl Part {
             let (di, re) = (self.diag[i], self.row_ptr[i + 1]);
             let mut s = [0.0; B];
             s.copy_from_slice(&z[i * B..(i + 1) * B]);
-            for (blk, &c) in self.lu32[(di + 1) * bb..re * bb]
+            for (blk, &c) in self.lu[(di + 1) * bb..re * bb]
                 .chunks_exact(bb)
                 .zip(&self.col[di + 1..re])
             {
                 let c = c as usize * B;
                 mat_vec_sub::<B>(blk, &z[c..c + B], &mut s);
             }
-            let d = &self.lu32[di * bb..(di + 1) * bb];
+            let d = &self.lu[di * bb..(di + 1) * bb];
             let zi = &mut z[i * B..(i + 1) * B];
             zi.fill(0.0);
             for (k, sk) in s.iter().enumerate() {
                 for (r, zr) in zi.iter_mut().enumerate() {
-                    *zr += f64::from(d[k * B + r]) * sk;
+                    *zr += d[k * B + r] * sk;
                 }
             }
         }
@@ -470,12 +454,12 @@ fn block_product<const B: usize>(
 /// product summed first and then subtracted, as PETSc's `MatSolve_SeqBAIJ_N` kernels do, so that the
 /// running sums `s` wait on one operation per block instead of `B`.
 #[inline(always)]
-fn mat_vec_sub<const B: usize>(a: &[f32], x: &[f64], s: &mut [f64; B]) {
+fn mat_vec_sub<const B: usize>(a: &[f64], x: &[f64], s: &mut [f64; B]) {
     let (a, x) = (&a[..B * B], &x[..B]);
     for (i, si) in s.iter_mut().enumerate() {
-        let mut t = f64::from(a[i]) * x[0];
+        let mut t = a[i] * x[0];
         for k in 1..B {
-            t += f64::from(a[k * B + i]) * x[k];
+            t += a[k * B + i] * x[k];
         }
         *si -= t;
     }
@@ -568,15 +552,13 @@ mod tests {
         a
     }
 
-    /// Asserts that the factored `ilu` applied to `x` gives `y` with `a y = x` to 1e-6: an exact solve
-    /// with the factors rounded to single precision (a relative 6e-8 per entry; a dropped fill entry of
-    /// these matrices costs about 1e-2).
+    /// Asserts that the factored `ilu` applied to `x` gives `y` with `a y = x` to 1e-12: an exact solve.
     fn assert_solves_exactly(ilu: &mut SchwarzIlu, a: &[Vec<f64>], x: &[f64], case: &str) {
         let mut y = vec![0.0; x.len()];
         ilu.apply(x, &mut y);
         for (r, row) in a.iter().enumerate() {
             let ay: f64 = row.iter().zip(&y).map(|(a, y)| a * y).sum();
-            assert!((ay - x[r]).abs() < 1e-6, "{case}row {r}: {ay} vs {}", x[r]);
+            assert!((ay - x[r]).abs() < 1e-12, "{case}row {r}: {ay} vs {}", x[r]);
         }
     }
 
