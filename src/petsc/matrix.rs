@@ -684,9 +684,10 @@ fn orthonormalise(vectors: &mut [Vector]) -> Result<()> {
 /// the half-resolution CT at 4.3 m/s (38,900 points, 3 unknowns per node, one process) the factorisations
 /// took 24.7 against 35.6 ms and a triangular solve 2.2 against 4.1 ms, for the same Krylov iterations
 /// (2736 against 2737), and whole runs took 0.86x the time; on two processes (additive Schwarz, whose
-/// overlapping blocks PETSc extracts as BAIJ too) the half-resolution CT's first 150 steps took 0.65x and
-/// the 3D demo's first 30 steps 0.69x the time, with the same iterations (`docs/benchmarks.md`, "Block
-/// storage on several processes"). Block ILU(0) shifts a pivot only when it is exactly zero: in 5 of the
+/// overlapping blocks PETSc extracts as BAIJ too) the half-resolution CT's first 150 steps took 0.79x and
+/// its whole run to 1 ms 0.80x the time, and the 3D demo's first 30 steps on one process 0.49-0.60x, with
+/// the same iterations in the first steps (`docs/benchmarks.md`, "Block storage on several processes and
+/// in 3D"). Block ILU(0) shifts a pivot only when it is exactly zero: in 5 of the
 /// 1000 steps of that CT, after the crack branched, it failed where point ILU(0) passed and the fallback
 /// solved the step (about 3 % of the run); docs/benchmarks.md, "Block storage for the CT's ILU".
 /// Everywhere else AIJ with the block size set: GAMG, hypre and the field split need it.

@@ -218,27 +218,35 @@ impl<const D: usize> Step<'_, D> {
         Ok(())
     }
 
+    /// The processes' bands of cell rows, where the points are shared out among them.
+    fn shared_partition(&self) -> Option<&Partition> {
+        self.work
+            .partition
+            .as_ref()
+            .filter(|_| self.state.distributed)
+    }
+
     /// With the points shared out: each own point's support lies within the node rows its process reads
     /// (`Partition::check_reach`).
     pub(super) fn check_reach(&self) -> Result<(), StepError> {
-        match (&self.work.partition, self.state.distributed) {
-            (Some(part), true) => part
+        match self.shared_partition() {
+            Some(part) => part
                 .check_reach(
                     &self.work.table,
                     &self.state.particles,
                     self.own_point_count(),
                 )
                 .map_err(StepError::Setup),
-            _ => Ok(()),
+            None => Ok(()),
         }
     }
 
     /// The node rows of the step's nodal sums ([`Step::nodal_windows`]) with the points shared out, none
     /// otherwise (every process sums all of its nodes itself).
     pub(super) fn plan_windows(&mut self, session: &SessionGuard) -> Result<(), StepError> {
-        self.work.windows = match (&self.work.partition, self.state.distributed) {
-            (Some(part), true) => Some(self.nodal_windows(session, part)?),
-            _ => None,
+        self.work.windows = match self.shared_partition() {
+            Some(part) => Some(self.nodal_windows(session, part)?),
+            None => None,
         };
         Ok(())
     }
@@ -255,9 +263,9 @@ impl<const D: usize> Step<'_, D> {
     /// The grid nodes whose energy this process counts: those of its node rows with the points shared
     /// out, every node otherwise.
     pub(super) fn owned_nodes(&self) -> Range<usize> {
-        match (&self.work.partition, self.state.distributed) {
-            (Some(part), true) => part.owned_nodes(),
-            _ => 0..usize::MAX,
+        match self.shared_partition() {
+            Some(part) => part.owned_nodes(),
+            None => 0..usize::MAX,
         }
     }
 
@@ -272,13 +280,13 @@ impl<const D: usize> Step<'_, D> {
     /// rows ([`Partition::owned_nodes`]); otherwise an equal share of the active nodes.
     pub(super) fn own_rows(&self, session: &SessionGuard) -> Range<usize> {
         let active = self.work.dofs.active_nodes();
-        match (&self.work.partition, self.state.distributed) {
-            (Some(part), true) => {
+        match self.shared_partition() {
+            Some(part) => {
                 let nodes = part.owned_nodes();
                 let first = |n: usize| active.partition_point(|&a| (a as usize) < n);
                 first(nodes.start)..first(nodes.end)
             }
-            _ => {
+            None => {
                 let (rank, size, n) = (session.rank(), session.size(), active.len());
                 n * rank / size..n * (rank + 1) / size
             }
