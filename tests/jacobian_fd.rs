@@ -135,6 +135,31 @@ fn fd_check<const D: usize>(
     let mut full_r = vec![0.0; n];
     asm.residual(&input, &x0, &mut full_r, false)
         .expect("residual");
+    // The residual sums each node's point terms in point order whether it is formed point by point in
+    // one chunk of points per worker or node by node where chunks meet: the same bits on any number of
+    // workers.
+    for workers in [1, 3, 5] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(workers)
+            .build()
+            .expect("thread pool");
+        let r = pool.install(|| {
+            let mut other = Assembler::new();
+            other.begin_step(&input);
+            other.evaluate(&input, &x0).expect("evaluate");
+            let mut r = vec![0.0; n];
+            other
+                .residual(&input, &x0, &mut r, false)
+                .expect("residual");
+            r
+        });
+        assert!(
+            r.iter()
+                .zip(&full_r)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "the residual on {workers} workers"
+        );
+    }
     let x1: Vec<f64> = x0.iter().map(|v| 1.7 * v + 1e-4).collect();
     asm.evaluate(&input, &x1).expect("evaluate x1");
     asm.restrict_to_rows(&input, part.clone());
