@@ -1,5 +1,6 @@
-//! Residual and consistent Jacobian of one implicit step, assembled node by node from per-particle
-//! contributions (spec Sec. 1 step 5-6 and Sec. 4).
+//! Residual and consistent Jacobian of one implicit step from per-particle contributions (spec Sec. 1
+//! step 5-6 and Sec. 4): the residual summed point by point, one chunk of points per worker, with the
+//! nodes where chunks meet gathered node by node; the Jacobian filled row by row (`jacobian.rs`).
 //!
 //! Unknowns per active node `I`: `du_I` (mm) and, for gradient-enhanced runs, `eta_bar_I` (-). With the
 //! start-of-step gradients `g_I = grad_{X_n} S_Ip`, `G_I = F_n^T g_I` (the gradient w.r.t. the initial
@@ -41,6 +42,9 @@ use crate::shape::ShapeTable;
 use crate::space::{det, lift3};
 use nalgebra::{Matrix3, SMatrix, SVector};
 use rayon::prelude::*;
+
+mod jacobian;
+use jacobian::{AssemblerView, JacobianRows, fill_rows};
 
 /// Newmark parameters of the dynamic step; `None` in [`StepInput::newmark`] means quasi-static.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -817,24 +821,6 @@ impl<const D: usize> Assembler<D> {
     }
 }
 
-/// Read-only view of the assembler used by the parallel row filling (the values are borrowed apart).
-struct AssemblerView<'a, const D: usize> {
-    inc_offsets: &'a [usize],
-    inc_entries: &'a [(u32, u8)],
-    inc_pos: &'a [u16],
-    row_ptr: &'a [usize],
-    cols: &'a [u32],
-    g0: &'a [SVector<f64, D>],
-    evals: &'a [PointEval<D>],
-}
-
-struct JacobianRows<'a, const D: usize> {
-    asm: AssemblerView<'a, D>,
-    input: &'a StepInput<'a, D>,
-    nf: usize,
-    layout: BlockLayout,
-}
-
 /// Kinematics and constitutive update of point `p` at the iterate scattered to the nodes (`du`: nodal
 /// displacement increments (mm), `eb`: nodal `eta_bar`): `F = (I + grad du) F_n`, the law's `P`, `A` and
 /// nonlocal terms; an eroded point keeps its history and carries no stress. Writes the trial history of
@@ -922,126 +908,6 @@ fn evaluate_point<const D: usize>(
         dc_deb: r.activity.dc_deta_bar,
         eroded: false,
     })
-}
-
-/// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
-/// range in two (rayon::join) until it is small: parallel, allocation-free and race-free because block
-/// rows own disjoint value ranges.
-fn fill_rows<const D: usize>(
-    ctx: &JacobianRows<'_, D>,
-    rows: std::ops::Range<usize>,
-    values: &mut [f64],
-    base: usize,
-    bs2: usize,
-) {
-    if rows.len() <= 64 {
-        for a in rows {
-            let lo = ctx.asm.row_ptr[a] * bs2 - base;
-            let hi = ctx.asm.row_ptr[a + 1] * bs2 - base;
-            fill_row(ctx, a, &mut values[lo..hi]);
-        }
-        return;
-    }
-    let mid = rows.start + rows.len() / 2;
-    let split = ctx.asm.row_ptr[mid] * bs2 - base;
-    let (left, right) = values.split_at_mut(split);
-    rayon::join(
-        || fill_rows(ctx, rows.start..mid, left, base, bs2),
-        || fill_rows(ctx, mid..rows.end, right, base + split, bs2),
-    );
-}
-
-/// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
-fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]) {
-    let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
-    let (table, particles, dofs) = (input.table, input.particles, input.dofs);
-    let stride = table.stride();
-    let s = input.row_scale;
-    let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
-    let (ncols, layout) = (cols.len(), ctx.layout);
-    let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
-    // The same offsets as strides: entry (i, pos, k) at `pos * block + i * si + k * sk`, so that the
-    // inner loop over a point's support nodes computes one base per node and no layout branch.
-    let (block, si, sk) = (at(0, 1, 0), at(1, 0, 0), at(0, 0, 1));
-    let eta_bar = dofs.layout().eta_bar();
-    row.fill(0.0);
-    let node = dofs.node(a);
-    let first = asm.inc_offsets[node];
-    let diag = cols.binary_search(&(a as u32)).ok();
-    for (e, &(p, k)) in asm.inc_entries[first..asm.inc_offsets[node + 1]]
-        .iter()
-        .enumerate()
-    {
-        let (p, k) = (p as usize, k as usize);
-        let ev = &asm.evals[p];
-        let ws = table.weights(p);
-        if ev.eroded {
-            // No stiffness; the lumped anchor of eta_bar on the diagonal (see `Assembler::residual`).
-            if let (Some(e), Some(d)) = (eta_bar, diag) {
-                row[at(e, d, e)] += s * particles.vol[p] * ws[k].value;
-            }
-            continue;
-        }
-        let positions = &asm.inc_pos[(first + e) * stride..(first + e + 1) * stride];
-        let g0 = &asm.g0[p * stride..p * stride + ws.len()];
-        let gi0 = g0[k];
-        let (s_i, gi) = (ws[k].value, ws[k].grad);
-        let v0 = particles.vol0[p];
-        let vn = particles.vol[p];
-        // M[i][k]_L = sum_J G_I,J A_iJkL
-        let m: [[SVector<f64, D>; D]; D] =
-            std::array::from_fn(|i| std::array::from_fn(|kk| ev.a[i][kk].tr_mul(&gi0)));
-        // Factors of the nonlocal terms that do not depend on the column node (grouped as before:
-        // `v0 q_i S_J` = `(v0 q_i) S_J`, `s vn (S_I - ..) h_i` = `(s vn (S_I - ..)) h_i`).
-        let q = ev.dp_deb * gi0;
-        let vq: [f64; D] = std::array::from_fn(|i| v0 * q[i]);
-        // Evolving activity: d(c grad S_I . grad eta_bar)/d(unknowns) through c(eta, eta_bar).
-        let flux = gi.dot(&ev.grad_eta_bar);
-        let (c, dc_deta, dc_deb) = (ev.c, ev.dc_deta * flux, ev.dc_deb * flux);
-        let svn = s * vn;
-        let coupling = svn * (s_i - dc_deta);
-        for ((wj, &pos), gj0) in ws.iter().zip(positions).zip(g0) {
-            if pos == NO_COLUMN {
-                continue;
-            }
-            let base = pos as usize * block;
-            for (i, mi) in m.iter().enumerate() {
-                for (kk, mik) in mi.iter().enumerate() {
-                    row[base + i * si + kk * sk] += v0 * mik.dot(gj0);
-                }
-            }
-            if let Some(e) = eta_bar {
-                let (sj, gj) = (wj.value, wj.grad);
-                let h = ev.deta_dx * gj;
-                for i in 0..D {
-                    row[base + i * si + e * sk] += vq[i] * sj;
-                    row[base + e * si + i * sk] -= coupling * h[i];
-                }
-                row[base + e * (si + sk)] += svn * (s_i * sj + c * gi.dot(&gj) + dc_deb * sj);
-            }
-        }
-    }
-    // Inertia on the diagonal block, then constraints: identity rows. The columns of constrained unknowns
-    // are kept: they are the exact derivative of the free rows, so a Newton step from a guess that does
-    // not yet satisfy the constraints carries the prescribed motion into the interior (linear predictor).
-    if let (Some(nm), Some(d)) = (input.newmark, diag) {
-        let mf = input.mass[node] * nm.mass_factor();
-        for i in 0..D {
-            row[at(i, d, i)] += mf;
-        }
-    }
-    for i in 0..nf {
-        if dofs.is_constrained(a * nf + i) {
-            for pos in 0..ncols {
-                for k in 0..nf {
-                    row[at(i, pos, k)] = 0.0;
-                }
-            }
-            if let Some(d) = diag {
-                row[at(i, d, i)] = s;
-            }
-        }
-    }
 }
 
 /// The `D`-dimensional part of the tangent `A` (index `(3i+J, 3k+L)` of [`Response::a`]) as

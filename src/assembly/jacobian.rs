@@ -1,0 +1,146 @@
+//! The Jacobian's block rows, filled in parallel from the points' cached tangents: for every row (node
+//! `I`), the sum over the points `p` its shape functions reach of `V_p^0 G_Ip . A_p . G_Jp` on each
+//! support node `J` of `p`, the nonlocal coupling terms, inertia and the constrained rows.
+
+use super::{NO_COLUMN, PointEval, StepInput};
+use crate::petsc::BlockLayout;
+use nalgebra::SVector;
+
+/// Read-only view of the assembler used by the parallel row filling (the values are borrowed apart).
+pub(super) struct AssemblerView<'a, const D: usize> {
+    pub(super) inc_offsets: &'a [usize],
+    pub(super) inc_entries: &'a [(u32, u8)],
+    pub(super) inc_pos: &'a [u16],
+    pub(super) row_ptr: &'a [usize],
+    pub(super) cols: &'a [u32],
+    pub(super) g0: &'a [SVector<f64, D>],
+    pub(super) evals: &'a [PointEval<D>],
+}
+
+/// What the row filling reads: the assembler's arrays, the step's input and the value layout.
+pub(super) struct JacobianRows<'a, const D: usize> {
+    pub(super) asm: AssemblerView<'a, D>,
+    pub(super) input: &'a StepInput<'a, D>,
+    pub(super) nf: usize,
+    pub(super) layout: BlockLayout,
+}
+
+/// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
+/// range in two (rayon::join) until it is small: parallel, allocation-free and race-free because block
+/// rows own disjoint value ranges.
+pub(super) fn fill_rows<const D: usize>(
+    ctx: &JacobianRows<'_, D>,
+    rows: std::ops::Range<usize>,
+    values: &mut [f64],
+    base: usize,
+    bs2: usize,
+) {
+    if rows.len() <= 64 {
+        for a in rows {
+            let lo = ctx.asm.row_ptr[a] * bs2 - base;
+            let hi = ctx.asm.row_ptr[a + 1] * bs2 - base;
+            fill_row(ctx, a, &mut values[lo..hi]);
+        }
+        return;
+    }
+    let mid = rows.start + rows.len() / 2;
+    let split = ctx.asm.row_ptr[mid] * bs2 - base;
+    let (left, right) = values.split_at_mut(split);
+    rayon::join(
+        || fill_rows(ctx, rows.start..mid, left, base, bs2),
+        || fill_rows(ctx, mid..rows.end, right, base + split, bs2),
+    );
+}
+
+/// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
+fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]) {
+    let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
+    let (table, particles, dofs) = (input.table, input.particles, input.dofs);
+    let stride = table.stride();
+    let s = input.row_scale;
+    let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
+    let (ncols, layout) = (cols.len(), ctx.layout);
+    let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
+    // The same offsets as strides: entry (i, pos, k) at `pos * block + i * si + k * sk`, so that the
+    // inner loop over a point's support nodes computes one base per node and no layout branch.
+    let (block, si, sk) = (at(0, 1, 0), at(1, 0, 0), at(0, 0, 1));
+    let eta_bar = dofs.layout().eta_bar();
+    row.fill(0.0);
+    let node = dofs.node(a);
+    let first = asm.inc_offsets[node];
+    let diag = cols.binary_search(&(a as u32)).ok();
+    for (e, &(p, k)) in asm.inc_entries[first..asm.inc_offsets[node + 1]]
+        .iter()
+        .enumerate()
+    {
+        let (p, k) = (p as usize, k as usize);
+        let ev = &asm.evals[p];
+        let ws = table.weights(p);
+        if ev.eroded {
+            // No stiffness; the lumped anchor of eta_bar on the diagonal (see `Assembler::residual`).
+            if let (Some(e), Some(d)) = (eta_bar, diag) {
+                row[at(e, d, e)] += s * particles.vol[p] * ws[k].value;
+            }
+            continue;
+        }
+        let positions = &asm.inc_pos[(first + e) * stride..(first + e + 1) * stride];
+        let g0 = &asm.g0[p * stride..p * stride + ws.len()];
+        let gi0 = g0[k];
+        let (s_i, gi) = (ws[k].value, ws[k].grad);
+        let v0 = particles.vol0[p];
+        let vn = particles.vol[p];
+        // M[i][k]_L = sum_J G_I,J A_iJkL
+        let m: [[SVector<f64, D>; D]; D] =
+            std::array::from_fn(|i| std::array::from_fn(|kk| ev.a[i][kk].tr_mul(&gi0)));
+        // Factors of the nonlocal terms that do not depend on the column node (grouped as before:
+        // `v0 q_i S_J` = `(v0 q_i) S_J`, `s vn (S_I - ..) h_i` = `(s vn (S_I - ..)) h_i`).
+        let q = ev.dp_deb * gi0;
+        let vq: [f64; D] = std::array::from_fn(|i| v0 * q[i]);
+        // Evolving activity: d(c grad S_I . grad eta_bar)/d(unknowns) through c(eta, eta_bar).
+        let flux = gi.dot(&ev.grad_eta_bar);
+        let (c, dc_deta, dc_deb) = (ev.c, ev.dc_deta * flux, ev.dc_deb * flux);
+        let svn = s * vn;
+        let coupling = svn * (s_i - dc_deta);
+        for ((wj, &pos), gj0) in ws.iter().zip(positions).zip(g0) {
+            if pos == NO_COLUMN {
+                continue;
+            }
+            let base = pos as usize * block;
+            for (i, mi) in m.iter().enumerate() {
+                for (kk, mik) in mi.iter().enumerate() {
+                    row[base + i * si + kk * sk] += v0 * mik.dot(gj0);
+                }
+            }
+            if let Some(e) = eta_bar {
+                let (sj, gj) = (wj.value, wj.grad);
+                let h = ev.deta_dx * gj;
+                for i in 0..D {
+                    row[base + i * si + e * sk] += vq[i] * sj;
+                    row[base + e * si + i * sk] -= coupling * h[i];
+                }
+                row[base + e * (si + sk)] += svn * (s_i * sj + c * gi.dot(&gj) + dc_deb * sj);
+            }
+        }
+    }
+    // Inertia on the diagonal block, then constraints: identity rows. The columns of constrained unknowns
+    // are kept: they are the exact derivative of the free rows, so a Newton step from a guess that does
+    // not yet satisfy the constraints carries the prescribed motion into the interior (linear predictor).
+    if let (Some(nm), Some(d)) = (input.newmark, diag) {
+        let mf = input.mass[node] * nm.mass_factor();
+        for i in 0..D {
+            row[at(i, d, i)] += mf;
+        }
+    }
+    for i in 0..nf {
+        if dofs.is_constrained(a * nf + i) {
+            for pos in 0..ncols {
+                for k in 0..nf {
+                    row[at(i, pos, k)] = 0.0;
+                }
+            }
+            if let Some(d) = diag {
+                row[at(i, d, i)] = s;
+            }
+        }
+    }
+}
