@@ -352,20 +352,12 @@ fn the_threaded_operator_multiplies_as_the_jacobian() {
     });
 }
 
-/// The threaded ILU(0) (`petsc::use_threaded_ilu`: one overlapping subdomain per thread) preconditions
-/// GMRES as PETSc's block Jacobi + ILU(0) of the whole matrix does: the same solution, about the same
-/// iterations, a refill reaching the factorisation; a singular diagonal block fails the solve (so that
-/// a step goes to the fallback solver) instead of returning garbage.
-#[test]
-fn the_threaded_ilu_preconditions_as_petscs_ilu() {
-    use mpm_concrete::petsc::{BlockCsr, BlockLayout, Matrix, Snes, Vector};
-    let s = Session::get().expect("PETSc session");
-    // A 14 x 14 grid of nodes with 3 unknowns each, coupled to the 8 neighbours: the pattern of a
-    // bilinear grid, with fill that ILU(0) drops.
+/// A 14 x 14 grid of nodes with 3 unknowns each, coupled to the 8 neighbours: the block pattern of a
+/// bilinear grid, with fill that ILU(0) drops (row pointers, block columns).
+fn grid_pattern() -> (Vec<usize>, Vec<u32>) {
     let side = 14usize;
-    let nodes = side * side;
     let (mut row_ptr, mut cols) = (vec![0usize], Vec::new());
-    for a in 0..nodes {
+    for a in 0..side * side {
         let (x, y) = (a % side, a / side);
         for yy in y.saturating_sub(1)..(y + 2).min(side) {
             for xx in x.saturating_sub(1)..(x + 2).min(side) {
@@ -374,43 +366,140 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
         }
         row_ptr.push(cols.len());
     }
+    (row_ptr, cols)
+}
+
+/// Values of the grid pattern in `layout`: diagonally dominant blocks times `scale`; with `poison` the
+/// diagonal block of the middle node is NaN.
+fn fill_grid(
+    (row_ptr, cols): (&[usize], &[u32]),
+    (scale, poison): (f64, bool),
+    v: &mut [f64],
+    layout: mpm_concrete::petsc::BlockLayout,
+) {
+    let nodes = row_ptr.len() - 1;
+    for a in 0..nodes {
+        let ncols = row_ptr[a + 1] - row_ptr[a];
+        for (pos, &b) in cols[row_ptr[a]..row_ptr[a + 1]].iter().enumerate() {
+            for i in 0..3 {
+                for k in 0..3 {
+                    let b = b as usize;
+                    let val = if a == b {
+                        if i == k { 9.0 + 0.1 * i as f64 } else { 0.4 }
+                    } else {
+                        -0.3 + 0.02 * ((a + 2 * b + i + k) % 7) as f64
+                    };
+                    let val = if poison && a == b && a == nodes / 2 {
+                        f64::NAN
+                    } else {
+                        val
+                    };
+                    v[row_ptr[a] * 9 + layout.offset(ncols, 3, i, pos, k)] = scale * val;
+                }
+            }
+        }
+    }
+}
+
+/// Sets `options` (`-name value ...`) under `prefix`.
+fn set_under(s: &mpm_concrete::petsc::SessionGuard, prefix: &str, options: &str) {
+    for t in options.split_whitespace().collect::<Vec<_>>().chunks(2) {
+        let name = format!("{prefix}{}", &t[0][1..]);
+        petsc::set_option(s, &name, Some(t[1])).expect("option");
+    }
+}
+
+/// Solves the grid system of `mat_type` with `snes` three times: with the values, with twice them (the
+/// solution must halve: the refill reached the preconditioner), and poisoned (the solve must fail).
+/// Returns the first solve's iterations and solution.
+fn solve_grid_thrice(
+    s: &mpm_concrete::petsc::SessionGuard,
+    snes: &mut mpm_concrete::petsc::Snes,
+    m: &mut mpm_concrete::petsc::Matrix,
+    (row_ptr, cols): (&[usize], &[u32]),
+    what: &str,
+) -> (usize, Vec<f64>) {
+    use mpm_concrete::petsc::{BlockCsr, Vector};
+    let p = BlockCsr {
+        first: 0,
+        bs: 3,
+        row_ptr,
+        cols,
+    };
+    let n = (row_ptr.len() - 1) * 3;
+    let mut rhs = Vector::new(s, n, 3).expect("rhs");
+    rhs.write(|v| {
+        v.iter_mut()
+            .enumerate()
+            .for_each(|(i, r)| *r = 1.0 + (0.3 * i as f64).sin())
+    })
+    .expect("write");
+    let solve = |snes: &mut mpm_concrete::petsc::Snes, m: &mpm_concrete::petsc::Matrix| {
+        let mut x = Vector::new(s, n, 3).expect("x");
+        let r = snes.linear_solve(m, &rhs, &mut x).expect("solve");
+        (r, x.read(|v| v.to_vec()).expect("read"))
+    };
+    m.fill_block_rows(&p, |v, l| fill_grid((row_ptr, cols), (1.0, false), v, l))
+        .expect("fill");
+    let (r1, x1) = solve(snes, m);
+    assert!(r1.converged(), "{what}: {}", r1.reason_name);
+    m.fill_block_rows(&p, |v, l| fill_grid((row_ptr, cols), (2.0, false), v, l))
+        .expect("refill");
+    let (r2, x2) = solve(snes, m);
+    assert!(r2.converged(), "{what}: {}", r2.reason_name);
+    for (a, b) in x1.iter().zip(&x2) {
+        assert!(
+            (a - 2.0 * b).abs() <= 1e-8 * a.abs().max(1.0),
+            "{what}: the solve after the refill used the old factorisation"
+        );
+    }
+    m.fill_block_rows(&p, |v, l| fill_grid((row_ptr, cols), (1.0, true), v, l))
+        .expect("poisoned fill");
+    let (r3, _) = solve(snes, m);
+    assert!(
+        !r3.converged(),
+        "{what}: a NaN diagonal block must fail the solve, got {}",
+        r3.reason_name
+    );
+    (r1.iterations, x1)
+}
+
+/// The same solution to 1e-8 and iterations within `slack`.
+fn same_solve(petsc: &(usize, Vec<f64>), ours: &(usize, Vec<f64>), slack: usize, what: &str) {
+    for (a, b) in petsc.1.iter().zip(&ours.1) {
+        assert!(
+            (a - b).abs() <= 1e-8 * a.abs().max(1.0),
+            "{what}: solutions differ: {a} vs {b}"
+        );
+    }
+    assert!(
+        ours.0.abs_diff(petsc.0) <= slack,
+        "{what}: GMRES iterations: threaded ILU {}, PETSc's {}",
+        ours.0,
+        petsc.0
+    );
+}
+
+/// The threaded ILU(0) (`petsc::use_threaded_ilu`: one overlapping subdomain per thread) preconditions
+/// GMRES as PETSc's block Jacobi + ILU(0) of the whole matrix does: the same solution, about the same
+/// iterations, a refill reaching the factorisation; a singular diagonal block fails the solve (so that
+/// a step goes to the fallback solver) instead of returning garbage.
+#[test]
+fn the_threaded_ilu_preconditions_as_petscs_ilu() {
+    use mpm_concrete::petsc::{BlockCsr, Matrix, Snes};
+    let s = Session::get().expect("PETSc session");
+    let (row_ptr, cols) = grid_pattern();
     let p = BlockCsr {
         first: 0,
         bs: 3,
         row_ptr: &row_ptr,
         cols: &cols,
     };
-    let n = nodes * 3;
-    let fill = |scale: f64, poison: bool, v: &mut [f64], layout: BlockLayout| {
-        for a in 0..nodes {
-            let ncols = row_ptr[a + 1] - row_ptr[a];
-            for (pos, &b) in cols[row_ptr[a]..row_ptr[a + 1]].iter().enumerate() {
-                for i in 0..3 {
-                    for k in 0..3 {
-                        let b = b as usize;
-                        let val = if a == b {
-                            if i == k { 9.0 + 0.1 * i as f64 } else { 0.4 }
-                        } else {
-                            -0.3 + 0.02 * ((a + 2 * b + i + k) % 7) as f64
-                        };
-                        let val = if poison && a == b && a == nodes / 2 {
-                            f64::NAN
-                        } else {
-                            val
-                        };
-                        v[row_ptr[a] * 9 + layout.offset(ncols, 3, i, pos, k)] = scale * val;
-                    }
-                }
-            }
-        }
-    };
+    let n = (row_ptr.len() - 1) * 3;
     let options = "-ksp_type gmres -ksp_rtol 1e-10 -ksp_max_it 200 -pc_type bjacobi \
          -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
     for prefix in ["petsc_ilu_", "threaded_ilu_"] {
-        for t in options.split_whitespace().collect::<Vec<_>>().chunks(2) {
-            let name = format!("{prefix}{}", &t[0][1..]);
-            petsc::set_option(&s, &name, Some(t[1])).expect("option");
-        }
+        set_under(&s, prefix, options);
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
@@ -418,13 +507,6 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
         .expect("thread pool");
     pool.install(|| {
         for mat_type in ["baij", "aij"] {
-            let mut rhs = Vector::new(&s, n, 3).expect("rhs");
-            rhs.write(|v| {
-                v.iter_mut()
-                    .enumerate()
-                    .for_each(|(i, r)| *r = 1.0 + (0.3 * i as f64).sin())
-            })
-            .expect("write");
             let mut results = Vec::new();
             for (prefix, threaded) in [("petsc_ilu_", false), ("threaded_ilu_", true)] {
                 let mut m = Matrix::with_type(&s, n, 3, mat_type).expect("matrix");
@@ -438,46 +520,76 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
                     );
                     assert!(snes.describe().expect("describe").ends_with("shell"));
                 }
-                let mut solve = |m: &Matrix| {
-                    let mut x = Vector::new(&s, n, 3).expect("x");
-                    let r = snes.linear_solve(m, &rhs, &mut x).expect("solve");
-                    (r, x.read(|v| v.to_vec()).expect("read"))
-                };
-                m.fill_block_rows(&p, |v, l| fill(1.0, false, v, l))
-                    .expect("fill");
-                let (r1, x1) = solve(&m);
-                assert!(r1.converged(), "{mat_type} {prefix}: {}", r1.reason_name);
-                m.fill_block_rows(&p, |v, l| fill(2.0, false, v, l))
-                    .expect("refill");
-                let (r2, x2) = solve(&m);
-                assert!(r2.converged(), "{prefix}: {}", r2.reason_name);
-                for (a, b) in x1.iter().zip(&x2) {
-                    assert!(
-                        (a - 2.0 * b).abs() <= 1e-8 * a.abs().max(1.0),
-                        "{mat_type} {prefix}: the solve after the refill used the old factorisation"
-                    );
-                }
-                m.fill_block_rows(&p, |v, l| fill(1.0, true, v, l))
-                    .expect("poisoned fill");
-                let (r3, _) = solve(&m);
-                assert!(
-                    !r3.converged(),
-                    "{mat_type} {prefix}: a NaN diagonal block must fail the solve, got {}",
-                    r3.reason_name
-                );
-                results.push((r1.iterations, x1));
+                let what = format!("{mat_type} {prefix}");
+                results.push(solve_grid_thrice(
+                    &s,
+                    &mut snes,
+                    &mut m,
+                    (&row_ptr, &cols),
+                    &what,
+                ));
             }
-            let ((its_petsc, x_petsc), (its_threaded, x_threaded)) = (&results[0], &results[1]);
-            for (a, b) in x_petsc.iter().zip(x_threaded) {
-                assert!(
-                    (a - b).abs() <= 1e-8 * a.abs().max(1.0),
-                    "{mat_type}: solutions differ: {a} vs {b}"
-                );
-            }
-            assert!(
-                its_threaded.abs_diff(*its_petsc) <= 2,
-                "{mat_type}: GMRES iterations: threaded ILU {its_threaded}, PETSc's {its_petsc}"
+            same_solve(&results[0], &results[1], 2, mat_type);
+        }
+    });
+}
+
+/// Where the whole-matrix shell declines (one thread here; the matrices of several processes in a run),
+/// the threaded ILU(0) takes the place of PETSc's inside the subdomain of block Jacobi and of additive
+/// Schwarz (`Snes::use_threaded_ilu_on_subdomains`): with one part it is the subdomain's plain ILU(0), so
+/// GMRES takes PETSc's iterations to the same solution; a refill reaches it, a NaN pivot fails the solve.
+/// Point-wise storage keeps PETSc's ILU.
+#[test]
+fn the_subdomains_ilu_becomes_the_threaded_one() {
+    use mpm_concrete::petsc::{BlockCsr, Matrix, Snes};
+    let s = Session::get().expect("PETSc session");
+    let (row_ptr, cols) = grid_pattern();
+    let p = BlockCsr {
+        first: 0,
+        bs: 3,
+        row_ptr: &row_ptr,
+        cols: &cols,
+    };
+    let n = (row_ptr.len() - 1) * 3;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("thread pool");
+    pool.install(|| {
+        for pc in ["bjacobi", "asm"] {
+            let options = format!(
+                "-ksp_type gmres -ksp_rtol 1e-10 -ksp_max_it 200 -pc_type {pc} \
+                 -sub_pc_type ilu -sub_pc_factor_shift_type nonzero"
             );
+            for mat_type in ["baij", "aij"] {
+                let mut results = Vec::new();
+                for threaded in [false, true] {
+                    let prefix = format!("sub_{pc}_{mat_type}_{threaded}_");
+                    set_under(&s, &prefix, &options);
+                    let mut m = Matrix::with_type(&s, n, 3, mat_type).expect("matrix");
+                    m.set_block_pattern(&p).expect("pattern");
+                    let mut snes = Snes::new(&s, Some(&prefix)).expect("snes");
+                    snes.set_from_options().expect("options");
+                    assert!(
+                        !petsc::use_threaded_ilu(&snes, &m, &p).expect("shell"),
+                        "one thread: the whole-matrix shell declines"
+                    );
+                    if threaded {
+                        snes.use_threaded_ilu_on_subdomains(3);
+                    }
+                    let what = format!("{pc} {mat_type} threaded {threaded}");
+                    results.push(solve_grid_thrice(
+                        &s,
+                        &mut snes,
+                        &mut m,
+                        (&row_ptr, &cols),
+                        &what,
+                    ));
+                    let expected = usize::from(threaded && mat_type == "baij");
+                    assert_eq!(snes.threaded_subdomains(), expected, "{what}");
+                }
+                same_solve(&results[0], &results[1], 0, &format!("{pc} {mat_type}"));
+            }
         }
     });
 }

@@ -44,6 +44,10 @@ impl Snes {
                 sys::KSPSetOperators(ksp, jac.raw, jac.raw),
                 "KSPSetOperators",
             )?;
+        }
+        self.install_subdomain_ilu(jac.raw, jac.raw)?;
+        // SAFETY: as above.
+        unsafe {
             check(sys::KSPSolve(ksp, rhs.raw, x.raw), "KSPSolve")?;
             check(
                 sys::KSPGetIterationNumber(ksp, &mut its),

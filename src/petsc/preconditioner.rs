@@ -8,10 +8,15 @@
 //! and applies the subdomains in parallel. A factorisation that meets a non-finite pivot marks the
 //! preconditioner failed, so that the linear solve stops and the step goes to the fallback solver as with
 //! PETSc's ILU.
+//!
+//! Where the matrix is several processes' (or there is one thread), the same shell takes the place of
+//! PETSc's ILU(0) inside each subdomain of block Jacobi or additive Schwarz
+//! ([`threaded_ilu_on_subdomains`], through `Snes::use_threaded_ilu_on_subdomains`): PETSc still makes
+//! the subdomains' matrices and moves the vectors between processes.
 
-use super::{BlockCsr, BlockLayout, Matrix, PetscError, Result, Snes, check, cstring, sys};
+use super::{BlockCsr, BlockLayout, Matrix, PetscError, Result, Snes, check, sys};
 use crate::ilu::SchwarzIlu;
-use std::ffi::c_void;
+use std::ffi::{CStr, c_void};
 
 /// The shell's context: the subdomains and their factors, and the storage of the values they read.
 struct Context {
@@ -42,9 +47,25 @@ pub fn use_threaded_ilu(snes: &Snes, jacobian: &Matrix, pattern: &BlockCsr<'_>) 
     let Ok(ilu) = ilu else {
         return Ok(false);
     };
-    let pc = snes.pc()?;
+    // SAFETY: the SNES's own preconditioner.
+    unsafe {
+        install(
+            snes.pc()?,
+            ilu,
+            layout,
+            c"ILU(0) on overlapping subdomains, one per thread",
+        )
+    }?;
+    Ok(true)
+}
+
+/// Makes `pc` a shell over `ilu`, which reads the values of `pc`'s preconditioning matrix in `layout`.
+///
+/// # Safety
+/// `pc` is a valid PC whose preconditioning matrix, at every set-up, has the storage and pattern `ilu`
+/// was built for.
+unsafe fn install(pc: sys::PC, ilu: SchwarzIlu, layout: BlockLayout, name: &CStr) -> Result<()> {
     let ctx = Box::into_raw(Box::new(Context { ilu, layout })).cast::<c_void>();
-    let name = cstring("ILU(0) on overlapping subdomains, one per thread")?;
     // SAFETY: valid PC; the shell keeps `ctx` until its destroy callback frees it. The callbacks match
     // PETSc's signatures for the shell's operations.
     unsafe {
@@ -61,7 +82,194 @@ pub fn use_threaded_ilu(snes: &Snes, jacobian: &Matrix, pattern: &BlockCsr<'_>) 
         check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")?;
         check(sys::PCShellSetName(pc, name.as_ptr()), "PCShellSetName")?;
     }
-    Ok(true)
+    Ok(())
+}
+
+/// The ILU(0) of every subdomain of block Jacobi or additive Schwarz (`-pc_type bjacobi` or `asm` with
+/// `-sub_pc_type ilu`: one subdomain per process, the matrices of several processes or one thread, where
+/// [`use_threaded_ilu`] declines) made [`SchwarzIlu`] on the process's threads (one overlapping part per
+/// thread; one part is the subdomain's plain ILU(0)) instead of PETSc's. Per core it is about twice as
+/// fast as PETSc's (`docs/benchmarks.md`, "PETSc's ILU replaced on every subdomain"): the factors are
+/// stored in the order the solves read them and the factorisation is specialised for blocks of 2 to 4.
+///
+/// PETSc makes the subdomains' matrices at the preconditioner's first set-up, so this sets the Krylov
+/// solver's operators to `a` and `p` (which must hold assembled values: called after the first
+/// Jacobian) and sets the preconditioner up; each subdomain whose preconditioner is ILU and whose matrix
+/// is block storage (`seqbaij`) with block size `bs` (2 to 4) becomes a shell over its pattern, which
+/// PETSc refills at each later set-up. Returns how many subdomains it replaced (0: it did not apply).
+///
+/// # Safety
+/// `ksp`, `a` and `p` are valid; `p` holds assembled values.
+pub(super) unsafe fn threaded_ilu_on_subdomains(
+    ksp: sys::KSP,
+    a: sys::Mat,
+    p: sys::Mat,
+    bs: usize,
+) -> Result<usize> {
+    type GetSubKsp = unsafe extern "C" fn(
+        sys::PC,
+        *mut sys::PetscInt,
+        *mut sys::PetscInt,
+        *mut *mut sys::KSP,
+    ) -> sys::PetscErrorCode;
+    if !(2..=4).contains(&bs) {
+        return Ok(0);
+    }
+    let mut pc: sys::PC = std::ptr::null_mut();
+    // SAFETY: valid KSP; out-parameter.
+    check(unsafe { sys::KSPGetPC(ksp, &mut pc) }, "KSPGetPC")?;
+    // SAFETY: valid PC.
+    let get_sub: GetSubKsp = match unsafe { pc_type(pc) }?.as_str() {
+        "asm" => sys::PCASMGetSubKSP,
+        "bjacobi" => sys::PCBJacobiGetSubKSP,
+        _ => return Ok(0),
+    };
+    let (mut n, mut first, mut subs): (sys::PetscInt, sys::PetscInt, *mut sys::KSP) =
+        (0, 0, std::ptr::null_mut());
+    // SAFETY: valid objects; the set-up makes the sub-solvers, whose array PETSc owns.
+    unsafe {
+        check(sys::KSPSetOperators(ksp, a, p), "KSPSetOperators")?;
+        check(sys::PCSetUp(pc), "PCSetUp")?;
+        check(get_sub(pc, &mut n, &mut first, &mut subs), "PCGetSubKSP")?;
+    }
+    if subs.is_null() || n <= 0 {
+        return Ok(0);
+    }
+    // SAFETY: `n` sub-solvers, owned by the preconditioner.
+    let subs = unsafe { std::slice::from_raw_parts(subs, n as usize) };
+    let threads = rayon::current_num_threads();
+    let mut replaced = 0;
+    for &sub in subs {
+        let (mut sub_pc, mut amat, mut pmat): (sys::PC, sys::Mat, sys::Mat) = (
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
+        // SAFETY: a valid sub-solver; out-parameters (borrowed references).
+        unsafe {
+            check(sys::KSPGetPC(sub, &mut sub_pc), "KSPGetPC")?;
+            check(
+                sys::KSPGetOperators(sub, &mut amat, &mut pmat),
+                "KSPGetOperators",
+            )?;
+        }
+        // SAFETY: valid objects.
+        if unsafe { pc_type(sub_pc) }? != "ilu" || unsafe { mat_type(pmat) }? != "seqbaij" {
+            continue;
+        }
+        let mut block = 0;
+        // SAFETY: valid matrix; out-parameter.
+        check(
+            unsafe { sys::MatGetBlockSize(pmat, &mut block) },
+            "MatGetBlockSize",
+        )?;
+        if block as usize != bs {
+            continue;
+        }
+        // SAFETY: valid matrix.
+        let Some((row_ptr, cols)) = (unsafe { block_pattern(pmat) })? else {
+            continue;
+        };
+        let Ok(ilu) = SchwarzIlu::blocks(bs, &row_ptr, &cols, threads) else {
+            continue;
+        };
+        // SAFETY: the sub-preconditioner's matrix is `pmat`, whose pattern PETSc keeps at later set-ups
+        // of the same Jacobian.
+        unsafe {
+            install(
+                sub_pc,
+                ilu,
+                BlockLayout::Blocks,
+                c"ILU(0) of the subdomain, one overlapping part per thread",
+            )
+        }?;
+        replaced += 1;
+    }
+    Ok(replaced)
+}
+
+/// The block pattern (row pointers, block columns) of a block-storage matrix, `None` if PETSc does not
+/// give it.
+///
+/// # Safety
+/// `m` is a valid `seqbaij` matrix.
+unsafe fn block_pattern(m: sys::Mat) -> Result<Option<(Vec<usize>, Vec<u32>)>> {
+    let (mut n, mut ia, mut ja, mut done): (
+        sys::PetscInt,
+        *const sys::PetscInt,
+        *const sys::PetscInt,
+        sys::PetscBool,
+    ) = (
+        0,
+        std::ptr::null(),
+        std::ptr::null(),
+        sys::PetscBool_PETSC_FALSE,
+    );
+    let (no, yes) = (sys::PetscBool_PETSC_FALSE, sys::PetscBool_PETSC_TRUE);
+    // SAFETY: out-parameters; with block compression a block matrix gives its own block CSR arrays,
+    // returned below.
+    check(
+        unsafe { sys::MatGetRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
+        "MatGetRowIJ",
+    )?;
+    if done != yes || ia.is_null() || n < 0 {
+        return Ok(None);
+    }
+    let rows = n as usize;
+    // SAFETY: `rows + 1` row pointers and `ia[rows]` columns, valid until restored.
+    let pattern = unsafe {
+        let ia = std::slice::from_raw_parts(ia, rows + 1);
+        let ja = std::slice::from_raw_parts(ja, ia[rows] as usize);
+        (
+            ia.iter().map(|&i| i as usize).collect::<Vec<_>>(),
+            ja.iter().map(|&j| j as u32).collect::<Vec<_>>(),
+        )
+    };
+    // SAFETY: as above.
+    check(
+        unsafe { sys::MatRestoreRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
+        "MatRestoreRowIJ",
+    )?;
+    Ok(Some(pattern))
+}
+
+/// The type name of a preconditioner ("" if unset).
+///
+/// # Safety
+/// `pc` is valid.
+unsafe fn pc_type(pc: sys::PC) -> Result<String> {
+    let mut name: *const std::ffi::c_char = std::ptr::null();
+    // SAFETY: out-parameter; PETSc's own string.
+    check(unsafe { sys::PCGetType(pc, &mut name) }, "PCGetType")?;
+    // SAFETY: null or a NUL-terminated string owned by PETSc.
+    Ok(unsafe { type_string(name) })
+}
+
+/// The type name of a matrix ("" if unset).
+///
+/// # Safety
+/// `m` is valid.
+unsafe fn mat_type(m: sys::Mat) -> Result<String> {
+    let mut name: *const std::ffi::c_char = std::ptr::null();
+    // SAFETY: out-parameter; PETSc's own string.
+    check(unsafe { sys::MatGetType(m, &mut name) }, "MatGetType")?;
+    // SAFETY: as in `pc_type`.
+    Ok(unsafe { type_string(name) })
+}
+
+/// A type name PETSc returned.
+///
+/// # Safety
+/// `name` is null or a NUL-terminated string.
+unsafe fn type_string(name: *const std::ffi::c_char) -> String {
+    if name.is_null() {
+        String::new()
+    } else {
+        // SAFETY: as documented.
+        unsafe { CStr::from_ptr(name) }
+            .to_string_lossy()
+            .into_owned()
+    }
 }
 
 /// The shell's context.

@@ -88,6 +88,11 @@ pub struct Snes {
     operator: Option<ThreadedOperator>,
     /// The state of the stall test of [`converged_cb`] (registered once with this box's address).
     stall: Box<Stall>,
+    /// The block size of the subdomains whose ILU(0) is to become the threaded one at the next
+    /// Jacobian ([`Snes::use_threaded_ilu_on_subdomains`]); `None` once done or not asked.
+    subdomain_ilu: Option<usize>,
+    /// How many subdomains' ILU(0) the last replacement made the threaded one.
+    threaded_subdomains: usize,
 }
 
 /// What [`converged_cb`] keeps between the iterations of a solve.
@@ -107,6 +112,10 @@ struct Context<'a> {
     problem: &'a mut dyn NonlinearProblem,
     fatal: Option<String>,
     domain: Vec<String>,
+    /// [`Snes::subdomain_ilu`] for this solve, taken by the first Jacobian.
+    subdomain_ilu: Option<usize>,
+    /// How many subdomains the first Jacobian's replacement reached.
+    threaded_subdomains: Option<usize>,
 }
 
 /// PETSc's generic user error code (`PETSC_ERR_USER`).
@@ -125,6 +134,8 @@ impl Snes {
             monitored: None,
             operator: None,
             stall: Box::default(),
+            subdomain_ilu: None,
+            threaded_subdomains: 0,
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -332,6 +343,33 @@ impl Snes {
         self.operator = Some(operator);
     }
 
+    /// Makes the ILU(0) of each subdomain of block Jacobi or additive Schwarz (`-pc_type bjacobi` or
+    /// `asm`, `-sub_pc_type ilu`) the solver's own threaded one for a Jacobian of block size `bs`
+    /// (`petsc::preconditioner::threaded_ilu_on_subdomains`), at the first Jacobian of the next solve
+    /// (PETSc makes the subdomains' matrices from assembled values). Nothing changes where it does not
+    /// apply (another preconditioner, point-wise storage).
+    pub fn use_threaded_ilu_on_subdomains(&mut self, bs: usize) {
+        self.subdomain_ilu = Some(bs);
+    }
+
+    /// Replaces the subdomains' ILU(0) now if [`Snes::use_threaded_ilu_on_subdomains`] asked for it,
+    /// with the Krylov solver's operators `a` and `p` (assembled).
+    pub(super) fn install_subdomain_ilu(&mut self, a: sys::Mat, p: sys::Mat) -> Result<()> {
+        if let Some(bs) = self.subdomain_ilu.take() {
+            // SAFETY: the SNES's own KSP; the caller's matrices are valid and assembled.
+            self.threaded_subdomains = unsafe {
+                super::preconditioner::threaded_ilu_on_subdomains(self.ksp()?, a, p, bs)
+            }?;
+        }
+        Ok(())
+    }
+
+    /// How many of this process's subdomains precondition with the threaded ILU(0) after
+    /// [`Snes::use_threaded_ilu_on_subdomains`] (0 before the first Jacobian, or where it did not apply).
+    pub fn threaded_subdomains(&self) -> usize {
+        self.threaded_subdomains
+    }
+
     /// Solves `problem` from the initial guess in `x` (overwritten by the solution), assembling the
     /// Jacobian into `jac`. PETSc failures (bad options, errors raised in callbacks) are `Err`; a solve
     /// that simply does not converge is `Ok` with [`SolveInfo::converged`] false.
@@ -352,6 +390,8 @@ impl Snes {
             problem,
             fatal: None,
             domain: Vec::new(),
+            subdomain_ilu: self.subdomain_ilu,
+            threaded_subdomains: None,
         };
         let ctx_ptr = (&mut ctx as *mut Context).cast::<c_void>();
         *LAST_ERROR.lock().unwrap_or_else(|e| e.into_inner()) = None;
@@ -396,6 +436,12 @@ impl Snes {
                 solved
             })
         };
+        if ctx.subdomain_ilu.is_none() {
+            self.subdomain_ilu = None;
+        }
+        if let Some(n) = ctx.threaded_subdomains {
+            self.threaded_subdomains = n;
+        }
         if let Err(mut e) = result {
             if let Some(msg) = ctx.fatal.take() {
                 e.message = msg;
@@ -641,6 +687,23 @@ unsafe extern "C" fn jacobian_cb(
             let mut amat = Matrix::borrowed(a);
             if let Err(e) = amat.assemble() {
                 return e.code;
+            }
+        }
+        // The first Jacobian of a solve asked to: the subdomains' ILU(0) replaced, now that `p` holds
+        // values.
+        let c = &mut *ctx.cast::<Context>();
+        if code == 0
+            && let Some(bs) = c.subdomain_ilu.take()
+        {
+            let mut ksp = std::ptr::null_mut();
+            let installed = check(sys::SNESGetKSP(snes, &mut ksp), "SNESGetKSP")
+                .and_then(|()| super::preconditioner::threaded_ilu_on_subdomains(ksp, a, p, bs));
+            match installed {
+                Ok(n) => c.threaded_subdomains = Some(n),
+                Err(e) => {
+                    c.fatal = Some(e.to_string());
+                    return e.code;
+                }
             }
         }
         code

@@ -223,8 +223,9 @@ impl LinearSystem {
         }
         // ILU(0) on all threads (`ilu::SchwarzIlu`, one overlapping subdomain per thread) in place of
         // PETSc's one-core ILU(0) of the whole matrix (`ilu`, or block Jacobi or additive Schwarz with
-        // one block per process); declined by `petsc::use_threaded_ilu` for the matrices of several
-        // processes.
+        // one block per process). Declined by `petsc::use_threaded_ilu` for the matrices of several
+        // processes and for one thread: there the same ILU(0) takes the place of PETSc's inside each
+        // process's subdomain of block Jacobi or additive Schwarz, about twice as fast per core.
         let ilu_options = match (pc.as_deref(), sub_pc.as_deref()) {
             (Some("bjacobi" | "asm"), None | Some("ilu")) => Some("sub_"),
             (Some("ilu"), _) => Some(""),
@@ -233,8 +234,10 @@ impl LinearSystem {
         if let Some(sub) = ilu_options
             && plain_ilu(session, prefix, sub)?
             && flag(session, "mpm_threaded_ilu")?
+            && !petsc::use_threaded_ilu(&snes, &jac, &owned.pattern())?
+            && sub == "sub_"
         {
-            petsc::use_threaded_ilu(&snes, &jac, &owned.pattern())?;
+            snes.use_threaded_ilu_on_subdomains(nf);
         }
         // Near-null space of the displacement block (the D translations and the rotations: 3 modes in 2D,
         // 6 in 3D) for algebraic multigrid (-pc_type gamg / hypre); other preconditioners ignore it.
