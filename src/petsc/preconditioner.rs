@@ -22,6 +22,25 @@ use std::ffi::{CStr, c_void};
 struct Context {
     ilu: SchwarzIlu,
     layout: BlockLayout,
+    /// How a failed factorisation is reported.
+    failure: Failure,
+    /// The last factorisation failed.
+    failed: bool,
+}
+
+/// How the shell reports a factorisation that failed (a non-finite pivot).
+#[derive(Clone, Copy, PartialEq)]
+enum Failure {
+    /// As the preconditioner's failure (`PCSetFailedReason`), which stops the Krylov solver at once and
+    /// is cleared by the next factorisation that succeeds: the shell is the Krylov solver's own
+    /// preconditioner.
+    Reason,
+    /// By applying as NaN, which the outer Krylov solver meets as `DIVERGED_NANORINF` (as PETSc's ILU(0)
+    /// meets a NaN in the matrix): the shell is a subdomain's. Block Jacobi and additive Schwarz turn a
+    /// subdomain's failure into their own from the sub-solver's last converged reason, which a later
+    /// set-up does not clear (PETSc 3.18), so a failure marked there would fail every later solve of the
+    /// same solver.
+    NotANumber,
 }
 
 /// Makes the preconditioner of `snes` ILU(0) on one overlapping subdomain per thread for the Jacobian
@@ -51,21 +70,31 @@ pub fn use_threaded_ilu(snes: &Snes, jacobian: &Matrix, pattern: &BlockCsr<'_>) 
     unsafe {
         install(
             snes.pc()?,
-            ilu,
-            layout,
+            (ilu, layout, Failure::Reason),
             c"ILU(0) on overlapping subdomains, one per thread",
         )
     }?;
     Ok(true)
 }
 
-/// Makes `pc` a shell over `ilu`, which reads the values of `pc`'s preconditioning matrix in `layout`.
+/// Makes `pc` a shell over `ilu`, which reads the values of `pc`'s preconditioning matrix in `layout` and
+/// reports a failed factorisation as `failure` says.
 ///
 /// # Safety
 /// `pc` is a valid PC whose preconditioning matrix, at every set-up, has the storage and pattern `ilu`
 /// was built for.
-unsafe fn install(pc: sys::PC, ilu: SchwarzIlu, layout: BlockLayout, name: &CStr) -> Result<()> {
-    let ctx = Box::into_raw(Box::new(Context { ilu, layout })).cast::<c_void>();
+unsafe fn install(
+    pc: sys::PC,
+    (ilu, layout, failure): (SchwarzIlu, BlockLayout, Failure),
+    name: &CStr,
+) -> Result<()> {
+    let context = Context {
+        ilu,
+        layout,
+        failure,
+        failed: false,
+    };
+    let ctx = Box::into_raw(Box::new(context)).cast::<c_void>();
     // SAFETY: valid PC; the shell keeps `ctx` until its destroy callback frees it. The callbacks match
     // PETSc's signatures for the shell's operations.
     unsafe {
@@ -124,13 +153,16 @@ pub(super) unsafe fn threaded_ilu_on_subdomains(
         "bjacobi" => sys::PCBJacobiGetSubKSP,
         _ => return Ok(0),
     };
-    let (mut n, mut first, mut subs): (sys::PetscInt, sys::PetscInt, *mut sys::KSP) =
-        (0, 0, std::ptr::null_mut());
+    let (mut n, mut subs): (sys::PetscInt, *mut sys::KSP) = (0, std::ptr::null_mut());
     // SAFETY: valid objects; the set-up makes the sub-solvers, whose array PETSc owns.
     unsafe {
         check(sys::KSPSetOperators(ksp, a, p), "KSPSetOperators")?;
         check(sys::PCSetUp(pc), "PCSetUp")?;
-        check(get_sub(pc, &mut n, &mut first, &mut subs), "PCGetSubKSP")?;
+        // No first index asked for: that would be a collective scan over the processes.
+        check(
+            get_sub(pc, &mut n, std::ptr::null_mut(), &mut subs),
+            "PCGetSubKSP",
+        )?;
     }
     if subs.is_null() || n <= 0 {
         return Ok(0);
@@ -167,9 +199,13 @@ pub(super) unsafe fn threaded_ilu_on_subdomains(
             continue;
         }
         // SAFETY: valid matrix.
+        // An empty subdomain keeps PETSc's (it has nothing to factor).
         let Some((row_ptr, cols)) = (unsafe { block_pattern(pmat) })? else {
             continue;
         };
+        if row_ptr.len() < 2 {
+            continue;
+        }
         let Ok(ilu) = SchwarzIlu::blocks(bs, &row_ptr, &cols, threads) else {
             continue;
         };
@@ -178,8 +214,7 @@ pub(super) unsafe fn threaded_ilu_on_subdomains(
         unsafe {
             install(
                 sub_pc,
-                ilu,
-                BlockLayout::Blocks,
+                (ilu, BlockLayout::Blocks, Failure::NotANumber),
                 c"ILU(0) of the subdomain, one overlapping part per thread",
             )
         }?;
@@ -334,6 +369,30 @@ unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
                 sys::PCGetOperators(pc, &mut amat, &mut pmat),
                 "PCGetOperators",
             )?;
+        }
+        // The factorisation reads as many values as the pattern it was built for: refuse a matrix of
+        // another size (PETSc would hand the shell another matrix after a change of pattern) instead of
+        // reading past its array.
+        let len = ctx.ilu.values_len();
+        let mut info = std::mem::MaybeUninit::<sys::MatInfo>::uninit();
+        // SAFETY: out-parameter filled by PETSc.
+        check(
+            unsafe { sys::MatGetInfo(pmat, sys::MatInfoType_MAT_LOCAL, info.as_mut_ptr()) },
+            "MatGetInfo",
+        )?;
+        // SAFETY: initialised by the successful call above.
+        let held = unsafe { info.assume_init() }.nz_used as usize;
+        if held != len {
+            return Err(PetscError {
+                code: 60, // PETSC_ERR_ARG_SIZ
+                call: "PCSetUp_Shell",
+                message: format!(
+                    "the threaded ILU(0) was built for {len} matrix values, the matrix holds {held}"
+                ),
+            });
+        }
+        // SAFETY: as above.
+        unsafe {
             match ctx.layout {
                 BlockLayout::Blocks => {
                     check(
@@ -348,7 +407,6 @@ unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
                 )?,
             }
         }
-        let len = ctx.ilu.values_len();
         // SAFETY: the Jacobian's values, in the storage and pattern the shell was made for.
         let factored = ctx
             .ilu
@@ -365,11 +423,17 @@ unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
                     "MatSeqAIJRestoreArrayRead",
                 )?,
             }
-            if factored.is_err() {
-                check(
-                    sys::PCSetFailedReason(pc, sys::PCFailedReason_PC_FACTOR_NUMERIC_ZEROPIVOT),
-                    "PCSetFailedReason",
-                )?;
+            ctx.failed = factored.is_err();
+            // A failure is marked, and cleared by the next factorisation that succeeds (PETSc's ILU
+            // clears it at each set-up; a shell's is left to the shell), so that a solve after a failed
+            // one is not failed with it.
+            if ctx.failure == Failure::Reason {
+                let reason = if ctx.failed {
+                    sys::PCFailedReason_PC_FACTOR_NUMERIC_ZEROPIVOT
+                } else {
+                    sys::PCFailedReason_PC_NOERROR
+                };
+                check(sys::PCSetFailedReason(pc, reason), "PCSetFailedReason")?;
             }
         }
         Ok(())
@@ -382,15 +446,36 @@ unsafe extern "C" fn apply(pc: sys::PC, x: sys::PetscVec, y: sys::PetscVec) -> s
         // SAFETY: our shell.
         let ctx = unsafe { context(pc) }.map_err(context_error)?;
         let n = ctx.ilu.rows();
+        for v in [x, y] {
+            let mut len = 0;
+            // SAFETY: a valid vector; out-parameter.
+            check(
+                unsafe { sys::VecGetLocalSize(v, &mut len) },
+                "VecGetLocalSize",
+            )?;
+            if len as usize != n {
+                return Err(PetscError {
+                    code: 60, // PETSC_ERR_ARG_SIZ
+                    call: "PCApply_Shell",
+                    message: format!("the threaded ILU(0) has {n} rows, a vector {len}"),
+                });
+            }
+        }
+        if n == 0 {
+            return Ok(());
+        }
         let (mut xa, mut ya): (*const f64, *mut f64) = (std::ptr::null(), std::ptr::null_mut());
-        // SAFETY: PETSc's arrays of two distinct vectors of the preconditioner's size, restored below.
+        // SAFETY: PETSc's arrays of two distinct vectors of the preconditioner's size (checked above),
+        // restored below.
         unsafe {
             check(sys::VecGetArrayRead(x, &mut xa), "VecGetArrayRead")?;
             check(sys::VecGetArray(y, &mut ya), "VecGetArray")?;
-            ctx.ilu.apply(
-                std::slice::from_raw_parts(xa, n),
-                std::slice::from_raw_parts_mut(ya, n),
-            );
+            let out = std::slice::from_raw_parts_mut(ya, n);
+            if ctx.failed {
+                out.fill(f64::NAN);
+            } else {
+                ctx.ilu.apply(std::slice::from_raw_parts(xa, n), out);
+            }
             check(sys::VecRestoreArray(y, &mut ya), "VecRestoreArray")?;
             check(sys::VecRestoreArrayRead(x, &mut xa), "VecRestoreArrayRead")?;
         }

@@ -691,18 +691,25 @@ unsafe extern "C" fn jacobian_cb(
         }
         // The first Jacobian of a solve asked to: the subdomains' ILU(0) replaced, now that `p` holds
         // values.
-        let c = &mut *ctx.cast::<Context>();
+        let pending = (*ctx.cast::<Context>()).subdomain_ilu.take();
         if code == 0
-            && let Some(bs) = c.subdomain_ilu.take()
+            && let Some(bs) = pending
         {
-            let mut ksp = std::ptr::null_mut();
-            let installed = check(sys::SNESGetKSP(snes, &mut ksp), "SNESGetKSP")
-                .and_then(|()| super::preconditioner::threaded_ilu_on_subdomains(ksp, a, p, bs));
+            let installed = std::panic::catch_unwind(|| {
+                let mut ksp = std::ptr::null_mut();
+                check(sys::SNESGetKSP(snes, &mut ksp), "SNESGetKSP")
+                    .and_then(|()| super::preconditioner::threaded_ilu_on_subdomains(ksp, a, p, bs))
+            });
+            let c = &mut *ctx.cast::<Context>();
             match installed {
-                Ok(n) => c.threaded_subdomains = Some(n),
-                Err(e) => {
+                Ok(Ok(n)) => c.threaded_subdomains = Some(n),
+                Ok(Err(e)) => {
                     c.fatal = Some(e.to_string());
                     return e.code;
+                }
+                Err(panic) => {
+                    c.fatal = Some(panic_message(&*panic));
+                    return ERR_USER;
                 }
             }
         }
