@@ -72,7 +72,7 @@ const NEWTON_RTOL: &str = "-snes_rtol 1e-8";
 /// factorisation within a step"). With the former point-wise storage and the stale-factorisation bug of
 /// the block storage, the same lag had measured as a loss. With several threads the solver replaces this
 /// ILU(0) by its own on one overlapping part of the grid per thread (`ilu::SchwarzIlu`; `solver::system`,
-/// `-mpm_threaded_ilu 0` keeps PETSc's).
+/// `-mpm_threaded_ilu 0` keeps PETSc's); on one thread its own takes the place of PETSc's inside the block.
 const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 -ksp_max_it 1000 \
      -pc_type bjacobi -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
 
@@ -84,7 +84,8 @@ const INERTIA: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6
 /// steps), the overlap 95 / 503 and 93 / 500; on 20 cracked steps at 1 mm (2 processes) 41 / 487 against
 /// 40 / 331 (one process: 40 / 317). On one process the overlap buys nothing and its sub-matrix copy costs
 /// (PCSetUp 2.1 against 1.3 s in 60 steps), so `INERTIA` stays (`docs/benchmarks.md`, "Processes: the
-/// iterations of one process on several").
+/// iterations of one process on several"). Each process's subdomain is factored and solved by the
+/// solver's own ILU(0) in place of PETSc's (`Snes::use_threaded_ilu_on_subdomains`).
 const INERTIA_PROCESSES: &str = "-snes_lag_preconditioner 3 -ksp_type gmres -ksp_rtol 1e-6 \
      -ksp_max_it 1000 -pc_type asm -pc_asm_overlap 1 -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
 
