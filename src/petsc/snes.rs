@@ -689,11 +689,10 @@ unsafe extern "C" fn jacobian_cb(
                 return e.code;
             }
         }
-        // The first Jacobian of a solve asked to: the subdomains' ILU(0) replaced, now that `p` holds
-        // values.
-        let pending = (*ctx.cast::<Context>()).subdomain_ilu.take();
+        // The first Jacobian of a solve asked to that succeeds: the subdomains' ILU(0) replaced, now
+        // that `p` holds values.
         if code == 0
-            && let Some(bs) = pending
+            && let Some(bs) = (*ctx.cast::<Context>()).subdomain_ilu.take()
         {
             let installed = std::panic::catch_unwind(|| {
                 let mut ksp = std::ptr::null_mut();
