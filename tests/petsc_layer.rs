@@ -369,6 +369,16 @@ fn grid_pattern() -> (Vec<usize>, Vec<u32>) {
     (row_ptr, cols)
 }
 
+/// The grid pattern as PETSc's block pattern (one process, blocks of 3).
+fn grid_csr<'a>((row_ptr, cols): (&'a [usize], &'a [u32])) -> mpm_concrete::petsc::BlockCsr<'a> {
+    mpm_concrete::petsc::BlockCsr {
+        first: 0,
+        bs: 3,
+        row_ptr,
+        cols,
+    }
+}
+
 /// Which values [`fill_grid`] writes.
 #[derive(Clone, Copy, PartialEq)]
 enum Values {
@@ -438,13 +448,8 @@ fn solve_grid(
     (row_ptr, cols): (&[usize], &[u32]),
     what: &str,
 ) -> GridSolves {
-    use mpm_concrete::petsc::{BlockCsr, Vector};
-    let p = BlockCsr {
-        first: 0,
-        bs: 3,
-        row_ptr,
-        cols,
-    };
+    use mpm_concrete::petsc::Vector;
+    let p = grid_csr((row_ptr, cols));
     let n = (row_ptr.len() - 1) * 3;
     let mut rhs = Vector::new(s, n, 3).expect("rhs");
     rhs.write(|v| {
@@ -518,15 +523,10 @@ fn same_solve(petsc: &(usize, Vec<f64>), ours: &(usize, Vec<f64>), slack: usize,
 /// a step goes to the fallback solver) instead of returning garbage.
 #[test]
 fn the_threaded_ilu_preconditions_as_petscs_ilu() {
-    use mpm_concrete::petsc::{BlockCsr, Matrix, Snes};
+    use mpm_concrete::petsc::{Matrix, Snes};
     let s = Session::get().expect("PETSc session");
     let (row_ptr, cols) = grid_pattern();
-    let p = BlockCsr {
-        first: 0,
-        bs: 3,
-        row_ptr: &row_ptr,
-        cols: &cols,
-    };
+    let p = grid_csr((&row_ptr, &cols));
     let n = (row_ptr.len() - 1) * 3;
     let options = "-ksp_type gmres -ksp_rtol 1e-10 -ksp_max_it 200 -pc_type bjacobi \
          -sub_pc_type ilu -sub_pc_factor_shift_type nonzero";
@@ -571,15 +571,10 @@ fn the_threaded_ilu_preconditions_as_petscs_ilu() {
 /// Point-wise storage keeps PETSc's ILU.
 #[test]
 fn the_subdomains_ilu_becomes_the_threaded_one() {
-    use mpm_concrete::petsc::{BlockCsr, Matrix, Snes};
+    use mpm_concrete::petsc::{Matrix, Snes};
     let s = Session::get().expect("PETSc session");
     let (row_ptr, cols) = grid_pattern();
-    let p = BlockCsr {
-        first: 0,
-        bs: 3,
-        row_ptr: &row_ptr,
-        cols: &cols,
-    };
+    let p = grid_csr((&row_ptr, &cols));
     let n = (row_ptr.len() - 1) * 3;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)

@@ -186,7 +186,9 @@ pub(super) unsafe fn threaded_ilu_on_subdomains(
             )?;
         }
         // SAFETY: valid objects.
-        if unsafe { pc_type(sub_pc) }? != "ilu" || unsafe { mat_type(pmat) }? != "seqbaij" {
+        if unsafe { pc_type(sub_pc) }? != "ilu"
+            || unsafe { Matrix::borrowed(pmat) }.type_name()? != "seqbaij"
+        {
             continue;
         }
         let mut block = 0;
@@ -277,34 +279,7 @@ unsafe fn pc_type(pc: sys::PC) -> Result<String> {
     // SAFETY: out-parameter; PETSc's own string.
     check(unsafe { sys::PCGetType(pc, &mut name) }, "PCGetType")?;
     // SAFETY: null or a NUL-terminated string owned by PETSc.
-    Ok(unsafe { type_string(name) })
-}
-
-/// The type name of a matrix ("" if unset).
-///
-/// # Safety
-/// `m` is valid.
-unsafe fn mat_type(m: sys::Mat) -> Result<String> {
-    let mut name: *const std::ffi::c_char = std::ptr::null();
-    // SAFETY: out-parameter; PETSc's own string.
-    check(unsafe { sys::MatGetType(m, &mut name) }, "MatGetType")?;
-    // SAFETY: as in `pc_type`.
-    Ok(unsafe { type_string(name) })
-}
-
-/// A type name PETSc returned.
-///
-/// # Safety
-/// `name` is null or a NUL-terminated string.
-unsafe fn type_string(name: *const std::ffi::c_char) -> String {
-    if name.is_null() {
-        String::new()
-    } else {
-        // SAFETY: as documented.
-        unsafe { CStr::from_ptr(name) }
-            .to_string_lossy()
-            .into_owned()
-    }
+    Ok(unsafe { super::reason_name(name, "") })
 }
 
 /// The shell's context.
