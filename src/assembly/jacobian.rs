@@ -2,15 +2,56 @@
 //! `I`), the sum over the points `p` its shape functions reach of `V_p^0 G_Ip . A_p . G_Jp` on each
 //! support node `J` of `p`, the nonlocal coupling terms, inertia and the constrained rows.
 
-use super::{NO_COLUMN, PointEval, StepInput};
+use super::{PointEval, StepInput};
 use crate::petsc::BlockLayout;
 use nalgebra::SVector;
+use std::cell::RefCell;
+
+thread_local! {
+    /// Each worker's column positions of the row it fills ([`ColumnSlots`]).
+    static COLUMNS: RefCell<ColumnSlots> = const { RefCell::new(ColumnSlots::new()) };
+}
+
+/// Per worker, for every grid node: the tag of the last row that placed it among its columns and its
+/// position in that row. A row takes a fresh tag, so a node no row has placed since reads as no column
+/// (a node without unknowns) without clearing anything between rows.
+struct ColumnSlots {
+    /// `(tag, position)` per grid node.
+    slots: Vec<(u32, u16)>,
+    tag: u32,
+}
+
+impl ColumnSlots {
+    const fn new() -> Self {
+        Self {
+            slots: Vec::new(),
+            tag: 0,
+        }
+    }
+
+    /// Places the grid nodes `row_nodes` (the row's columns, in order) at their positions under a
+    /// fresh tag, which it returns; `grid_nodes` is the number of grid nodes.
+    fn place(&mut self, grid_nodes: usize, row_nodes: impl Iterator<Item = usize>) -> u32 {
+        if self.slots.len() < grid_nodes {
+            self.slots.resize(grid_nodes, (0, 0));
+        }
+        self.tag = self.tag.wrapping_add(1);
+        if self.tag == 0 {
+            // After 2^32 rows the tags come round: forget every placement.
+            self.slots.fill((0, 0));
+            self.tag = 1;
+        }
+        for (c, g) in row_nodes.enumerate() {
+            self.slots[g] = (self.tag, c as u16);
+        }
+        self.tag
+    }
+}
 
 /// Read-only view of the assembler used by the parallel row filling (the values are borrowed apart).
 pub(super) struct AssemblerView<'a, const D: usize> {
     pub(super) inc_offsets: &'a [usize],
     pub(super) inc_entries: &'a [(u32, u8)],
-    pub(super) inc_pos: &'a [u16],
     pub(super) row_ptr: &'a [usize],
     pub(super) cols: &'a [u32],
     pub(super) g0: &'a [SVector<f64, D>],
@@ -54,11 +95,27 @@ pub(super) fn fill_rows<const D: usize>(
 
 /// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
 fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]) {
+    COLUMNS.with_borrow_mut(|columns| fill_row_with(ctx, a, row, columns));
+}
+
+/// [`fill_row`] with the worker's column positions.
+fn fill_row_with<const D: usize>(
+    ctx: &JacobianRows<'_, D>,
+    a: usize,
+    row: &mut [f64],
+    columns: &mut ColumnSlots,
+) {
     let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
     let (table, particles, dofs) = (input.table, input.particles, input.dofs);
-    let stride = table.stride();
     let s = input.row_scale;
     let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
+    // Each support node's position in this row, looked up by grid node: `slots[g]` under this row's tag.
+    let grid = dofs.active_nodes();
+    let tag = columns.place(
+        dofs.node_indices().len(),
+        cols.iter().map(|&c| grid[c as usize] as usize),
+    );
+    let slots = columns.slots.as_slice();
     let (ncols, layout) = (cols.len(), ctx.layout);
     let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
     // The same offsets as strides: entry (i, pos, k) at `pos * block + i * si + k * sk`, so that the
@@ -69,10 +126,7 @@ fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]
     let node = dofs.node(a);
     let first = asm.inc_offsets[node];
     let diag = cols.binary_search(&(a as u32)).ok();
-    for (e, &(p, k)) in asm.inc_entries[first..asm.inc_offsets[node + 1]]
-        .iter()
-        .enumerate()
-    {
+    for &(p, k) in &asm.inc_entries[first..asm.inc_offsets[node + 1]] {
         let (p, k) = (p as usize, k as usize);
         let ev = &asm.evals[p];
         let ws = table.weights(p);
@@ -83,7 +137,7 @@ fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]
             }
             continue;
         }
-        let positions = &asm.inc_pos[(first + e) * stride..(first + e + 1) * stride];
+        let stride = table.stride();
         let g0 = &asm.g0[p * stride..p * stride + ws.len()];
         let gi0 = g0[k];
         let (s_i, gi) = (ws[k].value, ws[k].grad);
@@ -101,9 +155,10 @@ fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]
         let (c, dc_deta, dc_deb) = (ev.c, ev.dc_deta * flux, ev.dc_deb * flux);
         let svn = s * vn;
         let coupling = svn * (s_i - dc_deta);
-        for ((wj, &pos), gj0) in ws.iter().zip(positions).zip(g0) {
-            if pos == NO_COLUMN {
-                continue;
+        for (wj, gj0) in ws.iter().zip(g0) {
+            let (t, pos) = slots[wj.node as usize];
+            if t != tag {
+                continue; // a node without unknowns
             }
             let base = pos as usize * block;
             for (i, mi) in m.iter().enumerate() {

@@ -132,8 +132,8 @@ pub enum AssemblyError {
     },
 }
 
-/// Marks a support node without unknowns in [`Assembler`]'s position table.
-const NO_COLUMN: u16 = u16::MAX;
+/// Block columns of one Jacobian row at most: the fill keeps a column's position in a `u16`.
+const MAX_COLUMNS: usize = u16::MAX as usize;
 
 /// Cached constitutive evaluation of one particle at the current iterate.
 #[derive(Debug, Clone, Copy)]
@@ -211,9 +211,6 @@ pub struct Assembler<const D: usize = 2> {
     /// Node -> (particle, slot in its weight list), CSR over grid nodes.
     inc_offsets: Vec<usize>,
     inc_entries: Vec<(u32, u8)>,
-    /// Per incidence entry and support slot of its particle: the position of the support node in the
-    /// entry's Jacobian row ([`NO_COLUMN`] for a node without unknowns); `stride` slots per entry.
-    inc_pos: Vec<u16>,
     /// Block pattern: for active node a, its column active nodes `cols[row_ptr[a]..row_ptr[a+1]]` (sorted).
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
@@ -260,7 +257,6 @@ impl<const D: usize> Default for Assembler<D> {
             layout: FieldLayout::default(),
             inc_offsets: Vec::new(),
             inc_entries: Vec::new(),
-            inc_pos: Vec::new(),
             row_ptr: Vec::new(),
             cols: Vec::new(),
             g0: Vec::new(),
@@ -381,46 +377,23 @@ impl<const D: usize> Assembler<D> {
             });
     }
 
-    /// The block pattern of the step (row pointers and block columns per active node) and, for every
-    /// incidence entry, the column position of each support node of its point; from [`Self::incidence`].
+    /// The block pattern of the step: row pointers and block columns per active node, the sorted union
+    /// of the supports of the node's points (and of its contact partner's); from [`Self::incidence`].
     fn block_pattern_of_step(&mut self, input: &StepInput<'_, D>) {
         let (table, dofs) = (input.table, input.dofs);
-        // Block pattern: per active node, the sorted union of the supports of its particles; and for every
-        // incidence entry (node I, particle p) the position in I's row of each support node J of p, so
-        // that the Jacobian fill needs no search.
         let node_index = dofs.node_indices();
-        let stride = table.stride();
         let grid_nodes = node_index.len();
-        // Per worker: a stamp per grid node (the row that last saw it), its position in that row, and the
-        // row's distinct support nodes; no sorting of the ~300 raw entries of a row, no searching.
-        let marker = || (vec![0u32; grid_nodes], vec![0u16; grid_nodes], Vec::new());
-        // Each active node's positions are its own range of `inc_pos` (its incidence entries, `stride`
-        // slots each): the rows write them in place, in parallel; inactive nodes keep NO_COLUMN.
-        self.inc_pos.clear();
-        self.inc_pos
-            .resize(self.inc_entries.len() * stride, NO_COLUMN);
-        let mut row_pos: Vec<&mut [u16]> = Vec::with_capacity(dofs.active_nodes().len());
-        let mut rest = self.inc_pos.as_mut_slice();
-        let mut at = 0;
-        for &node in dofs.active_nodes() {
-            let (lo, hi) = (
-                self.inc_offsets[node as usize] * stride,
-                self.inc_offsets[node as usize + 1] * stride,
-            );
-            let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - at);
-            let (mine, tail) = tail.split_at_mut(hi - lo);
-            row_pos.push(mine);
-            (rest, at) = (tail, hi);
-        }
+        // Per worker: a stamp per grid node (the row that last saw it) and the row's distinct support
+        // nodes; no sorting of the ~300 raw entries of a row, no searching.
+        let marker = || (vec![0u32; grid_nodes], Vec::new());
         let (inc_entries, inc_offsets) = (&self.inc_entries, &self.inc_offsets);
         let rows: Vec<Vec<u32>> = dofs
             .active_nodes()
             .par_iter()
-            .zip(row_pos.into_par_iter())
             .enumerate()
             .map_init(
                 marker,
-                |(stamp, slot, unique): &mut (Vec<u32>, Vec<u16>, Vec<u32>), (a, (&node, pos))| {
+                |(stamp, unique): &mut (Vec<u32>, Vec<u32>), (a, &node)| {
                     let row = a as u32 + 1;
                     unique.clear();
                     let entries =
@@ -443,16 +416,6 @@ impl<const D: usize> Assembler<D> {
                     }
                     // Active indices increase with the grid index: sorting grid nodes sorts the columns.
                     unique.sort_unstable();
-                    for (c, &g) in unique.iter().enumerate() {
-                        slot[g as usize] = c as u16;
-                    }
-                    for (e, &(p, _)) in entries.iter().enumerate() {
-                        for (kj, w) in table.weights(p as usize).iter().enumerate() {
-                            if stamp[w.node as usize] == row {
-                                pos[e * stride + kj] = slot[w.node as usize];
-                            }
-                        }
-                    }
                     unique.iter().map(|&g| node_index[g as usize]).collect()
                 },
             )
@@ -462,7 +425,7 @@ impl<const D: usize> Assembler<D> {
         self.cols.clear();
         for r in &rows {
             assert!(
-                r.len() < NO_COLUMN as usize,
+                r.len() <= MAX_COLUMNS,
                 "a Jacobian row with {} block columns",
                 r.len()
             );
@@ -749,7 +712,6 @@ impl<const D: usize> Assembler<D> {
         let asm = AssemblerView {
             inc_offsets: &self.inc_offsets,
             inc_entries: &self.inc_entries,
-            inc_pos: &self.inc_pos,
             row_ptr: &self.row_ptr,
             cols: &self.cols,
             g0: &self.g0,
