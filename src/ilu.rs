@@ -159,26 +159,27 @@ impl SchwarzIlu {
             cuts.push(r.max(*cuts.last().expect("a first cut")));
         }
         cuts.push(n);
-        let mut out = Vec::with_capacity(parts);
-        for w in cuts.windows(2) {
-            let own = w[0]..w[1];
-            if own.is_empty() {
-                continue;
-            }
-            let lo = own
-                .clone()
-                .map(|r| cols[row_ptr[r]] as usize)
-                .min()
-                .unwrap_or(own.start)
-                .min(own.start);
-            let hi = own
-                .clone()
-                .map(|r| cols[row_ptr[r + 1] - 1] as usize + 1)
-                .max()
-                .unwrap_or(own.end)
-                .max(own.end);
-            out.push(Part::new(kernel, row_ptr, cols, lo..hi, own)?);
-        }
+        // The parts' symbolic factors, each on its own worker.
+        let out = cuts
+            .par_windows(2)
+            .filter(|w| w[0] < w[1])
+            .map(|w| {
+                let own = w[0]..w[1];
+                let lo = own
+                    .clone()
+                    .map(|r| cols[row_ptr[r]] as usize)
+                    .min()
+                    .unwrap_or(own.start)
+                    .min(own.start);
+                let hi = own
+                    .clone()
+                    .map(|r| cols[row_ptr[r + 1] - 1] as usize + 1)
+                    .max()
+                    .unwrap_or(own.end)
+                    .max(own.end);
+                Part::new(kernel, row_ptr, cols, lo..hi, own)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             kernel,
             unknowns: n * kernel,
