@@ -14,6 +14,7 @@
 //! ([`threaded_ilu_on_subdomains`], through `Snes::use_threaded_ilu_on_subdomains`): PETSc still makes
 //! the subdomains' matrices and moves the vectors between processes.
 
+use super::matrix::block_pattern;
 use super::{BlockCsr, BlockLayout, Matrix, PetscError, Result, Snes, check, sys};
 use crate::ilu::SchwarzIlu;
 use std::ffi::{CStr, c_void};
@@ -223,51 +224,6 @@ pub(super) unsafe fn threaded_ilu_on_subdomains(
         replaced += 1;
     }
     Ok(replaced)
-}
-
-/// The block pattern (row pointers, block columns) of a block-storage matrix, `None` if PETSc does not
-/// give it.
-///
-/// # Safety
-/// `m` is a valid `seqbaij` matrix.
-unsafe fn block_pattern(m: sys::Mat) -> Result<Option<(Vec<usize>, Vec<u32>)>> {
-    let (mut n, mut ia, mut ja, mut done): (
-        sys::PetscInt,
-        *const sys::PetscInt,
-        *const sys::PetscInt,
-        sys::PetscBool,
-    ) = (
-        0,
-        std::ptr::null(),
-        std::ptr::null(),
-        sys::PetscBool_PETSC_FALSE,
-    );
-    let (no, yes) = (sys::PetscBool_PETSC_FALSE, sys::PetscBool_PETSC_TRUE);
-    // SAFETY: out-parameters; with block compression a block matrix gives its own block CSR arrays,
-    // returned below.
-    check(
-        unsafe { sys::MatGetRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
-        "MatGetRowIJ",
-    )?;
-    if done != yes || ia.is_null() || n < 0 {
-        return Ok(None);
-    }
-    let rows = n as usize;
-    // SAFETY: `rows + 1` row pointers and `ia[rows]` columns, valid until restored.
-    let pattern = unsafe {
-        let ia = std::slice::from_raw_parts(ia, rows + 1);
-        let ja = std::slice::from_raw_parts(ja, ia[rows] as usize);
-        (
-            ia.iter().map(|&i| i as usize).collect::<Vec<_>>(),
-            ja.iter().map(|&j| j as u32).collect::<Vec<_>>(),
-        )
-    };
-    // SAFETY: as above.
-    check(
-        unsafe { sys::MatRestoreRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
-        "MatRestoreRowIJ",
-    )?;
-    Ok(Some(pattern))
 }
 
 /// The type name of a preconditioner ("" if unset).

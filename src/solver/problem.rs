@@ -32,6 +32,8 @@ pub(super) struct StepProblem<'a, 'b, const D: usize> {
     pub(super) session: &'a SessionGuard,
     /// The residual of all unknowns (this process hands PETSc its own rows).
     pub(super) scratch: Vec<f64>,
+    /// The Jacobian's values where the matrix does not lend its own array (several processes).
+    pub(super) jacobian_values: Vec<f64>,
     /// The request to stop that the step watches (`Simulation::watch`).
     pub(super) interrupt: Option<&'a Interrupt>,
     /// The processes agreed to abandon the step at an evaluation ([`StepProblem::abandon`]).
@@ -65,6 +67,7 @@ impl<'a, 'b, const D: usize> StepProblem<'a, 'b, D> {
             owned,
             session,
             scratch: Vec::new(),
+            jacobian_values: Vec::new(),
             interrupt,
             abandoned: false,
         }
@@ -133,7 +136,7 @@ impl<const D: usize> NonlinearProblem for StepProblem<'_, '_, D> {
         let (contacts, s) = (self.contacts, self.row_scale);
         let (pattern, own) = (owned.pattern(), owned.rows.clone());
         let r = jac
-            .fill_block_rows(&pattern, |values, layout| {
+            .fill_block_rows_in(&pattern, &mut self.jacobian_values, |values, layout| {
                 asm.jacobian_into(input, own.clone(), values, layout);
                 let nf = input.dofs.unknowns_per_node();
                 let row_of = |a: usize| {
