@@ -179,6 +179,9 @@ impl SchwarzIlu {
                     .max(own.end);
                 Part::new(kernel, row_ptr, cols, lo..hi, own)
             })
+            .collect::<Vec<_>>()
+            // The first error in the parts' order, whichever worker met it first.
+            .into_iter()
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             kernel,

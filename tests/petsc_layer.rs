@@ -145,8 +145,9 @@ fn options_set_in_code_yield_to_the_command_line() {
 }
 
 /// A block pattern filled through each path (`seqaij` and `seqbaij` in place, `mpiaij` through
-/// `MatUpdateMPIAIJWithArray`, `mpibaij` through `MatSetValuesBlocked`) gives the same operator as the
-/// dense matrix it describes.
+/// `MatUpdateMPIAIJWithArray`, `mpibaij` through its diagonal and off-diagonal parts, here on one
+/// process with an empty off-diagonal part; on several processes through the solver in
+/// `tests/mpi_parallel.rs`) gives the same operator as the dense matrix it describes.
 #[test]
 fn block_pattern_fills_every_matrix_type_alike() {
     use mpm_concrete::petsc::{BlockCsr, Matrix, Vector};

@@ -42,6 +42,8 @@ impl ColumnSlots {
             self.tag = 1;
         }
         for (c, g) in row_nodes.enumerate() {
+            // At most `MAX_COLUMNS` columns (asserted with the pattern): positions fit a u16.
+            debug_assert!(c < u16::MAX as usize, "column position {c}");
             self.slots[g] = (self.tag, c as u16);
         }
         self.tag

@@ -389,10 +389,10 @@ impl Matrix {
         // The scratch's values are all overwritten: only a change of length writes to it here.
         scratch.resize(nnz, 0.0);
         let values = scratch.as_mut_slice();
-        if let Some((diag, off)) = self.split_parts(p)? {
+        if let Some(parts) = self.split_parts(p)? {
             fill(values, BlockLayout::Blocks);
             // SAFETY: `split_parts` found the parts' structures to be the pattern's split.
-            unsafe { copy_split(p, values, diag, off) }?;
+            unsafe { copy_split(p, values, &parts) }?;
             // The parts' values changed behind PETSc's back (see the `seqbaij` case above): the
             // assembly marks them, and the matrix, changed.
             return self.assemble();
@@ -416,7 +416,7 @@ impl Matrix {
     /// part the columns in `p.first..p.first + p.block_rows()` (as local indices), the off-diagonal part
     /// the others, in the same order (its compressed columns mapping to them through `garray`).
     /// `None` otherwise, and for any other type.
-    fn split_parts(&self, p: &BlockCsr<'_>) -> Result<Option<(sys::Mat, sys::Mat)>> {
+    fn split_parts(&self, p: &BlockCsr<'_>) -> Result<Option<SplitParts>> {
         if self.type_name()? != "mpibaij" {
             return Ok(None);
         }
@@ -434,6 +434,15 @@ impl Matrix {
             unsafe { sys::MatGetLocalSize(off, &mut m, &mut n) },
             "MatGetLocalSize",
         )?;
+        let mut bs: PetscInt = 0;
+        // SAFETY: out-parameter of a valid matrix.
+        check(
+            unsafe { sys::MatGetBlockSize(off, &mut bs) },
+            "MatGetBlockSize",
+        )?;
+        if usize::try_from(bs).ok() != Some(p.bs) {
+            return Ok(None);
+        }
         let compressed = usize::try_from(n).unwrap_or(0) / p.bs.max(1);
         if compressed > 0 && garray.is_null() {
             return Ok(None);
@@ -457,7 +466,7 @@ impl Matrix {
         // SAFETY: both parts are `seqbaij` matrices of this valid matrix.
         let diag_same = unsafe {
             with_block_pattern(diag, |ia, ja| {
-                ia.len() == rows + 1
+                (ia.len() == rows + 1
                     && (0..rows).all(|a| {
                         let (lo, hi) = split(a);
                         let d = &ja[ia[a] as usize..ia[a + 1] as usize];
@@ -465,13 +474,14 @@ impl Matrix {
                             && d.iter()
                                 .zip(&p.block_cols(a)[lo..hi])
                                 .all(|(&l, &c)| l as usize + own.start == c as usize)
-                    })
+                    }))
+                .then(|| ia[rows] as usize)
             })
         }?;
         // SAFETY: as above.
         let off_same = unsafe {
             with_block_pattern(off, |ia, ja| {
-                ia.len() == rows + 1
+                (ia.len() == rows + 1
                     && (0..rows).all(|a| {
                         let (lo, hi) = split(a);
                         let cols = p.block_cols(a);
@@ -485,13 +495,19 @@ impl Matrix {
                                         .and_then(|l| global.get(l))
                                         .is_some_and(|&g| g as usize == c as usize)
                                 })
-                    })
+                    }))
+                .then(|| ia[rows] as usize)
             })
         }?;
-        if diag_same != Some(true) || off_same != Some(true) {
+        let (Some(Some(diag_blocks)), Some(Some(off_blocks))) = (diag_same, off_same) else {
             return Ok(None);
-        }
-        Ok(Some((diag, off)))
+        };
+        Ok(Some(SplitParts {
+            diag,
+            off,
+            diag_blocks,
+            off_blocks,
+        }))
     }
 
     /// Inserts every block row of `p` with one `MatSetValuesBlocked`: `row(a)` gives block row `a`'s
@@ -628,26 +644,36 @@ impl BlockLayout {
     }
 }
 
+/// The diagonal and off-diagonal parts of an `mpibaij` matrix that hold its block pattern split at the
+/// process's block columns ([`Matrix::split_parts`]), with their numbers of blocks.
+struct SplitParts {
+    diag: sys::Mat,
+    off: sys::Mat,
+    diag_blocks: usize,
+    off_blocks: usize,
+}
+
 /// Copies the block rows `values` of the pattern `p` (in [`BlockLayout::Blocks`]) into the diagonal
-/// part `diag` (the columns of the process's own rows) and the off-diagonal part `off` (the others) of
-/// an `mpibaij` matrix.
+/// part (the columns of the process's own rows) and the off-diagonal part (the others) of an `mpibaij`
+/// matrix.
 ///
 /// # Safety
 /// The parts' structures are `p` split at the process's block columns ([`Matrix::split_parts`]).
-unsafe fn copy_split(
-    p: &BlockCsr<'_>,
-    values: &[f64],
-    diag: sys::Mat,
-    off: sys::Mat,
-) -> Result<()> {
+unsafe fn copy_split(p: &BlockCsr<'_>, values: &[f64], parts: &SplitParts) -> Result<()> {
     let bs2 = p.bs * p.bs;
     let own = p.first..p.first + p.block_rows();
-    let in_diag = p
-        .cols
-        .iter()
-        .filter(|&&c| own.contains(&(c as usize)))
-        .count()
-        * bs2;
+    let (in_diag, in_off) = (parts.diag_blocks * bs2, parts.off_blocks * bs2);
+    if values.len() != in_diag + in_off {
+        return Err(PetscError {
+            code: 60,
+            call: "fill_block_rows",
+            message: format!(
+                "{} values for parts of {in_diag} and {in_off}",
+                values.len()
+            ),
+        });
+    }
+    let (diag, off) = (parts.diag, parts.off);
     let (mut d, mut o): (*mut f64, *mut f64) = (std::ptr::null_mut(), std::ptr::null_mut());
     // SAFETY: the parts hold `in_diag` and the rest of the pattern's values (the caller's promise);
     // both arrays are restored below.
@@ -668,7 +694,7 @@ unsafe fn copy_split(
             unsafe { std::slice::from_raw_parts_mut(a, len) }
         }
     };
-    let (ds, os) = (part(d, in_diag), part(o, values.len() - in_diag));
+    let (ds, os) = (part(d, in_diag), part(o, in_off));
     let (mut at_d, mut at_o) = (0, 0);
     for a in 0..p.block_rows() {
         let cols = p.block_cols(a);
