@@ -14,6 +14,7 @@
 //!   summed and negative indices ignored; PETSc sorts them once. Simple for small problems (the smoke
 //!   lattice).
 
+use super::block_parts::SplitParts;
 use super::{
     PetscError, PetscInt, Result, SessionGuard, Vector, check, comm_world, create, ownership_range,
     sys, to_petsc_int,
@@ -316,7 +317,7 @@ impl Matrix {
     /// write all of them. For `seqaij` and `seqbaij` this is the matrix's own value array (no copy); for
     /// other types a scratch array, then handed over with one `MatUpdateMPIAIJWithArray` (`mpiaij`),
     /// copied into the diagonal and off-diagonal parts (`mpibaij` whose parts hold the pattern, found
-    /// at every fill: [`Matrix::split_parts`]) or inserted with `MatSetValuesBlocked` row by row. Leaves
+    /// at every fill: [`SplitParts::of`]) or inserted with `MatSetValuesBlocked` row by row. Leaves
     /// the matrix assembled.
     pub fn fill_block_rows(
         &mut self,
@@ -389,10 +390,10 @@ impl Matrix {
         // The scratch's values are all overwritten: only a change of length writes to it here.
         scratch.resize(nnz, 0.0);
         let values = scratch.as_mut_slice();
-        if let Some(parts) = self.split_parts(p)? {
+        // SAFETY: a valid matrix.
+        if let Some(parts) = unsafe { SplitParts::of(self.raw, p) }? {
             fill(values, BlockLayout::Blocks);
-            // SAFETY: `split_parts` found the parts' structures to be the pattern's split.
-            unsafe { copy_split(p, values, &parts) }?;
+            parts.copy(p, values)?;
             // The parts' values changed behind PETSc's back (see the `seqbaij` case above): the
             // assembly marks them, and the matrix, changed.
             return self.assemble();
@@ -409,105 +410,6 @@ impl Matrix {
         let bs2 = p.bs * p.bs;
         self.set_block_rows(p, |a| &values[p.row_ptr[a] * bs2..p.row_ptr[a + 1] * bs2])?;
         self.assemble()
-    }
-
-    /// The diagonal and off-diagonal parts of an `mpibaij` matrix (`MatMPIBAIJGetSeqBAIJ`) if they hold
-    /// the block pattern `p` split at this process's block columns: in each block row, the diagonal
-    /// part the columns in `p.first..p.first + p.block_rows()` (as local indices), the off-diagonal part
-    /// the others, in the same order (its compressed columns mapping to them through `garray`).
-    /// `None` otherwise, and for any other type.
-    fn split_parts(&self, p: &BlockCsr<'_>) -> Result<Option<SplitParts>> {
-        if self.type_name()? != "mpibaij" {
-            return Ok(None);
-        }
-        let (mut diag, mut off, mut garray): (sys::Mat, sys::Mat, *const PetscInt) =
-            (std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null());
-        // SAFETY: out-parameters; the parts and `garray` belong to the matrix.
-        check(
-            unsafe { sys::MatMPIBAIJGetSeqBAIJ(self.raw, &mut diag, &mut off, &mut garray) },
-            "MatMPIBAIJGetSeqBAIJ",
-        )?;
-        // The off-diagonal part's columns are `garray`'s entries (one per block column of the part).
-        let (mut m, mut n) = (0, 0);
-        // SAFETY: out-parameters of a valid matrix.
-        check(
-            unsafe { sys::MatGetLocalSize(off, &mut m, &mut n) },
-            "MatGetLocalSize",
-        )?;
-        let mut bs: PetscInt = 0;
-        // SAFETY: out-parameter of a valid matrix.
-        check(
-            unsafe { sys::MatGetBlockSize(off, &mut bs) },
-            "MatGetBlockSize",
-        )?;
-        if usize::try_from(bs).ok() != Some(p.bs) {
-            return Ok(None);
-        }
-        let compressed = usize::try_from(n).unwrap_or(0) / p.bs.max(1);
-        if compressed > 0 && garray.is_null() {
-            return Ok(None);
-        }
-        // SAFETY: `garray` lists the global block column of each of the part's `compressed` columns.
-        let global: &[PetscInt] = if compressed == 0 {
-            &[]
-        } else {
-            unsafe { std::slice::from_raw_parts(garray, compressed) }
-        };
-        let rows = p.block_rows();
-        let own = p.first..p.first + rows;
-        // Where each block row's own columns start and end.
-        let split = |a: usize| {
-            let cols = p.block_cols(a);
-            (
-                cols.partition_point(|&c| (c as usize) < own.start),
-                cols.partition_point(|&c| (c as usize) < own.end),
-            )
-        };
-        // SAFETY: both parts are `seqbaij` matrices of this valid matrix.
-        let diag_same = unsafe {
-            with_block_pattern(diag, |ia, ja| {
-                (ia.len() == rows + 1
-                    && (0..rows).all(|a| {
-                        let (lo, hi) = split(a);
-                        let d = &ja[ia[a] as usize..ia[a + 1] as usize];
-                        d.len() == hi - lo
-                            && d.iter()
-                                .zip(&p.block_cols(a)[lo..hi])
-                                .all(|(&l, &c)| l as usize + own.start == c as usize)
-                    }))
-                .then(|| ia[rows] as usize)
-            })
-        }?;
-        // SAFETY: as above.
-        let off_same = unsafe {
-            with_block_pattern(off, |ia, ja| {
-                (ia.len() == rows + 1
-                    && (0..rows).all(|a| {
-                        let (lo, hi) = split(a);
-                        let cols = p.block_cols(a);
-                        let o = &ja[ia[a] as usize..ia[a + 1] as usize];
-                        o.len() == cols.len() - (hi - lo)
-                            && o.iter()
-                                .zip(cols[..lo].iter().chain(&cols[hi..]))
-                                .all(|(&l, &c)| {
-                                    usize::try_from(l)
-                                        .ok()
-                                        .and_then(|l| global.get(l))
-                                        .is_some_and(|&g| g as usize == c as usize)
-                                })
-                    }))
-                .then(|| ia[rows] as usize)
-            })
-        }?;
-        let (Some(Some(diag_blocks)), Some(Some(off_blocks))) = (diag_same, off_same) else {
-            return Ok(None);
-        };
-        Ok(Some(SplitParts {
-            diag,
-            off,
-            diag_blocks,
-            off_blocks,
-        }))
     }
 
     /// Inserts every block row of `p` with one `MatSetValuesBlocked`: `row(a)` gives block row `a`'s
@@ -644,151 +546,6 @@ impl BlockLayout {
     }
 }
 
-/// The diagonal and off-diagonal parts of an `mpibaij` matrix that hold its block pattern split at the
-/// process's block columns ([`Matrix::split_parts`]), with their numbers of blocks.
-struct SplitParts {
-    diag: sys::Mat,
-    off: sys::Mat,
-    diag_blocks: usize,
-    off_blocks: usize,
-}
-
-/// Copies the block rows `values` of the pattern `p` (in [`BlockLayout::Blocks`]) into the diagonal
-/// part (the columns of the process's own rows) and the off-diagonal part (the others) of an `mpibaij`
-/// matrix.
-///
-/// # Safety
-/// The parts' structures are `p` split at the process's block columns ([`Matrix::split_parts`]).
-unsafe fn copy_split(p: &BlockCsr<'_>, values: &[f64], parts: &SplitParts) -> Result<()> {
-    let bs2 = p.bs * p.bs;
-    let own = p.first..p.first + p.block_rows();
-    let (in_diag, in_off) = (parts.diag_blocks * bs2, parts.off_blocks * bs2);
-    if values.len() != in_diag + in_off {
-        return Err(PetscError {
-            code: 60,
-            call: "fill_block_rows",
-            message: format!(
-                "{} values for parts of {in_diag} and {in_off}",
-                values.len()
-            ),
-        });
-    }
-    let (diag, off) = (parts.diag, parts.off);
-    let (mut d, mut o): (*mut f64, *mut f64) = (std::ptr::null_mut(), std::ptr::null_mut());
-    // SAFETY: the parts hold `in_diag` and the rest of the pattern's values (the caller's promise);
-    // both arrays are restored below.
-    check(
-        unsafe { sys::MatSeqBAIJGetArray(diag, &mut d) },
-        "MatSeqBAIJGetArray",
-    )?;
-    check(
-        unsafe { sys::MatSeqBAIJGetArray(off, &mut o) },
-        "MatSeqBAIJGetArray",
-    )?;
-    // An empty part (no columns of other processes) may give a null array.
-    let part = |a: *mut f64, len: usize| -> &mut [f64] {
-        if len == 0 {
-            &mut []
-        } else {
-            // SAFETY: the part holds `len` values at `a` until restored.
-            unsafe { std::slice::from_raw_parts_mut(a, len) }
-        }
-    };
-    let (ds, os) = (part(d, in_diag), part(o, in_off));
-    let (mut at_d, mut at_o) = (0, 0);
-    for a in 0..p.block_rows() {
-        let cols = p.block_cols(a);
-        let (lo, hi) = (
-            cols.partition_point(|&c| (c as usize) < own.start),
-            cols.partition_point(|&c| (c as usize) < own.end),
-        );
-        let row = &values[p.row_ptr[a] * bs2..p.row_ptr[a + 1] * bs2];
-        let (left, rest) = row.split_at(lo * bs2);
-        let (mid, right) = rest.split_at((hi - lo) * bs2);
-        os[at_o..at_o + left.len()].copy_from_slice(left);
-        at_o += left.len();
-        ds[at_d..at_d + mid.len()].copy_from_slice(mid);
-        at_d += mid.len();
-        os[at_o..at_o + right.len()].copy_from_slice(right);
-        at_o += right.len();
-    }
-    // SAFETY: restoring the arrays taken above.
-    check(
-        unsafe { sys::MatSeqBAIJRestoreArray(diag, &mut d) },
-        "MatSeqBAIJRestoreArray",
-    )?;
-    check(
-        unsafe { sys::MatSeqBAIJRestoreArray(off, &mut o) },
-        "MatSeqBAIJRestoreArray",
-    )
-}
-
-/// The block pattern (row pointers, block columns) of a block-storage matrix, `None` if PETSc does not
-/// give it.
-///
-/// # Safety
-/// `m` is a valid `seqbaij` matrix.
-pub(super) unsafe fn block_pattern(m: sys::Mat) -> Result<Option<(Vec<usize>, Vec<u32>)>> {
-    // SAFETY: the caller's promise.
-    unsafe {
-        with_block_pattern(m, |ia, ja| {
-            (
-                ia.iter().map(|&i| i as usize).collect::<Vec<_>>(),
-                ja.iter().map(|&j| j as u32).collect::<Vec<_>>(),
-            )
-        })
-    }
-}
-
-/// `f` of the block CSR arrays (row pointers, block columns) of a block-storage matrix, read where
-/// PETSc keeps them (`MatGetRowIJ` with block compression); `None` if PETSc does not give them.
-///
-/// # Safety
-/// `m` is a valid `seqbaij` matrix.
-unsafe fn with_block_pattern<T>(
-    m: sys::Mat,
-    f: impl FnOnce(&[PetscInt], &[PetscInt]) -> T,
-) -> Result<Option<T>> {
-    let (mut n, mut ia, mut ja, mut done): (
-        sys::PetscInt,
-        *const sys::PetscInt,
-        *const sys::PetscInt,
-        sys::PetscBool,
-    ) = (
-        0,
-        std::ptr::null(),
-        std::ptr::null(),
-        sys::PetscBool_PETSC_FALSE,
-    );
-    let (no, yes) = (sys::PetscBool_PETSC_FALSE, sys::PetscBool_PETSC_TRUE);
-    // SAFETY: out-parameters; with block compression a block matrix gives its own block CSR arrays,
-    // returned below.
-    check(
-        unsafe { sys::MatGetRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
-        "MatGetRowIJ",
-    )?;
-    if done != yes || ia.is_null() || n < 0 {
-        return Ok(None);
-    }
-    let rows = n as usize;
-    // SAFETY: `rows + 1` row pointers and `ia[rows]` columns, valid until restored.
-    let out = unsafe {
-        let ia = std::slice::from_raw_parts(ia, rows + 1);
-        let ja: &[PetscInt] = if ia[rows] == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ja, ia[rows] as usize)
-        };
-        f(ia, ja)
-    };
-    // SAFETY: as above.
-    check(
-        unsafe { sys::MatRestoreRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
-        "MatRestoreRowIJ",
-    )?;
-    Ok(Some(out))
-}
-
 /// The exact nonzero pattern of one process's block rows, as block CSR with `bs x bs` dense blocks.
 ///
 /// Block row `a` (global block row `first + a`, scalar rows `(first + a) bs .. (first + a + 1) bs`) has the
@@ -807,6 +564,17 @@ pub struct BlockCsr<'a> {
 }
 
 impl BlockCsr<'_> {
+    /// Where block row `a`'s columns of this process's own rows start and end among its columns:
+    /// those before `lo` and from `hi` on belong to other processes.
+    pub(super) fn own_columns(&self, a: usize) -> (usize, usize) {
+        let cols = self.block_cols(a);
+        let own = self.first..self.first + self.block_rows();
+        (
+            cols.partition_point(|&c| (c as usize) < own.start),
+            cols.partition_point(|&c| (c as usize) < own.end),
+        )
+    }
+
     /// Number of block rows.
     pub fn block_rows(&self) -> usize {
         self.row_ptr.len().saturating_sub(1)

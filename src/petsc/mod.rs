@@ -9,6 +9,7 @@
 //! * Every PETSc error becomes a [`PetscError`] carrying PETSc's own message (captured by an error
 //!   handler pushed at start-up), never an abort.
 
+mod block_parts;
 mod ksp;
 mod matrix;
 mod operator;

@@ -14,7 +14,7 @@
 //! ([`threaded_ilu_on_subdomains`], through `Snes::use_threaded_ilu_on_subdomains`): PETSc still makes
 //! the subdomains' matrices and moves the vectors between processes.
 
-use super::matrix::block_pattern;
+use super::block_parts::block_pattern;
 use super::{BlockCsr, BlockLayout, Matrix, PetscError, Result, Snes, check, sys};
 use crate::ilu::SchwarzIlu;
 use std::ffi::{CStr, c_void};
