@@ -138,6 +138,9 @@ pub struct Parameters<const D: usize = 2> {
     pub fields: Vec<u16>,
     /// Interpolator.
     pub shape: ShapeKind,
+    /// The CPDI interpolators' corner hold (cell widths, `[shape] corner_hold`,
+    /// [`crate::shape::DEFAULT_CORNER_HOLD`]).
+    pub corner_hold: f64,
     /// Time integration.
     pub time: TimeIntegration,
     /// Body force per unit mass (mm/s^2), e.g. gravity `(0, -9810)`.
@@ -184,6 +187,7 @@ impl<const D: usize> Parameters<D> {
             materials,
             fields: Vec::new(),
             shape,
+            corner_hold: crate::shape::DEFAULT_CORNER_HOLD,
             time,
             body_force: SVector::zeros(),
             body_force_ramp: 0.0,

@@ -359,6 +359,7 @@ impl Seeded {
                 loads: cfg.load.iter().map(nodal_load).collect(),
                 method: cfg.shape.method,
                 mass_tolerance: cfg.grid.mass_tolerance,
+                corner_hold: cfg.shape.corner_hold,
                 path: cfg.path.as_ref().map(|p| PathControl {
                     from: frame.to_grid(Vector2::from(p.from)),
                     to: frame.to_grid(Vector2::from(p.to)),

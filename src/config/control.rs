@@ -128,6 +128,11 @@ pub struct ShapeSection {
     /// Material points per cell and direction.
     #[serde(default = "default_ppc")]
     pub points_per_cell: usize,
+    /// The CPDI corners' hold on their cell, in cell widths (default 0: plain CPDI; within `[0, 0.25]`):
+    /// a domain corner that crossed a grid line away from its domain's centre by up to this much keeps its
+    /// cell's functions, blending into the next cell's hats up to twice this (docs/shape-functions.md).
+    #[serde(default = "default_corner_hold")]
+    pub corner_hold: f64,
     /// Discretisation: "mpm" (default; grid reset each step) or "fem" (points fixed at the Gauss points of
     /// the grid cells, bilinear elements, no grid reset; requires `kind = "linear"`).
     #[serde(default)]
@@ -137,6 +142,7 @@ pub struct ShapeSection {
 serde_defaults! {
     default_kind: ShapeKind = ShapeKind::Cpdi1;
     default_ppc: usize = 2;
+    default_corner_hold: f64 = crate::shape::DEFAULT_CORNER_HOLD;
 }
 
 impl Default for ShapeSection {
@@ -144,6 +150,7 @@ impl Default for ShapeSection {
         Self {
             kind: default_kind(),
             points_per_cell: default_ppc(),
+            corner_hold: default_corner_hold(),
             method: Method::default(),
         }
     }
@@ -276,6 +283,12 @@ impl ShapeSection {
             "shape.points_per_cell",
             ppc.to_string(),
             "1 to 8 points per direction",
+        )?;
+        c.ensure(
+            (0.0..=0.25).contains(&self.corner_hold),
+            "shape.corner_hold",
+            shown(self.corner_hold),
+            "0 (plain CPDI) to 0.25 cell widths",
         )?;
         if self.method == Method::Fem {
             c.ensure(

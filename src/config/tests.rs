@@ -208,6 +208,14 @@ fn overrides_and_fem_mode_are_validated() {
     assert!(e.contains("--set") && e.contains("method"), "{e}");
     let e = set(&["grid.cell_size"]).unwrap_err().to_string();
     assert!(e.contains("key=value"), "{e}");
+    // The CPDI corner hold: plain CPDI by default, at most a quarter cell.
+    assert_eq!(set(&[]).unwrap().shape.corner_hold, 0.0);
+    assert_eq!(
+        set(&["shape.corner_hold=0.1"]).unwrap().shape.corner_hold,
+        0.1
+    );
+    let e = set(&["shape.corner_hold=0.5"]).unwrap_err().to_string();
+    assert!(e.contains("shape.corner_hold") && e.contains("0.25"), "{e}");
     std::fs::remove_file(&path).ok();
 }
 

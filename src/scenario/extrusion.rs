@@ -125,6 +125,7 @@ impl Setup<2> {
             materials: plane.materials,
             fields: plane.fields,
             shape: plane.shape,
+            corner_hold: plane.corner_hold,
             time: plane.time,
             body_force: SVector::from([plane.body_force.x, plane.body_force.y, 0.0]),
             body_force_ramp: plane.body_force_ramp,

@@ -36,18 +36,39 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::{At, Interpolator, ShapeError, Weight, add_merged, outside};
-use crate::grid::{Grid, Locus, MAX_CELL_NODES, axis, cell_node_offset};
+use crate::grid::{Grid, Locus, MAX_CELL_NODES, axis};
 use crate::particles::{corner_signs, domain_corner};
 use crate::space::{cofactor, det};
 
-/// CPDI1 interpolator (parallelogram or parallelepiped domain from `x_p` and `r_p`).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Cpdi1;
+/// The default corner hold of the CPDI interpolators, in cell widths ([`axis_weights`], `[shape]
+/// corner_hold`): none, plain CPDI. A hold keeps the support of a domain that crossed a line by a sliver
+/// compact at the price of `O(eps)` in the nodal forces at the bodies' edges (docs/shape-functions.md),
+/// so it is a run's choice.
+pub const DEFAULT_CORNER_HOLD: f64 = 0.0;
+
+/// CPDI1 interpolator (parallelogram or parallelepiped domain from `x_p` and `r_p`) with the corner hold
+/// `hold` (cell widths; 0: the corners always take the hats of their cell).
+#[derive(Debug, Clone, Copy)]
+pub struct Cpdi1 {
+    /// Corner hold, cell widths ([`axis_weights`]).
+    pub hold: f64,
+}
+
+impl Default for Cpdi1 {
+    fn default() -> Self {
+        Self {
+            hold: DEFAULT_CORNER_HOLD,
+        }
+    }
+}
 
 /// CPDI2 interpolator (quadrilateral or hexahedral domain from the tracked corners), with the corner
-/// functions `M_c` and their gradients at the `2^D` Gauss points tabulated once.
+/// functions `M_c` and their gradients at the `2^D` Gauss points tabulated once, and the corner hold
+/// `hold` (cell widths, as [`Cpdi1`]'s).
 #[derive(Debug, Clone, Copy)]
 pub struct Cpdi2<const D: usize> {
+    /// Corner hold, cell widths ([`axis_weights`]).
+    pub hold: f64,
     /// `M_c(xi_q)`, `[q][c]`.
     m: [[f64; MAX_CELL_NODES]; MAX_CELL_NODES],
     /// `grad_xi M_c(xi_q)`, `[q][c]`.
@@ -73,76 +94,158 @@ impl<const D: usize> Default for Cpdi2<D> {
                 });
             }
         }
-        Self { m, dm }
+        Self {
+            hold: DEFAULT_CORNER_HOLD,
+            m,
+            dm,
+        }
+    }
+}
+
+/// A corner's weight along an axis below which it is dropped in the blend of [`axis_weights`].
+const TINY: f64 = 1e-12;
+
+/// The weights of a corner along one axis: nodes `first`, `first + 1` and `first + 2` of the axis.
+#[derive(Clone, Copy)]
+struct AxisWeights {
+    first: usize,
+    w: [f64; 3],
+}
+
+impl AxisWeights {
+    /// The last node of the axis with a nonzero weight.
+    fn last(&self) -> usize {
+        self.first + self.w.iter().rposition(|&w| w != 0.0).unwrap_or(0)
+    }
+}
+
+/// The weights along one axis at the corner coordinate `s` (cell widths from the grid origin, within
+/// `[0, n]` for an axis of `n` cells) of a domain centred at `centre` (same units), with the corner hold
+/// `hold` (cell widths, [`DEFAULT_CORNER_HOLD`]).
+///
+/// A corner that has crossed an interior grid line `k` by `eps` away from its domain's centre is held to
+/// the cell on the centre's side: it takes that cell's linear functions extended across the line
+/// (`1 + eps` at node `k`, `-eps` at the node beyond) rather than the hats of the cell it entered (`1 - eps`
+/// at `k`, `eps` at the node across). Up to `eps = a`, `a = min(hold, |centre - s| / 2)`, the corner is held;
+/// from `a` to `2a` the two blend linearly; beyond `2a` the corner takes the hats of its cell, as plain
+/// CPDI. The weights sum to one and reproduce `s` at every `eps`, and they are continuous in the corner's
+/// position: the interpolation keeps CPDI's partition of unity, linear reproduction and continuity, and
+/// a domain that crosses a line by a sliver adds no node to the support. What it gives up: domains that
+/// share a corner no longer evaluate it alike (the rule depends on each domain's centre). Inside a body
+/// the held corners of the lines around a node cancel and a homogeneous deformation still balances; at
+/// the body's edges the nodal forces move by `O(eps)` (a held edge corner weighs the node inside by
+/// `-eps` where plain CPDI weighs the node outside by `eps`).
+fn axis_weights(s: f64, centre: f64, n: usize, hold: f64) -> AxisWeights {
+    let k = s.round();
+    let eps = (s - k).abs();
+    let away = (s < k && centre > k) || (s > k && centre < k);
+    let reach = hold.min(0.5 * (centre - s).abs());
+    if away && k > 0.0 && k < n as f64 && eps < 2.0 * reach {
+        let mut lambda = ((eps - reach) / reach).clamp(0.0, 1.0);
+        // A weight below 1e-12 is rounding, not support: a corner on the verge of either end of the
+        // blend takes that end (the two differ by less than 1e-12).
+        if lambda * eps < TINY {
+            lambda = 0.0;
+        }
+        if (1.0 - lambda) * eps >= TINY {
+            let near = lambda * (1.0 - eps) + (1.0 - lambda) * (1.0 + eps);
+            let (across, beyond) = (lambda * eps, -(1.0 - lambda) * eps);
+            let first = k as usize - 1;
+            return match s < k {
+                true => AxisWeights {
+                    first,
+                    w: [across, near, beyond],
+                },
+                false => AxisWeights {
+                    first,
+                    w: [beyond, near, across],
+                },
+            };
+        }
+    }
+    // As `Grid::locate`: a point on an interior line belongs to the cell above it.
+    let i = (s as usize).min(n - 1);
+    let f = s - i as f64;
+    AxisWeights {
+        first: i,
+        w: [1.0 - f, f, 0.0],
     }
 }
 
 /// Merges `sum_c wf_c N_I(x_c)` and `sum_c wg_c N_I(x_c)` over the corners into `out`, one entry per node with
-/// `N_I(x_c) != 0` for some corner.
+/// `N_I(x_c) != 0` for some corner; `N_I(x_c)` are the tensor products of [`axis_weights`] (the hats of the
+/// corner's cell, or of the cell it is held to), `centre` the domain's centre.
 ///
-/// Fast path: when the corners' cells span at most `3^D` cells, the sums are accumulated in a dense `4^D`
-/// node window and emitted in ascending node order; larger domains fall back to a linear-search merge.
+/// Fast path: when the corners' nodes span at most 4 nodes per axis, the sums are accumulated in a dense
+/// `4^D` node window and emitted in ascending node order; larger domains fall back to a linear-search merge.
 fn corner_weights<const D: usize>(
-    grid: &Grid<D>,
-    p: usize,
+    (grid, hold): (&Grid<D>, f64),
+    (p, centre): (usize, SVector<f64, D>),
     corners: &[SVector<f64, D>],
-    wf: &[f64],
-    wg: &[SVector<f64, D>],
+    (wf, wg): (&[f64], &[SVector<f64, D>]),
     out: &mut [Weight<D>],
 ) -> Result<usize, ShapeError> {
-    let nc = Grid::<D>::CELL_NODES;
-    let mut cells = [[0; D]; MAX_CELL_NODES];
-    let mut hats = [[0.0; MAX_CELL_NODES]; MAX_CELL_NODES];
+    let n = grid.cells();
+    let c0 = (centre - grid.origin()) / grid.cell_size();
+    let mut axes = [[AxisWeights {
+        first: 0,
+        w: [0.0; 3],
+    }; D]; MAX_CELL_NODES];
     for (c, &xc) in corners.iter().enumerate() {
-        let (cell, f) = grid
-            .locate(xc)
-            .ok_or_else(|| outside(p, Locus::Corner(c as u8), xc))?;
-        cells[c] = cell;
-        hats[c] = Grid::<D>::cell_values(&f);
-    }
-    let cells = &cells[..nc];
-    let low: [usize; D] =
-        std::array::from_fn(|d| cells.iter().map(|cell| cell[d]).min().unwrap_or(0));
-    if cells
-        .iter()
-        .any(|cell| (0..D).any(|d| cell[d] - low[d] > 2))
-    {
-        let mut count = 0;
-        for (c, cell) in cells.iter().enumerate() {
-            let nodes = grid.cell_nodes(*cell);
-            for (&node, &n) in nodes[..nc].iter().zip(&hats[c][..nc]) {
-                if n != 0.0 {
-                    add_merged(out, &mut count, node, wf[c] * n, wg[c] * n);
-                }
+        let s = (xc - grid.origin()) / grid.cell_size();
+        for d in 0..D {
+            // `!(s >= 0)` also rejects NaN.
+            if !(s[d] >= 0.0 && s[d] <= n[d] as f64) {
+                return Err(outside(p, Locus::Corner(c as u8), xc));
             }
+            axes[c][d] = axis_weights(s[d], c0[d], n[d], hold);
         }
-        return Ok(count);
     }
+    let axes = &axes[..corners.len()];
+    let low: [usize; D] =
+        std::array::from_fn(|d| axes.iter().map(|a| a[d].first).min().unwrap_or(0));
+    let wide = axes
+        .iter()
+        .any(|a| (0..D).any(|d| a[d].last() - low[d] > 3));
     // Window slot `sum_k a_(axis k) 4^k` is node `low + a` (axes in the grid's numbering order, so that
     // ascending slots are ascending nodes); `out` (4^D entries) is the window, written on first touch (no
     // clearing), then compacted in ascending slot order (a slot is never below its new place).
     let mut used = 0_u64;
-    for (c, cell) in cells.iter().enumerate() {
-        for (k, &n) in hats[c][..nc].iter().enumerate() {
-            if n != 0.0 {
-                let off = cell_node_offset::<D>(k);
-                let slot = (0..D).rev().fold(0, |acc, k| {
-                    let d = axis::<D>(k);
-                    4 * acc + cell[d] - low[d] + off[d]
-                });
-                let (value, grad) = (wf[c] * n, wg[c] * n);
-                if used & (1 << slot) == 0 {
-                    out[slot].value = value;
-                    out[slot].grad = grad;
-                    used |= 1 << slot;
-                } else {
-                    out[slot].value += value;
-                    out[slot].grad += grad;
-                }
+    let mut count = 0;
+    for (c, a) in axes.iter().enumerate() {
+        for m in 0..3_usize.pow(D as u32) {
+            let mut ijk = [0; D];
+            let mut n_c = 1.0;
+            for d in 0..D {
+                let j = (m / 3_usize.pow(d as u32)) % 3;
+                ijk[d] = a[d].first + j;
+                n_c *= a[d].w[j];
+            }
+            if n_c == 0.0 {
+                continue;
+            }
+            let (value, grad) = (wf[c] * n_c, wg[c] * n_c);
+            if wide {
+                add_merged(out, &mut count, grid.node_at(ijk) as u32, value, grad);
+                continue;
+            }
+            let slot = (0..D).rev().fold(0, |acc, k| {
+                let d = axis::<D>(k);
+                4 * acc + ijk[d] - low[d]
+            });
+            if used & (1 << slot) == 0 {
+                out[slot].value = value;
+                out[slot].grad = grad;
+                used |= 1 << slot;
+            } else {
+                out[slot].value += value;
+                out[slot].grad += grad;
             }
         }
     }
-    let mut count = 0;
+    if wide {
+        return Ok(count);
+    }
     while used != 0 {
         let slot = used.trailing_zeros() as usize;
         used &= used - 1;
@@ -187,7 +290,13 @@ impl<const D: usize> Interpolator<D> for Cpdi1 {
             wg[c] = r_inv_t * corner_signs::<D>(c);
         }
         let wf = [1.0 / nc as f64; MAX_CELL_NODES];
-        corner_weights(grid, p, &corners[..nc], &wf[..nc], &wg[..nc], out)
+        corner_weights(
+            (grid, self.hold),
+            (p, particles.x[p]),
+            &corners[..nc],
+            (&wf[..nc], &wg[..nc]),
+            out,
+        )
     }
 }
 
@@ -219,6 +328,13 @@ impl<const D: usize> Interpolator<D> for Cpdi2<D> {
             wf[c] /= vol;
             wg[c] /= vol;
         }
-        corner_weights(grid, p, corners, &wf[..nc], &wg[..nc], out)
+        let centre = corners.iter().sum::<SVector<f64, D>>() / nc as f64;
+        corner_weights(
+            (grid, self.hold),
+            (p, centre),
+            corners,
+            (&wf[..nc], &wg[..nc]),
+            out,
+        )
     }
 }

@@ -40,7 +40,7 @@ use crate::particles::Particles;
 use crate::space::{cofactor, det};
 
 pub use bspline::Bspline2;
-pub use cpdi::{Cpdi1, Cpdi2};
+pub use cpdi::{Cpdi1, Cpdi2, DEFAULT_CORNER_HOLD};
 pub use gimp::Gimp;
 pub use linear::Linear;
 
@@ -300,6 +300,8 @@ pub struct ShapeTable<const D: usize = 2> {
     counts: Vec<u8>,
     /// Velocity fields the node ids run over (set by `offset_fields`; 0, before any table, counts as 1).
     fields: usize,
+    /// The CPDI interpolators' corner hold, in cell widths ([`DEFAULT_CORNER_HOLD`]).
+    corner_hold: f64,
 }
 
 impl<const D: usize> Default for ShapeTable<D> {
@@ -310,6 +312,7 @@ impl<const D: usize> Default for ShapeTable<D> {
             weights: Vec::new(),
             counts: Vec::new(),
             fields: 0,
+            corner_hold: DEFAULT_CORNER_HOLD,
         }
     }
 }
@@ -318,6 +321,17 @@ impl<const D: usize> ShapeTable<D> {
     /// An empty table.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The corner hold of the CPDI interpolators (cell widths).
+    pub fn corner_hold(&self) -> f64 {
+        self.corner_hold
+    }
+
+    /// Sets the corner hold of the CPDI interpolators (cell widths; 0: plain CPDI, every corner on the hats
+    /// of its cell), used from the next [`ShapeTable::compute`] on.
+    pub fn set_corner_hold(&mut self, hold: f64) {
+        self.corner_hold = hold;
     }
 
     /// Number of material points in the table (0 after a failed [`ShapeTable::compute`]).
@@ -370,8 +384,15 @@ impl<const D: usize> ShapeTable<D> {
         let result = match kind {
             ShapeKind::Linear => self.fill(&Linear, grid, particles),
             ShapeKind::Gimp => self.fill(&Gimp, grid, particles),
-            ShapeKind::Cpdi1 => self.fill(&Cpdi1, grid, particles),
-            ShapeKind::Cpdi2 => self.fill(&Cpdi2::<D>::default(), grid, particles),
+            ShapeKind::Cpdi1 => {
+                let hold = self.corner_hold;
+                self.fill(&Cpdi1 { hold }, grid, particles)
+            }
+            ShapeKind::Cpdi2 => {
+                let mut cpdi2 = Cpdi2::<D>::default();
+                cpdi2.hold = self.corner_hold;
+                self.fill(&cpdi2, grid, particles)
+            }
             ShapeKind::Bspline2 => self.fill(&Bspline2, grid, particles),
         };
         self.fields = 1;

@@ -11,6 +11,8 @@ use crate::particles::tests::rect_geometry;
 
 const H: f64 = 0.5;
 const N: usize = 2;
+/// The corner hold (cell widths) the CPDI tests set besides plain CPDI.
+const HOLD: f64 = 0.1;
 
 /// 24 x 20 cells of h = 0.5 mm with the origin off zero.
 fn grid() -> Grid {
@@ -75,14 +77,29 @@ fn deformations() -> [Matrix2<f64>; 5] {
     ]
 }
 
-/// Checks the invariants at every point; `centre[p]` is the point the linear field must reproduce.
+/// Checks the invariants at every point, for CPDI both plain and with the corner hold [`HOLD`];
+/// `centre[p]` is the point the linear field must reproduce.
 fn check_invariants<const D: usize>(
     kind: ShapeKind,
     g: &Grid<D>,
     ps: &Particles<D>,
     centre: &[SVector<f64, D>],
 ) {
-    let mut table = ShapeTable::new();
+    for hold in [0.0, HOLD] {
+        let mut table = ShapeTable::new();
+        table.set_corner_hold(hold);
+        check_table_invariants(kind, g, ps, centre, &mut table);
+    }
+}
+
+fn check_table_invariants<const D: usize>(
+    kind: ShapeKind,
+    g: &Grid<D>,
+    ps: &Particles<D>,
+    centre: &[SVector<f64, D>],
+    table: &mut ShapeTable<D>,
+) {
+    let hold = table.corner_hold();
     table
         .compute(kind, g, ps)
         .unwrap_or_else(|e| panic!("{kind:?}: {e}"));
@@ -121,7 +138,18 @@ fn check_invariants<const D: usize>(
             (grad_x - SMatrix::<f64, D, D>::identity()).norm() < 1e-12,
             "{kind:?} point {p}: grad x = {grad_x}"
         );
-        assert!(ws.iter().all(|w| w.value >= -1e-15));
+        // CPDI's held corners take a cell's functions extended past its face by at most twice the hold:
+        // down to -2 hold (1 + 2 hold)^(D - 1) at a corner, never below it for the point.
+        let floor = match kind {
+            ShapeKind::Cpdi1 | ShapeKind::Cpdi2 => {
+                -2.0 * hold * (1.0 + 2.0 * hold).powi(D as i32 - 1)
+            }
+            _ => 0.0,
+        };
+        assert!(
+            ws.iter().all(|w| w.value >= floor - 1e-15),
+            "{kind:?} point {p}: a weight below {floor}"
+        );
     }
 }
 
@@ -518,4 +546,160 @@ fn shape_3d_seeded_supports_and_out_of_grid_errors() {
             "{kind:?}: {err}"
         );
     }
+}
+
+/// The CPDI1 table of `ps` on `grid()` with the corner hold `hold`.
+fn cpdi1_table(ps: &Particles<2>, hold: f64) -> ShapeTable<2> {
+    let mut table = ShapeTable::new();
+    table.set_corner_hold(hold);
+    table.compute(ShapeKind::Cpdi1, &grid(), ps).unwrap();
+    table
+}
+
+#[test]
+fn shape_cpdi_corners_that_cross_a_line_by_a_sliver_add_no_node() {
+    // Seeded points (domains on grid lines) moved by 0.03 cell: with the hold every point keeps the 4 nodes
+    // of its cell; without it the corners that crossed a line reach the next cells' nodes (9 nodes).
+    let g = grid();
+    let corner = g.node_position(g.node_index(6, 6));
+    let xs: Vec<Vector2<f64>> = (0..4)
+        .flat_map(|i| (0..4).map(move |j| Vector2::new(i as f64 + 0.5, j as f64 + 0.5)))
+        .map(|ij| corner + ij * (H / 2.0) + Vector2::new(-0.03, -0.02) * H)
+        .collect();
+    let ps = points(&xs, Matrix2::identity());
+    let held = cpdi1_table(&ps, HOLD);
+    let plain = cpdi1_table(&ps, 0.0);
+    assert!(held.iter().all(|(_, ws)| ws.len() == 4));
+    assert_eq!(plain.iter().filter(|(_, ws)| ws.len() == 9).count(), 4);
+    check_invariants(ShapeKind::Cpdi1, &g, &ps, &xs);
+}
+
+#[test]
+fn shape_cpdi_held_corners_values_are_closer_to_the_domain_integral() {
+    // An axis-aligned quarter-cell domain whose left edge crossed a vertical line by eps: the exact
+    // `S_Ip = (1/V) int N_I` is `eps^2`-close to the held corners' values and `eps`-close to plain CPDI's
+    // (the gradients go the other way: `shape_cpdi_hold_costs_the_patch_test_to_the_order_of_the_sliver`).
+    let g = grid();
+    let line = g.node_position(g.node_index(8, 5));
+    // int_{-inf}^{t} of the 1D hat centred at 0.
+    let hat_integral = |t: f64| match t {
+        t if t <= -1.0 => 0.0,
+        t if t <= 0.0 => 0.5 * (t + 1.0).powi(2),
+        t if t <= 1.0 => 1.0 - 0.5 * (1.0 - t).powi(2),
+        _ => 1.0,
+    };
+    for eps in [0.01, 0.05, 0.1, 0.15] {
+        let x = line + Vector2::new(0.25 - eps, 0.25) * H;
+        let ps = points(&[x], Matrix2::identity());
+        let error = |hold: f64| {
+            let table = cpdi1_table(&ps, hold);
+            let mut worst: f64 = 0.0;
+            for i in 6..11 {
+                for j in 4..8 {
+                    let node = g.node_index(i, j);
+                    let s = (g.node_position(node) - x) / H;
+                    // The domain is [-1/4, 1/4]^2 cells around x; the hat is a product of 1D hats.
+                    let exact: f64 = (0..2)
+                        .map(|d| (hat_integral(0.25 - s[d]) - hat_integral(-0.25 - s[d])) / 0.5)
+                        .product();
+                    let value = table
+                        .weights(0)
+                        .iter()
+                        .find(|w| w.node as usize == node)
+                        .map_or(0.0, |w| w.value);
+                    worst = worst.max((value - exact).abs());
+                }
+            }
+            worst
+        };
+        let (held, plain) = (error(HOLD), error(0.0));
+        assert!(held < 0.5 * plain, "eps {eps}: held {held}, plain {plain}");
+        assert!(held <= 2.0 * eps * eps, "eps {eps}: held {held}");
+    }
+}
+
+#[test]
+fn shape_cpdi_weights_are_continuous_as_a_point_crosses_a_line() {
+    // A sheared domain moved across a vertical line in steps of 1e-4 cell: the hold, its blend and the plain
+    // hats beyond it join without a jump in any value or gradient.
+    let g = grid();
+    let start = g.node_position(g.node_index(8, 5)) + Vector2::new(0.3, 0.4) * H;
+    let f = Matrix2::new(1.1, 0.3, -0.1, 0.9);
+    let step = 1e-4;
+    let mut last: Option<Vec<Weight<2>>> = None;
+    for k in 0..=6000 {
+        let x = start - Vector2::new(k as f64 * step * H, 0.0);
+        let ps = points(&[x], f);
+        let now = cpdi1_table(&ps, HOLD).weights(0).to_vec();
+        if let Some(before) = &last {
+            let at = |ws: &[Weight<2>], node: u32| {
+                ws.iter()
+                    .find(|w| w.node == node)
+                    .map_or((0.0, Vector2::zeros()), |w| (w.value, w.grad))
+            };
+            for node in before.iter().chain(&now).map(|w| w.node) {
+                let ((v0, g0), (v1, g1)) = (at(before, node), at(&now, node));
+                // Smooth changes are O(step) (values) and O(step / h) (gradients): 20x that is a jump.
+                assert!(
+                    (v1 - v0).abs() < 20.0 * step,
+                    "k {k}, node {node}: {v0} -> {v1}"
+                );
+                assert!(
+                    (g1 - g0).norm() < 20.0 * step / H * 10.0,
+                    "k {k}, node {node}: {g0} -> {g1}"
+                );
+            }
+        }
+        last = Some(now);
+    }
+}
+
+#[test]
+fn shape_cpdi_hold_keeps_the_patch_test_inside_and_moves_the_edge_forces_by_the_sliver() {
+    // Seeded points translated by eps: a uniform stress gives node I the force
+    // `sigma . sum_p V_p grad S_Ip`. Inside the body it vanishes, plain or held (the held corners of the
+    // lines around a node cancel); at the body's edges the hold moves it by the order of eps h (a held
+    // edge corner puts `-eps` on the node inside instead of `eps` on the node outside).
+    let geometry = rect_geometry([-1.0, 3.0], [4.0, 8.0]);
+    let seeded = Particles::seed(
+        &geometry,
+        &Seeding {
+            h: H,
+            points_per_cell: N,
+            density: 1.0,
+            body: 0,
+        },
+    )
+    .unwrap();
+    let g = grid();
+    let eps = 0.05;
+    let shift = Vector2::new(eps, 0.5 * eps) * H;
+    let xs: Vec<Vector2<f64>> = seeded.x.iter().map(|x| x + shift).collect();
+    let ps = points(&xs, Matrix2::identity());
+    let sums = |hold: f64| {
+        let table = cpdi1_table(&ps, hold);
+        let mut sum = vec![Vector2::zeros(); g.num_nodes()];
+        for (p, ws) in table.iter() {
+            for w in ws {
+                sum[w.node as usize] += ps.vol[p] * w.grad;
+            }
+        }
+        sum
+    };
+    let (plain, held) = (sums(0.0), sums(HOLD));
+    // Nodes at least two cells inside the body.
+    let inside = |i: usize| {
+        let x = g.node_position(i);
+        x.x >= 0.0 && x.x <= 3.0 && x.y >= 4.0 && x.y <= 7.0
+    };
+    let nodes = 0..g.num_nodes();
+    let worst = |f: &dyn Fn(usize) -> f64| nodes.clone().map(f).fold(0.0, f64::max);
+    assert!(worst(&|i| if inside(i) { plain[i].norm() } else { 0.0 }) < 1e-12);
+    assert!(worst(&|i| if inside(i) { held[i].norm() } else { 0.0 }) < 1e-12);
+    let edge = worst(&|i| (held[i] - plain[i]).norm());
+    assert!(
+        edge > 0.1 * eps * H && edge < 4.0 * eps * H,
+        "edge {edge} against eps h = {}",
+        eps * H
+    );
 }

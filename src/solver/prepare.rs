@@ -237,10 +237,11 @@ impl<const D: usize> Step<'_, D> {
         let ps = &self.state.particles;
         let counted = self.own_point_count();
         let local = match &model.fem {
-            None => self
-                .work
-                .table
-                .compute(model.params.shape, &model.params.grid, ps),
+            None => {
+                let table = &mut self.work.table;
+                table.set_corner_hold(model.params.corner_hold);
+                table.compute(model.params.shape, &model.params.grid, ps)
+            }
             Some(fem) => self.work.table.push_forward(&fem.points, &ps.f),
         }
         .map_err(|e| StepError::from(e.renumbered(&ps.id)))
@@ -356,7 +357,9 @@ impl<const D: usize> Step<'_, D> {
             let rt = match &model.fem {
                 Some(fem) => &fem.rigid[k],
                 None => {
-                    self.work.rigid_tables[k].compute(model.params.shape, grid, points)?;
+                    let table = &mut self.work.rigid_tables[k];
+                    table.set_corner_hold(model.params.corner_hold);
+                    table.compute(model.params.shape, grid, points)?;
                     &self.work.rigid_tables[k]
                 }
             };
