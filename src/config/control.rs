@@ -290,6 +290,12 @@ impl ShapeSection {
             shown(self.corner_hold),
             "0 (plain CPDI) to 0.25 cell widths",
         )?;
+        c.ensure(
+            self.corner_hold == 0.0 || matches!(self.kind, ShapeKind::Cpdi1 | ShapeKind::Cpdi2),
+            "shape.corner_hold",
+            shown(self.corner_hold),
+            "0 unless kind is \"cpdi1\" or \"cpdi2\" (the hold is a CPDI corner's)",
+        )?;
         if self.method == Method::Fem {
             c.ensure(
                 self.kind == ShapeKind::Linear,

@@ -216,6 +216,13 @@ fn overrides_and_fem_mode_are_validated() {
     );
     let e = set(&["shape.corner_hold=0.5"]).unwrap_err().to_string();
     assert!(e.contains("shape.corner_hold") && e.contains("0.25"), "{e}");
+    let e = set(&["shape.corner_hold=0.1", "shape.kind=\"gimp\""])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("shape.corner_hold") && e.contains("cpdi1"),
+        "{e}"
+    );
     std::fs::remove_file(&path).ok();
 }
 

@@ -30,8 +30,9 @@
 //! evaluated exactly by the `2^D`-point Gauss rule (the integrands are at most cubic per direction). In 2D
 //! this is the closed form of the paper, e.g. `wg_1 = (y2 - y4, x4 - x2) / (2 V_p)`. On a parallelogram
 //! `wf_c = 1/4` and CPDI2 equals CPDI1. `sum_I S_Ip x_I = sum_c wf_c x_c` is the centroid of the domain.
-//! Support: the union of the cells owning the corners, each node once (at most `4^D` nodes), in ascending
-//! node order when the corners lie within `3^D` cells.
+//! Support: the union of the cells owning the corners (with a corner hold, [`axis_weights`], the cells the
+//! corners are held to), each node once (at most `4^D` nodes), in ascending node order when the corners lie
+//! within `3^D` cells; a domain whose corners span more than that takes plain CPDI.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -102,6 +103,16 @@ impl<const D: usize> Default for Cpdi2<D> {
     }
 }
 
+impl<const D: usize> Cpdi2<D> {
+    /// The CPDI2 interpolator with the corner hold `hold` (cell widths).
+    pub fn held(hold: f64) -> Self {
+        Self {
+            hold,
+            ..Self::default()
+        }
+    }
+}
+
 /// A corner's weight along an axis below which it is dropped in the blend of [`axis_weights`].
 const TINY: f64 = 1e-12;
 
@@ -141,25 +152,41 @@ fn axis_weights(s: f64, centre: f64, n: usize, hold: f64) -> AxisWeights {
     let away = (s < k && centre > k) || (s > k && centre < k);
     let reach = hold.min(0.5 * (centre - s).abs());
     if away && k > 0.0 && k < n as f64 && eps < 2.0 * reach {
-        let mut lambda = ((eps - reach) / reach).clamp(0.0, 1.0);
-        // A weight below 1e-12 is rounding, not support: a corner on the verge of either end of the
+        let k = k as usize;
+        // A weight below 1e-12 is rounding, not support: a corner within it of the line is on the line
+        // (node `k` alone: `s` reproduced to 1e-12 cell), and a corner on the verge of either end of the
         // blend takes that end (the two differ by less than 1e-12).
+        if eps < TINY {
+            return AxisWeights {
+                first: k,
+                w: [1.0, 0.0, 0.0],
+            };
+        }
+        let mut lambda = ((eps - reach) / reach).clamp(0.0, 1.0);
         if lambda * eps < TINY {
             lambda = 0.0;
         }
         if (1.0 - lambda) * eps >= TINY {
             let near = lambda * (1.0 - eps) + (1.0 - lambda) * (1.0 + eps);
             let (across, beyond) = (lambda * eps, -(1.0 - lambda) * eps);
-            let first = k as usize - 1;
-            return match s < k {
-                true => AxisWeights {
-                    first,
-                    w: [across, near, beyond],
-                },
-                false => AxisWeights {
-                    first,
+            // The first node with a weight: `k - 1` unless the corner is held outright and node `k - 1`
+            // is the one across (weight 0).
+            return if s < k as f64 {
+                match lambda > 0.0 {
+                    true => AxisWeights {
+                        first: k - 1,
+                        w: [across, near, beyond],
+                    },
+                    false => AxisWeights {
+                        first: k,
+                        w: [near, beyond, 0.0],
+                    },
+                }
+            } else {
+                AxisWeights {
+                    first: k - 1,
                     w: [beyond, near, across],
-                },
+                }
             };
         }
     }
@@ -176,8 +203,9 @@ fn axis_weights(s: f64, centre: f64, n: usize, hold: f64) -> AxisWeights {
 /// `N_I(x_c) != 0` for some corner; `N_I(x_c)` are the tensor products of [`axis_weights`] (the hats of the
 /// corner's cell, or of the cell it is held to), `centre` the domain's centre.
 ///
-/// Fast path: when the corners' nodes span at most 4 nodes per axis, the sums are accumulated in a dense
-/// `4^D` node window and emitted in ascending node order; larger domains fall back to a linear-search merge.
+/// Fast path: when the corners' cells span at most 3 cells per axis, the sums are accumulated in a dense
+/// `4^D` node window and emitted in ascending node order; larger domains fall back to plain CPDI merged by
+/// linear search ([`plain_merge`]).
 fn corner_weights<const D: usize>(
     (grid, hold): (&Grid<D>, f64),
     (p, centre): (usize, SVector<f64, D>),
@@ -204,14 +232,18 @@ fn corner_weights<const D: usize>(
     let axes = &axes[..corners.len()];
     let low: [usize; D] =
         std::array::from_fn(|d| axes.iter().map(|a| a[d].first).min().unwrap_or(0));
-    let wide = axes
+    // Plain CPDI's corners each reach 2 nodes per axis from their cell `first`: a span of more than 3
+    // cells is plain CPDI's fallback; a held corner reaches 3 nodes, which must fit the window too.
+    if axes
         .iter()
-        .any(|a| (0..D).any(|d| a[d].last() - low[d] > 3));
+        .any(|a| (0..D).any(|d| a[d].first - low[d] > 2 || a[d].last() - low[d] > 3))
+    {
+        return plain_merge(grid, corners, (wf, wg), out);
+    }
     // Window slot `sum_k a_(axis k) 4^k` is node `low + a` (axes in the grid's numbering order, so that
     // ascending slots are ascending nodes); `out` (4^D entries) is the window, written on first touch (no
     // clearing), then compacted in ascending slot order (a slot is never below its new place).
     let mut used = 0_u64;
-    let mut count = 0;
     for (c, a) in axes.iter().enumerate() {
         for m in 0..3_usize.pow(D as u32) {
             let mut ijk = [0; D];
@@ -225,10 +257,6 @@ fn corner_weights<const D: usize>(
                 continue;
             }
             let (value, grad) = (wf[c] * n_c, wg[c] * n_c);
-            if wide {
-                add_merged(out, &mut count, grid.node_at(ijk) as u32, value, grad);
-                continue;
-            }
             let slot = (0..D).rev().fold(0, |acc, k| {
                 let d = axis::<D>(k);
                 4 * acc + ijk[d] - low[d]
@@ -243,9 +271,7 @@ fn corner_weights<const D: usize>(
             }
         }
     }
-    if wide {
-        return Ok(count);
-    }
+    let mut count = 0;
     while used != 0 {
         let slot = used.trailing_zeros() as usize;
         used &= used - 1;
@@ -260,6 +286,29 @@ fn corner_weights<const D: usize>(
             grad: out[slot].grad,
         };
         count += 1;
+    }
+    Ok(count)
+}
+
+/// The fallback of [`corner_weights`] for a domain whose corners span more than `3^D` cells (stretched
+/// far beyond a sliver crossing): plain CPDI, each corner on the `2^D` hats of its cell (at most `4^D`
+/// nodes in all), merged by linear search. The corners are known to lie in the grid.
+fn plain_merge<const D: usize>(
+    grid: &Grid<D>,
+    corners: &[SVector<f64, D>],
+    (wf, wg): (&[f64], &[SVector<f64, D>]),
+    out: &mut [Weight<D>],
+) -> Result<usize, ShapeError> {
+    let nc = Grid::<D>::CELL_NODES;
+    let mut count = 0;
+    for (c, &xc) in corners.iter().enumerate() {
+        let (cell, f) = grid.locate(xc).expect("corner checked to lie in the grid");
+        let nodes = grid.cell_nodes(cell);
+        for (&node, &n) in nodes[..nc].iter().zip(&Grid::<D>::cell_values(&f)[..nc]) {
+            if n != 0.0 {
+                add_merged(out, &mut count, node, wf[c] * n, wg[c] * n);
+            }
+        }
     }
     Ok(count)
 }

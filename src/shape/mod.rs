@@ -331,6 +331,7 @@ impl<const D: usize> ShapeTable<D> {
     /// Sets the corner hold of the CPDI interpolators (cell widths; 0: plain CPDI, every corner on the hats
     /// of its cell), used from the next [`ShapeTable::compute`] on.
     pub fn set_corner_hold(&mut self, hold: f64) {
+        debug_assert!((0.0..=0.25).contains(&hold), "corner hold {hold}");
         self.corner_hold = hold;
     }
 
@@ -389,9 +390,8 @@ impl<const D: usize> ShapeTable<D> {
                 self.fill(&Cpdi1 { hold }, grid, particles)
             }
             ShapeKind::Cpdi2 => {
-                let mut cpdi2 = Cpdi2::<D>::default();
-                cpdi2.hold = self.corner_hold;
-                self.fill(&cpdi2, grid, particles)
+                let hold = self.corner_hold;
+                self.fill(&Cpdi2::<D>::held(hold), grid, particles)
             }
             ShapeKind::Bspline2 => self.fill(&Bspline2, grid, particles),
         };

@@ -138,12 +138,10 @@ fn check_table_invariants<const D: usize>(
             (grad_x - SMatrix::<f64, D, D>::identity()).norm() < 1e-12,
             "{kind:?} point {p}: grad x = {grad_x}"
         );
-        // CPDI's held corners take a cell's functions extended past its face by at most twice the hold:
-        // down to -2 hold (1 + 2 hold)^(D - 1) at a corner, never below it for the point.
+        // CPDI's held corners weigh a node along an axis by -hold at least and by 1 + hold at most: down
+        // to -hold (1 + hold)^(D - 1) at a corner, never below it for the point.
         let floor = match kind {
-            ShapeKind::Cpdi1 | ShapeKind::Cpdi2 => {
-                -2.0 * hold * (1.0 + 2.0 * hold).powi(D as i32 - 1)
-            }
+            ShapeKind::Cpdi1 | ShapeKind::Cpdi2 => -hold * (1.0 + hold).powi(D as i32 - 1),
             _ => 0.0,
         };
         assert!(
@@ -570,15 +568,43 @@ fn shape_cpdi_corners_that_cross_a_line_by_a_sliver_add_no_node() {
     let held = cpdi1_table(&ps, HOLD);
     let plain = cpdi1_table(&ps, 0.0);
     assert!(held.iter().all(|(_, ws)| ws.len() == 4));
+    assert!(held.iter().all(|(_, ws)| ws.iter().all(|w| w.value >= 0.0)));
     assert_eq!(plain.iter().filter(|(_, ws)| ws.len() == 9).count(), 4);
     check_invariants(ShapeKind::Cpdi1, &g, &ps, &xs);
+    // Crossed by rounding only: no node across the line either.
+    let xs: Vec<Vector2<f64>> = xs
+        .iter()
+        .map(|x| x - Vector2::new(-0.03, -0.02) * H - Vector2::repeat(1e-15))
+        .collect();
+    let rounded = cpdi1_table(&points(&xs, Matrix2::identity()), HOLD);
+    assert!(rounded.iter().all(|(_, ws)| ws.len() == 4));
+}
+
+#[test]
+fn shape_cpdi_held_corners_of_wide_domains_fit_the_support() {
+    // Domains stretched over 2.3 and 4.8 cells whose corners sit in the blend: the held corners' third
+    // node per axis must not overflow the 4^D support; such domains take plain CPDI's merge.
+    let g = grid();
+    for (half, hold) in [
+        (Vector2::new(1.15, 0.65), HOLD),
+        (Vector2::new(2.4, 0.9), 0.25),
+    ] {
+        let x = g.origin() + Vector2::new(10.0, 10.5) * H;
+        let mut ps = points(&[x], Matrix2::identity());
+        ps.r0[0] = Matrix2::from_diagonal(&(half * H));
+        ps.set_deformation(0, Matrix2::identity());
+        let mut table = ShapeTable::new();
+        table.set_corner_hold(hold);
+        check_table_invariants(ShapeKind::Cpdi1, &g, &ps, &[x], &mut table);
+    }
 }
 
 #[test]
 fn shape_cpdi_held_corners_values_are_closer_to_the_domain_integral() {
     // An axis-aligned quarter-cell domain whose left edge crossed a vertical line by eps: the exact
     // `S_Ip = (1/V) int N_I` is `eps^2`-close to the held corners' values and `eps`-close to plain CPDI's
-    // (the gradients go the other way: `shape_cpdi_hold_costs_the_patch_test_to_the_order_of_the_sliver`).
+    // (at the bodies' edges the forces move by eps:
+    // `shape_cpdi_hold_keeps_the_patch_test_inside_and_moves_the_edge_forces_by_the_sliver`).
     let g = grid();
     let line = g.node_position(g.node_index(8, 5));
     // int_{-inf}^{t} of the 1D hat centred at 0.
