@@ -245,11 +245,13 @@ fn corner_weights<const D: usize>(
     // clearing), then compacted in ascending slot order (a slot is never below its new place).
     let mut used = 0_u64;
     for (c, a) in axes.iter().enumerate() {
-        for m in 0..3_usize.pow(D as u32) {
-            let mut ijk = [0; D];
-            let mut n_c = 1.0;
+        // The nodes a corner weighs per axis: 2 (its cell's), 3 where it is held or blended.
+        let len: [usize; D] = std::array::from_fn(|d| a[d].last() - a[d].first + 1);
+        for m in 0..len.iter().product() {
+            let (mut ijk, mut n_c, mut rest) = ([0; D], 1.0, m);
             for d in 0..D {
-                let j = (m / 3_usize.pow(d as u32)) % 3;
+                let j = rest % len[d];
+                rest /= len[d];
                 ijk[d] = a[d].first + j;
                 n_c *= a[d].w[j];
             }

@@ -335,13 +335,10 @@ fn shape_degenerate_domains_and_gimp_width_are_errors() {
     );
 }
 
-#[test]
-fn shape_undeformed_seeded_points_have_compact_supports() {
-    // 2 x 2 points per cell: CPDI corners and GIMP support edges lie on grid lines, so only the owning cell's
-    // 4 nodes carry weight; linear always lists 4 nodes; the B-spline reaches 3 x 3 nodes.
-    let geometry = rect_geometry([0.0, 3.0], [4.0, 6.0]);
-    let ps = Particles::seed(
-        &geometry,
+/// N x N points per cell seeded in the rectangle from `min` to `max` (mm).
+fn seeded(min: [f64; 2], max: [f64; 2]) -> Particles {
+    Particles::seed(
+        &rect_geometry(min, max),
         &Seeding {
             h: H,
             points_per_cell: N,
@@ -349,7 +346,14 @@ fn shape_undeformed_seeded_points_have_compact_supports() {
             body: 0,
         },
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn shape_undeformed_seeded_points_have_compact_supports() {
+    // 2 x 2 points per cell: CPDI corners and GIMP support edges lie on grid lines, so only the owning cell's
+    // 4 nodes carry weight; linear always lists 4 nodes; the B-spline reaches 3 x 3 nodes.
+    let ps = seeded([0.0, 3.0], [4.0, 6.0]);
     let mut table = ShapeTable::new();
     for kind in ShapeKind::ALL {
         assert_compact_supports(kind, &mut table, &grid(), &ps);
@@ -686,17 +690,7 @@ fn shape_cpdi_hold_keeps_the_patch_test_inside_and_moves_the_edge_forces_by_the_
     // `sigma . sum_p V_p grad S_Ip`. Inside the body it vanishes, plain or held (the held corners of the
     // lines around a node cancel); at the body's edges the hold moves it by the order of eps h (a held
     // edge corner puts `-eps` on the node inside instead of `eps` on the node outside).
-    let geometry = rect_geometry([-1.0, 3.0], [4.0, 8.0]);
-    let seeded = Particles::seed(
-        &geometry,
-        &Seeding {
-            h: H,
-            points_per_cell: N,
-            density: 1.0,
-            body: 0,
-        },
-    )
-    .unwrap();
+    let seeded = seeded([-1.0, 3.0], [4.0, 8.0]);
     let g = grid();
     let eps = 0.05;
     let shift = Vector2::new(eps, 0.5 * eps) * H;
