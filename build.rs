@@ -27,6 +27,9 @@ fn main() {
 
     let petsc = probe("PETSc");
     let mpi = probe("ompi-c");
+    // The shim's shared HDF5 files (MPI-IO): the headers of Debian's parallel HDF5, the library that
+    // hdf5-metno links too.
+    let hdf5 = probe("hdf5-openmpi");
     let includes: Vec<PathBuf> = petsc
         .include_paths
         .iter()
@@ -41,7 +44,7 @@ fn main() {
 
     let mut shim = cc::Build::new();
     shim.file("src/petsc/shim.c").warnings(false);
-    for inc in &includes {
+    for inc in includes.iter().chain(&hdf5.include_paths) {
         shim.include(inc);
     }
     shim.compile("mpmc_petsc_shim");

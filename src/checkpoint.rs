@@ -12,8 +12,9 @@
 //! file is reported as corrupt and never loaded.
 
 use crate::contact::{ContactMemory, ContactRecord};
-use crate::io::{OutputError, RunOutput};
+use crate::io::{Layout, OutputError, RunOutput, SharedCrc, SharedFile, SharedState};
 use crate::model::{Counters, EnergyBooks, Method, Model, State};
+use crate::output_file::exchange_err;
 use crate::rundir::RunIdentity;
 use nalgebra::SVector;
 use std::collections::HashMap;
@@ -75,20 +76,51 @@ fn crc_f64(data: &[f64]) -> u32 {
     h.finalize()
 }
 
-/// Writes `state`, the records of `out` and the run's `identity` to `dir/checkpoint.h5`
-/// (through a temporary file, so a failed write leaves the previous checkpoint).
+/// Writes the state of `shared`, the records of `out` and the run's `identity` to `dir/checkpoint.h5`
+/// (through a temporary file, so a failed write leaves the previous checkpoint): every process writes its
+/// points' columns, each with its checksum put together from all processes' points; once all agree that
+/// their parts are written, process 0 (the one whose `out` writes) adds the rigid bodies, the nodal FEM
+/// state and the meta data and renames the file into place. The file is the same whatever the number of
+/// processes. Collective.
 pub fn save<const D: usize>(
     dir: &Path,
-    state: &State<D>,
+    shared: &SharedState<D>,
     out: &RunOutput,
     identity: &RunIdentity,
 ) -> Result<(), OutputError> {
     let path = dir.join(FILE);
     let tmp = dir.join(format!("{FILE}.tmp"));
-    if let Err(e) = write(&tmp, state, out, identity) {
+    let (p, rows, session) = (&shared.state.particles, &shared.rows, shared.session);
+    // Column by column (one copy of a column at a time); a process that writes no points passes none.
+    let mut file = SharedFile::create(session, &tmp, rows);
+    let mut crcs = Vec::new();
+    for (name, width) in p.state_columns() {
+        let values = if rows.order().is_empty() {
+            Vec::new()
+        } else {
+            p.column(name).expect("a listed column")
+        };
+        let mut crc = SharedCrc::new();
+        crc.column(rows, width, &values, f64::to_le_bytes);
+        crcs.push((name, crc.finish(session).map_err(exchange_err(&path))?));
+        file.column(name, (width, Layout::Flat), &values);
+    }
+    let written = file.close(session).and_then(|()| {
+        if out.writes() {
+            describe(&tmp, shared, crcs.into_iter(), out, identity)
+        } else {
+            Ok(())
+        }
+    });
+    if let Err(e) = written {
         // A full disk leaves no half-written temporary behind (the previous checkpoint stays).
-        let _ = std::fs::remove_file(&tmp);
+        if out.writes() {
+            let _ = std::fs::remove_file(&tmp);
+        }
         return Err(OutputError::hdf5(&path, &e));
+    }
+    if !out.writes() {
+        return Ok(());
     }
     std::fs::rename(&tmp, &path).map_err(|source| OutputError::Io {
         path: path.display().to_string(),
@@ -96,29 +128,35 @@ pub fn save<const D: usize>(
     })
 }
 
-fn write<const D: usize>(
+/// Process 0, after every process has written the points' columns (`crcs`: their checksums) into
+/// `path`: the checksums, the rigid bodies and the nodal FEM state (the same on every process) and the
+/// meta data (format, identity, datasets, counters, the records of `out`, points).
+fn describe<'c, const D: usize>(
     path: &Path,
-    state: &State<D>,
+    shared: &SharedState<D>,
+    crcs: impl Iterator<Item = (&'c str, u32)>,
     out: &RunOutput,
     identity: &RunIdentity,
 ) -> hdf5_metno::Result<()> {
-    let f = hdf5_metno::File::create(path)?;
-    let p = &state.particles;
+    let f = hdf5_metno::File::open_rw(path)?;
+    let put_crc = |ds: &hdf5_metno::Dataset, crc: u32| {
+        ds.new_attr::<u32>().create("crc32")?.write_scalar(&crc)
+    };
     let mut names = Vec::new();
+    for (name, crc) in crcs {
+        put_crc(&f.dataset(name)?, crc)?;
+        names.push(name.to_owned());
+    }
     let mut put = |name: String, data: &[f64]| -> hdf5_metno::Result<()> {
         let ds = f
             .new_dataset_builder()
             .with_data(data)
             .create(name.as_str())?;
-        ds.new_attr::<u32>()
-            .create("crc32")?
-            .write_scalar(&crc_f64(data))?;
+        put_crc(&ds, crc_f64(data))?;
         names.push(name);
         Ok(())
     };
-    for (name, _) in p.state_columns() {
-        put(name.into(), &p.column(name).expect("a listed column"))?;
-    }
+    let state = shared.state;
     for (k, rb) in state.rigid.iter().enumerate() {
         for name in RIGID_COLUMNS {
             put(
@@ -139,19 +177,15 @@ fn write<const D: usize>(
         "datasets": names,
         "counters": counters,
         "records": out.records_json(),
-        "points": p.len(),
-        "history_stride": p.history_stride(),
+        "points": shared.rows.total(),
+        "history_stride": state.particles.history_stride(),
     })
     .to_string();
     let meta = f
         .new_dataset_builder()
         .with_data(text.as_bytes())
         .create("meta")?;
-    meta.new_attr::<u32>()
-        .create("crc32")?
-        .write_scalar(&crc32fast::hash(text.as_bytes()))?;
-    // A write that fails on the way to the disk (full, or above the file-size limit) is reported here:
-    // dropping the file would close it silently, truncated, and it would be renamed into place.
+    put_crc(&meta, crc32fast::hash(text.as_bytes()))?;
     f.flush()
 }
 

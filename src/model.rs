@@ -498,7 +498,7 @@ pub struct State<const D: usize = 2> {
     pub fem_nodal: Option<NodalState<D>>,
     /// `particles` holds this process's own points only (MPM on several processes, from the first
     /// step on; [`crate::partition`]); false: every point. Not checkpointed: a checkpoint holds every
-    /// point, gathered ([`State::with_points`]).
+    /// point, each process's written at the rows of their ids ([`crate::io::SharedState`]).
     pub distributed: bool,
 }
 
@@ -601,10 +601,11 @@ impl<const D: usize> State<D> {
         }
     }
 
-    /// This state with `particles` (e.g. every point, gathered from the processes) in place of its own.
-    pub fn with_points(&self, particles: Particles<D>) -> Self {
+    /// This state without its points (the counters, the rigid bodies and the points' column widths):
+    /// what a process that writes no points takes into the collective writes of the output.
+    pub fn without_points(&self) -> Self {
         Self {
-            particles,
+            particles: self.particles.empty_like(),
             rigid: self.rigid.clone(),
             counters: self.counters.clone(),
             fem_nodal: self.fem_nodal.clone(),

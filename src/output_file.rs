@@ -32,6 +32,14 @@ pub enum OutputError {
         /// Cause.
         message: String,
     },
+    /// The processes could not exchange what a file needs (a collective write of several processes).
+    #[error("{path}: between the processes: {message}")]
+    Exchange {
+        /// File.
+        path: String,
+        /// Cause.
+        message: String,
+    },
     /// Plotting error.
     #[error("{path}: {message}")]
     Plot {
@@ -56,6 +64,16 @@ impl OutputError {
             message: system
                 .unwrap_or_else(|| text.split_whitespace().collect::<Vec<_>>().join(" ")),
         }
+    }
+}
+
+/// The error of an exchange between the processes for the file `path`.
+pub(crate) fn exchange_err<E: std::fmt::Display>(
+    path: &Path,
+) -> impl FnOnce(E) -> OutputError + '_ {
+    move |e| OutputError::Exchange {
+        path: path.display().to_string(),
+        message: e.to_string(),
     }
 }
 

@@ -436,10 +436,12 @@ impl<const D: usize> Particles<D> {
     }
 
     /// Position of the id in a point record.
+    #[cfg(test)]
     const RECORD_ID: usize = Self::RECORD_FIXED - 10;
 
-    /// The id ([`Particles::id`]) of a point record of this set's layout.
-    pub fn record_id(&self, record: &[f64]) -> u64 {
+    /// The id ([`Particles::id`]) of a point record of this set's layout (tests of the records).
+    #[cfg(test)]
+    pub(crate) fn record_id(&self, record: &[f64]) -> u64 {
         record[Self::RECORD_ID] as u64
     }
 
@@ -502,7 +504,8 @@ impl<const D: usize> Particles<D> {
         self.history.truncate(n * self.history_stride);
     }
 
-    /// An empty set with this one's history stride (to unpack records into).
+    /// An empty set with this one's history stride (to unpack records into, or the columns' widths of
+    /// a process that holds no points).
     pub fn empty_like(&self) -> Self {
         Self {
             history_stride: self.history_stride,

@@ -11,12 +11,10 @@
 //! [`Session::exchange`](crate::petsc::Session::exchange)). Units: mm.
 
 use crate::grid::{Grid, SLOWEST_AXIS};
-use crate::model::State;
 use crate::particles::Particles;
 use crate::petsc::{PetscError, SessionGuard};
 use crate::shape::ShapeTable;
 use nalgebra::SVector;
-use std::borrow::Cow;
 use std::ops::Range;
 
 /// Node rows beyond the cell rows of a point's domain that its support may reach: 1 for the linear
@@ -463,44 +461,6 @@ pub fn add_ghosts<const D: usize>(
         to.extend(partition.ranks_meeting(&partition.reach(particles, p)));
     })?;
     Ok(unpack_all(particles, &received))
-}
-
-/// The whole set of points on process 0, in the order of their ids (the order of the serial run), from
-/// every process's own points (`None` on the other processes). Collective.
-pub fn gather<const D: usize>(
-    session: &SessionGuard,
-    particles: &Particles<D>,
-) -> Result<Option<Particles<D>>, PetscError> {
-    let width = particles.record_width();
-    let mut counts = vec![0; session.size()];
-    counts[0] = particles.len();
-    let mut send = Vec::with_capacity(particles.len() * width);
-    for p in 0..particles.len() {
-        particles.pack(p, &mut send);
-    }
-    let received = session.exchange(width, &counts, &send)?;
-    if session.rank() != 0 {
-        return Ok(None);
-    }
-    let mut records: Vec<&[f64]> = received.chunks_exact(width).collect();
-    records.sort_by_key(|r| particles.record_id(r));
-    let mut all = particles.empty_like();
-    for r in records {
-        all.unpack(r);
-    }
-    Ok(Some(all))
-}
-
-/// The whole state for output and checkpoints: `state` itself where it holds every point; gathered on
-/// process 0 ([`gather`]) where the points are shared out (`None` on the other processes). Collective.
-pub fn whole_state<'a, const D: usize>(
-    session: &SessionGuard,
-    state: &'a State<D>,
-) -> Result<Option<Cow<'a, State<D>>>, PetscError> {
-    if !state.distributed {
-        return Ok(Some(Cow::Borrowed(state)));
-    }
-    Ok(gather(session, &state.particles)?.map(|all| Cow::Owned(state.with_points(all))))
 }
 
 #[cfg(test)]

@@ -3,7 +3,7 @@
 
 use mpm_concrete::checkpoint;
 use mpm_concrete::config::RunConfig;
-use mpm_concrete::io::RunOutput;
+use mpm_concrete::io::{RunOutput, SharedState};
 use mpm_concrete::petsc::{self, Session, SessionGuard};
 use mpm_concrete::rundir::RunIdentity;
 use mpm_concrete::scenario;
@@ -100,7 +100,9 @@ fn check_restart(config: &str, tag: &str) {
     let mut out_b = RunOutput::create(&dir_b, "b", config, &b.model, &b.state).expect("output");
     advance(&s, &mut b, &mut out_b, cfg.run.steps / 2);
     let identity = RunIdentity::new(config, "");
-    checkpoint::save(&dir_b, &b.state, &out_b, &identity).expect("checkpoint");
+    let shared = SharedState::new(&s, &b.state).expect("rows");
+    checkpoint::save(&dir_b, &shared, &out_b, &identity).expect("checkpoint");
+    drop(shared);
     drop((b, out_b));
 
     let mut c = simulation(&cfg);

@@ -163,7 +163,7 @@ fn run_on_two_and_three_processes_matches_serial() {
             let share = *n as f64 / total as f64;
             assert!((share - 1.0 / ranks as f64).abs() < 0.05, "{counts:?}");
         }
-        // The seeded points, gathered into the step-0 file, are the serial run's: every dataset with
+        // The seeded points, written into the step-0 file, are the serial run's: every dataset with
         // the same values in the same order, bit for bit; later files hold the same datasets.
         let fields =
             |d: &std::path::Path, step: &str| datasets(&d.join(format!("fields_{step}.h5")));
@@ -180,6 +180,16 @@ fn run_on_two_and_three_processes_matches_serial() {
             fields(&dir, "000030"),
         );
         assert_eq!(shape(a), shape(b), "{ranks} processes: step-30 datasets");
+        // Every process wrote its points into the shared files: their checksums, put together from the
+        // processes' parts, are those of the files' contents (`crack` verifies each snapshot's against
+        // its datasets and run.json before it re-measures; a resumed run verifies the checkpoint's).
+        let o = Command::new(env!("CARGO_BIN_EXE_mpm-concrete"))
+            .arg("crack")
+            .arg(&dir)
+            .output()
+            .expect("crack");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{ranks} processes: {err}");
         for file in [
             "fields_000000.h5",
             "fields_000030.h5",
@@ -347,8 +357,8 @@ fn a_checkpoint_written_on_two_processes_resumes_on_one_and_three() {
 }
 
 /// A block flying into a wall (`tests/data/mpi-crossing.toml`) on 2 and 3 processes: its points cross
-/// the processes' bands (the run reports how many moved) and every point ends, in the files gathered on
-/// process 0 in the serial order, where the serial run puts it, with its velocity and stress: a point
+/// the processes' bands (the run reports how many moved) and every point ends, in the files each
+/// process writes its points into in the serial order, where the serial run puts it, with its velocity and stress: a point
 /// that lost part of its state on the way (its deformation gradient, its domain, its history) or a
 /// process missing a ghost (an incomplete row) would be off by far more than the bounds. The solver is
 /// MUMPS LU with tight Newton tolerances, so the runs differ by round-off in the factorisation and in

@@ -5,8 +5,8 @@
 //! step fails for good, and keeps run.json up to date.
 //!
 //! On several processes every one holds the whole model and its own share of the points (from the first
-//! step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes"); process 0
-//! gathers the points and alone writes.
+//! step on), the unknowns and PETSc's solvers are distributed (docs/theory.md, "Processes"); every
+//! process writes its points into the snapshots' and checkpoints' HDF5 files, process 0 the rest.
 
 mod resume;
 mod steps;
@@ -244,9 +244,8 @@ fn refuse_if_locked_out(session: SessionGuard, prepared: &Prepared) -> Result<Se
 /// Refuses a run whose estimated memory need exceeds the memory available, unless `allow_large`; `label`
 /// names the configuration.
 fn check_memory(plan: &Plan, label: &str, allow_large: bool) -> Result<()> {
-    // Every process builds the whole model before it keeps its share of the points, and process 0
-    // gathers all points for the output: each process on this node may peak near a serial run's memory
-    // (paper-size CT: 731 MB per process on 2 against 649 MB on one).
+    // Where the points are not seeded in bands every process builds the whole model before it keeps its
+    // share of the points: each process on this node may peak near a serial run's memory.
     let mut need = preflight::memory_need(plan).map_err(|e| bad(format!("{label}: {e}")))?;
     // Points are numbered with 32 bits: more cannot be seeded, however much memory there is.
     if need.points > u32::MAX as f64 {
@@ -293,10 +292,16 @@ fn simulate<const D: usize>(
         share_out(session, &mut sim)?;
     }
     // The output's reference state (initial positions, the step-0 fields) is the state at step 0 as
-    // built, also for a resumed run, whole on the process that writes (the others keep the records
-    // only). Where the points are shared out each process keeps its own, gathered after the first step.
-    let built = (root || sim.state.distributed).then(|| sim.state.clone());
-    let resumed = resume(&prepared, &mut sim, root)?;
+    // built, also for a resumed run: each process's points where they are shared out; where they are
+    // not, every point on process 0, which writes them, and none on the others (which take part in the
+    // collective writes with the counters).
+    let built = if root || sim.state.distributed {
+        sim.state.clone()
+    } else {
+        sim.state.without_points()
+    };
+    let positions = initial_positions(session, &sim.state)?;
+    let resumed = resume(session, &prepared, &mut sim)?;
     let interrupted = on_signal(root)?;
     sim.watch(interrupted.clone());
     let counts = points_per_process(session, &sim.state)?;
@@ -318,8 +323,7 @@ fn simulate<const D: usize>(
         bar.abandon();
         return Err(e);
     }
-    let initial = whole_initial(session, built, root)?;
-    let opened = open_output(invocation, &prepared, &sim, (root, lock), initial.as_ref());
+    let opened = open_output(invocation, &prepared, &sim, (root, lock), positions);
     let mut records = agreed(session, opened)?;
     // The output directory exists from here on: the fallback's factors go there from the next step on
     // (in the first step, before anything is written, to MUMPS's default directory).
@@ -333,14 +337,15 @@ fn simulate<const D: usize>(
     let start = if prepared.resume_from.is_some() {
         resumed.as_ref()
     } else {
-        initial.as_ref()
+        Some(&built)
     };
-    if let Err(e) = records.keep(session, start) {
+    if let Some(start) = start
+        && let Err(e) = records.keep(session, start)
+    {
         bar.abandon();
         return Err(records.abandon(session, &sim, e, &hint));
     }
-    // Written: process 0 need not hold a whole state through the run.
-    drop((initial, resumed));
+    drop((built, resumed));
     let steps = Steps {
         session,
         bar: &bar,
@@ -365,45 +370,68 @@ fn simulate<const D: usize>(
     report_unused_fallback(session, &defaults)
 }
 
-/// The state at step 0 as `built` (a copy of every point on process 0, of this process's own points
-/// on every process where they are shared out), whole on process 0 (`root`: gathered where shared out)
-/// and `None` on the others. Collective where the points are shared out.
-fn whole_initial<const D: usize>(
+/// x, y, z of every point at step 0 (`built`, this process's points; all of them where they are not
+/// shared out), by id, on every process: the reference of the displacements and of a 3D section (3
+/// values per point on each process). Collective where the points are shared out (each process sends
+/// its points' positions to all).
+fn initial_positions<const D: usize>(
     session: &SessionGuard,
-    built: Option<State<D>>,
-    root: bool,
-) -> Result<Option<State<D>>> {
-    let Some(built) = built else {
-        return Ok(None);
-    };
+    built: &State<D>,
+) -> Result<Vec<[f64; 3]>> {
+    let p = &built.particles;
     if !built.distributed {
-        return Ok(root.then_some(built));
+        return Ok(crate::io::positions_by_id(&p.id, &p.x));
     }
-    let whole = crate::partition::whole_state(session, &built);
-    let whole = agreed(session, whole.context("gathering the points on process 0"))?;
-    Ok(whole.map(std::borrow::Cow::into_owned))
+    let mine: Vec<f64> = (0..p.len())
+        .flat_map(|k| {
+            let mut r = [p.id[k] as f64, 0.0, 0.0, 0.0];
+            r[1..=D].copy_from_slice(p.x[k].as_slice());
+            r
+        })
+        .collect();
+    let size = session.size();
+    let send = mine.repeat(size);
+    let received = session.exchange(4, &vec![p.len(); size], &send);
+    let received = agreed(
+        session,
+        received.context("sharing the initial positions with every process"),
+    )?;
+    let mut positions = vec![[0.0; 3]; received.len() / 4];
+    for r in received.chunks_exact(4) {
+        positions[r[0] as usize] = [r[1], r[2], r[3]];
+    }
+    Ok(positions)
 }
 
-/// Loads the checkpoint of a resumed run into `sim`; on process 0 (`root`) returns a copy of the loaded
-/// state if the fields of its step are missing (a write failed after the checkpoint), to be written again.
+/// Loads the checkpoint of a resumed run into `sim`; returns a copy of the loaded state if the fields of
+/// its step are missing (a write failed after the checkpoint; as process 0 sees the directory), to be
+/// written again. Collective.
 fn resume<const D: usize>(
+    session: &SessionGuard,
     prepared: &Prepared,
     sim: &mut Simulation<D>,
-    root: bool,
 ) -> Result<Option<State<D>>> {
     if prepared.resume_from.is_none() {
         return Ok(None);
     }
-    checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad)?;
-    if !root {
-        return Ok(None);
+    let loaded = checkpoint::load(&prepared.dir, &sim.model, &mut sim.state).map_err(bad);
+    steps::agreed(session, loaded)?;
+    let root = session.rank() == 0;
+    if root {
+        eprintln!(
+            "resuming at step {} (t = {:e} s)",
+            sim.state.counters.step, sim.state.counters.time
+        );
     }
-    eprintln!(
-        "resuming at step {} (t = {:e} s)",
-        sim.state.counters.step, sim.state.counters.time
-    );
     let fields = file::numbered(file::FIELDS, sim.state.counters.step);
-    Ok((!prepared.dir.join(fields).is_file()).then(|| sim.state.clone()))
+    let missing = session.any(root && !prepared.dir.join(fields).is_file());
+    Ok(missing.then(|| {
+        if root {
+            sim.state.clone()
+        } else {
+            sim.state.without_points()
+        }
+    }))
 }
 
 /// Notes SIGINT (Ctrl-C), SIGTERM (what an MPI launcher sends the processes on Ctrl-C) and SIGHUP: the
@@ -577,14 +605,14 @@ fn check_first_step(
 /// The output: the directory now belongs to this run (on process 0, `root`, it holds `lock` of the
 /// directory, taken here if the directory is new). Removes an earlier run's files (--overwrite) and the
 /// temporaries of an interrupted write, writes the effective configuration and run.json, and sets up the
-/// output on the reference state `initial` (the state at step 0, on process 0; a resumed run restores
-/// its records).
+/// output of this process with the points' positions at step 0, `initial_position` (by id; a resumed run
+/// restores its records).
 fn open_output<'a, const D: usize>(
     invocation: &Invocation,
     prepared: &'a Prepared,
     sim: &Simulation<D>,
     (root, lock): (bool, Option<DirLock>),
-    initial: Option<&State<D>>,
+    initial_position: Vec<[f64; 3]>,
 ) -> Result<Records<'a>> {
     let Prepared { cfg, dir, .. } = prepared;
     let lock = match lock {
@@ -618,10 +646,13 @@ fn open_output<'a, const D: usize>(
         config::source_label(&invocation.file, &prepared.overrides),
         prepared.effective
     );
-    let mut out = match initial {
-        Some(initial) => RunOutput::create(dir, &cfg.run.name, &config_copy, &sim.model, initial)?,
-        None => RunOutput::mirror(dir, &cfg.run.name, &config_copy, cfg.grid.cell_size),
-    };
+    let mut out = RunOutput::for_process(
+        dir,
+        (&cfg.run.name, &config_copy),
+        (sim.model.params.grid.cell_size(), D),
+        initial_position,
+        root,
+    )?;
     if let Some(z) = cfg.extrusion.as_ref().and_then(|e| e.section_z) {
         out.set_section(z);
     }

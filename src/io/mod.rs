@@ -12,11 +12,12 @@
 
 mod cracks;
 mod provenance;
+mod shared;
 
 use crate::crack::{self, CrackCriteria, CrackState};
 use crate::model::{Model, State};
 pub use crate::output_file::{OutputError, write_atomic};
-use crate::output_file::{io_err, tmp_name};
+use crate::output_file::{exchange_err, io_err, tmp_name};
 use crate::plot::{LinePlot, ScatterField, Series};
 use crate::schema::{file, history};
 use crate::solver::StepReport;
@@ -25,6 +26,7 @@ pub use cracks::remeasure_cracks;
 use cracks::{mid_z, save_line_plot, section_layer, speed_summary, write_crack_json};
 use hdf5_metno::types::VarLenUnicode;
 use nalgebra::{SVector, Vector2};
+pub use shared::{Layout, PointRows, SharedCrc, SharedFile, SharedState};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -159,6 +161,26 @@ pub const FIELDS: [Field; 15] = [
     },
 ];
 
+/// The points of a snapshot's section gathered on process 0, in the order of their ids.
+struct SectionPoints {
+    /// Positions in the specimen's frame (mm).
+    x: Vec<Vector2<f64>>,
+    damage: Vec<f64>,
+    nonlocal_damage: Vec<f64>,
+    /// 3D: the z (mm) of the section's layer.
+    layer: Option<f64>,
+}
+
+/// x, y, z (z = 0 in 2D) of the points at `x` with the ids `ids`, in the order of the ids (0..N-1, once
+/// each).
+pub fn positions_by_id<const D: usize>(ids: &[u64], x: &[SVector<f64, D>]) -> Vec<[f64; 3]> {
+    let mut out = vec![[0.0; 3]; x.len()];
+    for (&id, x) in ids.iter().zip(x) {
+        out[id as usize] = xyz(x);
+    }
+    out
+}
+
 /// A point as x, y, z (mm; z = 0 in 2D).
 fn xyz<const D: usize>(x: &SVector<f64, D>) -> [f64; 3] {
     std::array::from_fn(|d| if d < D { x[d] } else { 0.0 })
@@ -284,11 +306,13 @@ pub struct RunOutput {
     /// The specimen's frame on the grid (`grid.rotation`): reactions, displacements, crack metrics and
     /// damage maps are reported in the specimen's frame.
     frame: Frame,
+    /// Process 0: the section's points of the snapshot noted last and its step, for its damage map.
+    noted_section: Option<(usize, SectionPoints)>,
 }
 
 impl RunOutput {
     /// Creates (or reuses) `dir`, keeps a copy of the configuration text as `config.toml`; displacements
-    /// are measured from the points of `initial` (the state at t = 0 of `model`).
+    /// are measured from the points of `initial` (the whole state at t = 0 of `model`, on one process).
     pub fn create<const D: usize>(
         dir: &Path,
         title: &str,
@@ -296,36 +320,50 @@ impl RunOutput {
         model: &Model<D>,
         initial: &State<D>,
     ) -> Result<Self, OutputError> {
-        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
-        write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
-        Ok(Self {
-            initial_position: initial.particles.x.iter().map(xyz).collect(),
-            writes: true,
-            dimension: D,
-            ..Self::mirror(dir, title, config_text, model.params.grid.cell_size())
-        })
+        let positions = positions_by_id(&initial.particles.id, &initial.particles.x);
+        Self::for_process(
+            dir,
+            (title, config_text),
+            (model.params.grid.cell_size(), D),
+            positions,
+            true,
+        )
     }
 
-    /// The records of a run whose files another process writes (the other processes of a distributed
-    /// run, on a grid of `cell_size` mm): steps are recorded, nothing is written.
-    pub fn mirror(dir: &Path, title: &str, config_text: &str, cell_size: f64) -> Self {
-        Self {
+    /// The output of one process of a run (the only one in a serial run): in `dir` (created, with
+    /// `config.toml`, where this process `writes` the run's files, process 0), of the run `title` with the
+    /// configuration `config_text`, on a grid of `cell_size` mm in `dimension` dimensions; displacements
+    /// are measured from `initial_position` (x, y, z of every point at t = 0, by id). The processes that
+    /// do not write record the steps and take part in the snapshots' and checkpoints' collective writes.
+    pub fn for_process(
+        dir: &Path,
+        (title, config_text): (&str, &str),
+        (cell_size, dimension): (f64, usize),
+        initial_position: Vec<[f64; 3]>,
+        writes: bool,
+    ) -> Result<Self, OutputError> {
+        if writes {
+            std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+            write_atomic(&dir.join(file::CONFIG), config_text.as_bytes())?;
+        }
+        Ok(Self {
             dir: dir.to_owned(),
             title: title.to_owned(),
             config_text: config_text.to_owned(),
             run_id: None,
             rows: Vec::new(),
             snapshots: Vec::new(),
-            initial_position: Vec::new(),
+            initial_position,
             cell_size,
-            writes: false,
+            writes,
             crack: None,
             cracks: Vec::new(),
             rayleigh: None,
-            dimension: 2,
+            dimension,
             section_z: None,
             frame: Frame::IDENTITY,
-        }
+            noted_section: None,
+        })
     }
 
     /// The identity of the run ([`crate::rundir::RunIdentity::id`]) that its snapshots carry.
@@ -357,16 +395,21 @@ impl RunOutput {
         self.section_z = Some(z);
     }
 
-    /// The points of `state` that the crack metrics and damage maps show: every point in 2D, in 3D the
-    /// layer of points seeded nearest the section plane (by their initial z, so that a layer stays one as
-    /// the plate deforms), and that plane's z.
+    /// The points of `state` (local indices) that the crack metrics and damage maps show: every point in
+    /// 2D, in 3D the layer of points seeded nearest the section plane (by their initial z, so that a layer
+    /// stays one as the plate deforms), and that plane's z.
     fn section<const D: usize>(&self, state: &State<D>) -> (Vec<usize>, Option<f64>) {
-        let n = state.particles.len();
-        if D < 3 || self.initial_position.len() != n {
-            return ((0..n).collect(), None);
+        let p = &state.particles;
+        if D < 3 {
+            return ((0..p.len()).collect(), None);
         }
         let z0: Vec<f64> = self.initial_position.iter().map(|x| x[2]).collect();
-        let (layer, points) = section_layer(&z0, self.section_z.unwrap_or_else(|| mid_z(&z0)));
+        let (layer, ids) = section_layer(&z0, self.section_z.unwrap_or_else(|| mid_z(&z0)));
+        let mut in_layer = vec![false; z0.len()];
+        ids.into_iter().for_each(|i| in_layer[i] = true);
+        let points = (0..p.len())
+            .filter(|&k| in_layer[p.id[k] as usize])
+            .collect();
         (points, Some(layer))
     }
 
@@ -416,7 +459,7 @@ impl RunOutput {
         )
     }
 
-    /// True if this process writes the run's files (false for a [`RunOutput::mirror`]).
+    /// True if this process writes the run's files (process 0).
     pub fn writes(&self) -> bool {
         self.writes
     }
@@ -492,93 +535,187 @@ impl RunOutput {
     /// Writes the point fields of the current state (HDF5 + XDMF index), measures the crack (if tracked) and
     /// draws a damage map (PNG); in 3D both of the section layer ([`RunOutput::set_section`]): records
     /// the snapshot ([`RunOutput::note_snapshot`]), then writes it ([`RunOutput::write_snapshot`]).
-    pub fn snapshot<const D: usize>(&mut self, state: &State<D>) -> Result<(), OutputError> {
-        self.note_snapshot(state);
-        self.write_snapshot(state)
+    /// Collective.
+    pub fn snapshot<const D: usize>(&mut self, shared: &SharedState<D>) -> Result<(), OutputError> {
+        self.note_snapshot(shared)?;
+        self.write_snapshot(shared)
     }
 
-    /// Records the snapshot of `state` (its fields file, the crack measured on it) without writing it, so
-    /// that a checkpoint of the same step, written before the snapshot's files, lists it.
-    pub fn note_snapshot<const D: usize>(&mut self, state: &State<D>) {
+    /// Records the snapshot of the state (its fields file with the checksum of its fields, the crack
+    /// measured on it) without writing it, so that a checkpoint of the same step, written before the
+    /// snapshot's files, lists it. Collective: the checksum is put together from every process's points,
+    /// the section's points are gathered on process 0, which records.
+    pub fn note_snapshot<const D: usize>(
+        &mut self,
+        shared: &SharedState<D>,
+    ) -> Result<(), OutputError> {
+        let state = shared.state;
+        let name = file::numbered(file::FIELDS, state.counters.step);
+        let checksum = self.checksum(shared, &self.dir.join(&name))?;
+        let section = self.gather_section(shared)?;
+        let mut dissipated = shared.rows.order().iter().fold([0.0; 2], |a, &k| {
+            let d = state.particles.dissipated[k];
+            [a[0] + d[0], a[1] + d[1]]
+        });
+        shared
+            .session
+            .sum(&mut dissipated)
+            .map_err(exchange_err(&self.dir.join(file::CRACK)))?;
         if !self.writes {
-            return;
+            return Ok(());
         }
         self.snapshots.retain(|s| s.step != state.counters.step);
         self.snapshots.push(Snapshot {
             step: state.counters.step,
             time: state.counters.time,
-            file: file::numbered(file::FIELDS, state.counters.step),
+            file: name,
             run: self.run_id.clone(),
-            checksum: Some(self.checksum(state)),
+            checksum: Some(checksum),
         });
-        let Some((tip, criteria)) = &self.crack else {
-            return;
+        let Some(section) = section else {
+            return Ok(());
         };
-        let (section, _) = self.section(state);
-        let p = &state.particles;
-        let x: Vec<Vector2<f64>> = section
-            .iter()
-            .map(|&k| self.frame.to_specimen(xy(&p.x[k])))
-            .collect();
-        let damage: Vec<f64> = section.iter().map(|&k| p.damage[k]).collect();
+        let Some((tip, criteria)) = &self.crack else {
+            self.noted_section = Some((state.counters.step, section));
+            return Ok(());
+        };
         let mut measured = crack::measure(
-            &x,
-            &damage,
+            &section.x,
+            &section.damage,
             *tip,
             self.cell_size,
-            p.point_spacing(),
+            state.particles.point_spacing(),
             criteria,
             state.counters.time,
         );
-        measured.dissipated = p
-            .dissipated
-            .iter()
-            .fold([0.0; 2], |a, d| [a[0] + d[0], a[1] + d[1]]);
+        measured.dissipated = dissipated;
         measured.nonlocal_points = section
+            .damage
             .iter()
-            .filter(|&&i| {
-                p.damage[i] >= criteria.damage_threshold
-                    && p.nonlocal_damage[i] >= 0.5 * p.damage[i]
-            })
+            .zip(&section.nonlocal_damage)
+            .filter(|&(&d, &nl)| d >= criteria.damage_threshold && nl >= 0.5 * d)
             .count();
         self.cracks.retain(|c| c.time != measured.time);
         self.cracks.push(measured);
+        self.noted_section = Some((state.counters.step, section));
+        Ok(())
     }
 
-    /// Writes the snapshot of `state` that [`RunOutput::note_snapshot`] recorded: `fields_<step>.h5`
-    /// (written, then renamed), `fields.xdmf` for ParaView, `crack.json` (if the crack is tracked) and the
-    /// damage map.
-    pub fn write_snapshot<const D: usize>(&self, state: &State<D>) -> Result<(), OutputError> {
-        if !self.writes {
-            return Ok(());
+    /// The points of the section ([`RunOutput::section`]) of every process, in the order of their ids, on
+    /// process 0 (`None` on the others). Collective.
+    fn gather_section<const D: usize>(
+        &self,
+        shared: &SharedState<D>,
+    ) -> Result<Option<SectionPoints>, OutputError> {
+        let (session, p) = (shared.session, &shared.state.particles);
+        let (section, layer) = self.section(shared.state);
+        let written: std::collections::HashSet<usize> =
+            shared.rows.order().iter().copied().collect();
+        let mut send = Vec::new();
+        for &k in section.iter().filter(|k| written.contains(k)) {
+            let x = self.frame.to_specimen(xy(&p.x[k]));
+            send.extend([p.id[k] as f64, x.x, x.y, p.damage[k], p.nonlocal_damage[k]]);
         }
+        let mut counts = vec![0; session.size()];
+        counts[0] = send.len() / 5;
+        let path = self
+            .dir
+            .join(file::numbered(file::DAMAGE_MAP, shared.state.counters.step));
+        let received = session
+            .exchange(5, &counts, &send)
+            .map_err(exchange_err(&path))?;
+        if session.rank() != 0 {
+            return Ok(None);
+        }
+        let mut records: Vec<&[f64]> = received.chunks_exact(5).collect();
+        records.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        Ok(Some(SectionPoints {
+            x: records.iter().map(|r| Vector2::new(r[1], r[2])).collect(),
+            damage: records.iter().map(|r| r[3]).collect(),
+            nonlocal_damage: records.iter().map(|r| r[4]).collect(),
+            layer,
+        }))
+    }
+
+    /// Writes the snapshot of the state that [`RunOutput::note_snapshot`] recorded: `fields_<step>.h5`
+    /// (every process its points, into a temporary that process 0 completes and renames into place once
+    /// all have written), `fields.xdmf` for ParaView, `crack.json` (if the crack is tracked) and the
+    /// damage map (process 0). Collective.
+    pub fn write_snapshot<const D: usize>(
+        &mut self,
+        shared: &SharedState<D>,
+    ) -> Result<(), OutputError> {
+        let state = shared.state;
         let path = self
             .dir
             .join(file::numbered(file::FIELDS, state.counters.step));
         let tmp = tmp_name(&path);
-        if let Err(e) = self.write_h5(&tmp, state) {
+        let written = self.write_point_fields(&tmp, shared).and_then(|()| {
+            if self.writes {
+                self.describe_h5(&tmp, state)
+            } else {
+                Ok(())
+            }
+        });
+        if let Err(e) = written {
             // A full disk leaves no half-written temporary behind.
-            let _ = std::fs::remove_file(&tmp);
+            if self.writes {
+                let _ = std::fs::remove_file(&tmp);
+            }
             return Err(OutputError::hdf5(&path, &e));
         }
+        if !self.writes {
+            return Ok(());
+        }
         std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
-        self.write_xdmf(state.particles.len())?;
+        self.write_xdmf(shared.rows.total())?;
         self.write_cracks()?;
-        let (section, layer) = self.section(state);
-        self.damage_map(
-            state,
-            &section,
-            layer,
-            &self
-                .dir
-                .join(file::numbered(file::DAMAGE_MAP, state.counters.step)),
-        )
+        let map = self
+            .dir
+            .join(file::numbered(file::DAMAGE_MAP, state.counters.step));
+        match self.noted_section.take() {
+            Some((step, section)) if step == state.counters.step => {
+                self.damage_map(state, &section, &map)
+            }
+            _ => Err(OutputError::Run {
+                path: map.display().to_string(),
+                message: "the snapshot was not noted before it was written".into(),
+            }),
+        }
     }
 
-    fn write_h5<const D: usize>(&self, path: &Path, state: &State<D>) -> hdf5_metno::Result<()> {
-        let p = &state.particles;
-        let n = p.len();
-        let f = hdf5_metno::File::create(path)?;
+    /// The point datasets of the snapshot (connectivity and [`FIELDS`]), every process writing its
+    /// points into the new file `path` ([`SharedFile`]). Collective.
+    fn write_point_fields<const D: usize>(
+        &self,
+        path: &Path,
+        shared: &SharedState<D>,
+    ) -> hdf5_metno::Result<()> {
+        let rows = &shared.rows;
+        let mut f = SharedFile::create(shared.session, path, rows);
+        let ids: Vec<i64> = shared
+            .state
+            .particles
+            .id
+            .iter()
+            .map(|&i| i as i64)
+            .collect();
+        f.column(CONNECTIVITY.name, (1, Layout::Flat), &ids);
+        for (field, values) in FIELDS.iter().zip(self.point_values(shared)) {
+            let layout = match field.kind {
+                Kind::Scalar => (1, Layout::Flat),
+                Kind::Vector => (3, Layout::Rows),
+            };
+            f.column(field.name, layout, &values);
+        }
+        f.close(shared.session)
+    }
+
+    /// Process 0, after every process has written the point datasets: the attributes of the snapshot
+    /// file `path` (what it is, the units, the run, its configuration, time, step and checksum; units and
+    /// meaning of every dataset).
+    fn describe_h5<const D: usize>(&self, path: &Path, state: &State<D>) -> hdf5_metno::Result<()> {
+        let f = hdf5_metno::File::open_rw(path)?;
         let text = |s: &str| {
             s.parse::<VarLenUnicode>()
                 .map_err(|e| hdf5_metno::Error::from(e.to_string().as_str()))
@@ -606,48 +743,60 @@ impl RunOutput {
         if let Some(id) = &self.run_id {
             put_text(&f, RUN_ID_ATTR, id)?;
         }
-        put_text(&f, CHECKSUM_ATTR, &self.checksum(state))?;
-        let connectivity: Vec<i64> = (0..n as i64).collect();
-        let ds = f
-            .new_dataset_builder()
-            .with_data(&connectivity)
-            .create(CONNECTIVITY.name)?;
-        put_text(&ds, "units", CONNECTIVITY.units)?;
-        put_text(&ds, "description", CONNECTIVITY.description)?;
-        for (field, values) in FIELDS.iter().zip(self.point_values(state)) {
-            let builder = f.new_dataset_builder();
-            let ds = match field.kind {
-                Kind::Scalar => builder.with_data(&values).create(field.name)?,
-                Kind::Vector => builder
-                    .with_data(
-                        &ndarray::Array2::from_shape_vec((n, 3), values)
-                            .expect("3 values per point"),
-                    )
-                    .create(field.name)?,
-            };
+        let checksum = self
+            .snapshots
+            .iter()
+            .find(|s| s.step == state.counters.step)
+            .and_then(|s| s.checksum.clone())
+            .ok_or_else(|| {
+                hdf5_metno::Error::from("the snapshot was not noted before it was written")
+            })?;
+        put_text(&f, CHECKSUM_ATTR, &checksum)?;
+        for field in std::iter::once(&CONNECTIVITY).chain(&FIELDS) {
+            let ds = f.dataset(field.name)?;
             put_text(&ds, "units", field.units)?;
             put_text(&ds, "description", field.description)?;
         }
-        // A write that fails on the way to the disk (full, or above the file-size limit) is reported here:
-        // dropping the file would close it silently, truncated.
         f.flush()
     }
 
-    /// [`fields_checksum`] of the snapshot of `state`.
-    fn checksum<const D: usize>(&self, state: &State<D>) -> String {
-        let connectivity: Vec<i64> = (0..state.particles.len() as i64).collect();
-        let values = self.point_values(state);
-        let fields: Vec<&[f64]> = values.iter().map(Vec::as_slice).collect();
-        fields_checksum(&connectivity, &fields)
+    /// [`fields_checksum`] of the snapshot of the state (for the file `path`), put together from every
+    /// process's points ([`SharedCrc`]). Collective.
+    fn checksum<const D: usize>(
+        &self,
+        shared: &SharedState<D>,
+        path: &Path,
+    ) -> Result<String, OutputError> {
+        let mut crc = SharedCrc::new();
+        let ids: Vec<i64> = shared
+            .state
+            .particles
+            .id
+            .iter()
+            .map(|&i| i as i64)
+            .collect();
+        crc.column(&shared.rows, 1, &ids, i64::to_le_bytes);
+        for (field, values) in FIELDS.iter().zip(self.point_values(shared)) {
+            let width = match field.kind {
+                Kind::Scalar => 1,
+                Kind::Vector => 3,
+            };
+            crc.column(&shared.rows, width, &values, f64::to_le_bytes);
+        }
+        let crc = crc.finish(shared.session).map_err(exchange_err(path))?;
+        Ok(format!("{crc:08x}"))
     }
 
-    /// The values of [`FIELDS`] in the current state, in that order: vectors as x, y, z per point (z = 0
-    /// in 2D).
-    fn point_values<const D: usize>(&self, state: &State<D>) -> [Vec<f64>; FIELDS.len()] {
-        let p = &state.particles;
+    /// The values of [`FIELDS`] of this process's points in the current state, in that order: vectors as
+    /// x, y, z per point (z = 0 in 2D); none on a process that writes no points.
+    fn point_values<const D: usize>(&self, shared: &SharedState<D>) -> [Vec<f64>; FIELDS.len()] {
+        if shared.rows.order().is_empty() {
+            return std::array::from_fn(|_| Vec::new());
+        }
+        let p = &shared.state.particles;
         let comp = |i: usize, j: usize| p.stress.iter().map(|s| s[(i, j)]).collect::<Vec<f64>>();
-        let displacement = p.x.iter().zip(&self.initial_position).flat_map(|(x, x0)| {
-            let x = xyz(x);
+        let displacement = p.x.iter().zip(&p.id).flat_map(|(x, &id)| {
+            let (x, x0) = (xyz(x), self.initial_position[id as usize]);
             [x[0] - x0[0], x[1] - x0[1], x[2] - x0[2]]
         });
         [
@@ -686,20 +835,15 @@ impl RunOutput {
         )
     }
 
-    /// Damage map of the points `section` of the current state (in 3D the layer at z = `layer` mm).
+    /// Damage map of the points `section` (gathered, in the specimen's frame) of the current state (in
+    /// 3D the layer at `section.layer`).
     fn damage_map<const D: usize>(
         &self,
         state: &State<D>,
-        section: &[usize],
-        layer: Option<f64>,
+        section: &SectionPoints,
         path: &Path,
     ) -> Result<(), OutputError> {
-        let p = &state.particles;
-        let x: Vec<Vector2<f64>> = section
-            .iter()
-            .map(|&k| self.frame.to_specimen(xy(&p.x[k])))
-            .collect();
-        let plane = match layer {
+        let plane = match section.layer {
             Some(z) => format!(", layer z = {z:.1} mm"),
             None => String::new(),
         };
@@ -709,9 +853,9 @@ impl RunOutput {
                 self.title,
                 state.counters.time * 1e6
             ),
-            x: x.iter().map(|x| x.x).collect(),
-            y: x.iter().map(|x| x.y).collect(),
-            value: section.iter().map(|&k| p.damage[k]).collect(),
+            x: section.x.iter().map(|x| x.x).collect(),
+            y: section.x.iter().map(|x| x.y).collect(),
+            value: section.damage.clone(),
             value_label: "damage [-]".into(),
             range: Some((0.0, 1.0)),
             point_size: self.cell_size / 2.0,

@@ -1,7 +1,7 @@
 //! Tests of the run output: the section of a 3D run's plane pictures and the HDF5 snapshots' layout and units.
 
 use super::cracks::{mid_z, section_layer};
-use super::{CONNECTIVITY, FIELDS, Kind, RunOutput};
+use super::{CONNECTIVITY, FIELDS, Kind, RunOutput, SharedState};
 use crate::config::RunConfig;
 use hdf5_metno::types::VarLenUnicode;
 use nalgebra::Vector2;
@@ -57,7 +57,10 @@ fn snapshots_have_connectivity_3_component_vectors_and_units() {
     let dir = std::env::temp_dir().join(format!("mpmc-io-{}", std::process::id()));
     let mut out =
         RunOutput::create(&dir, "io-block", CONFIG, &sim.model, &sim.state).expect("output");
-    out.snapshot(&sim.state).expect("snapshot 0");
+    let session = crate::petsc::Session::get().expect("PETSc");
+    let shared = SharedState::new(&session, &sim.state).expect("rows");
+    out.snapshot(&shared).expect("snapshot 0");
+    drop(shared);
     let n = sim.state.particles.len();
     let p = &mut sim.state.particles;
     for (i, (x, v)) in p.x.iter_mut().zip(&mut p.v).enumerate() {
@@ -67,7 +70,8 @@ fn snapshots_have_connectivity_3_component_vectors_and_units() {
     p.damage[1] = 0.75;
     sim.state.counters.step = 7;
     sim.state.counters.time = 7.0e-6;
-    out.snapshot(&sim.state).expect("snapshot 7");
+    let shared = SharedState::new(&session, &sim.state).expect("rows");
+    out.snapshot(&shared).expect("snapshot 7");
 
     let xdmf = std::fs::read_to_string(dir.join("fields.xdmf")).expect("xdmf");
     for file in ["fields_000000.h5", "fields_000007.h5"] {

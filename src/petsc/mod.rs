@@ -239,6 +239,48 @@ impl Session {
         check(unsafe { op(values.as_mut_ptr(), n) }, call)
     }
 
+    /// `values[i]` replaced by its bitwise exclusive or over all processes, in place (collective; one
+    /// process: unchanged).
+    pub fn xor(&self, values: &mut [u32]) -> Result<()> {
+        if self.size() == 1 {
+            return Ok(());
+        }
+        let n = to_petsc_int(values.len(), "values to reduce")?;
+        count_sent(std::mem::size_of_val(values));
+        // SAFETY: the buffer holds n unsigned 32-bit integers, reduced in place over the world communicator.
+        check(
+            unsafe { sys::mpmc_xor_u32(values.as_mut_ptr(), n) },
+            "MPI_Allreduce (xor)",
+        )
+    }
+
+    /// Creates (truncating) the HDF5 file `path` that every process writes its part of: through MPI-IO on
+    /// several processes, HDF5's default driver on one. Every later call on the file that creates or
+    /// changes an object (datasets, attributes) and the file's closing are collective: every process
+    /// makes them in the same order with the same arguments; the data of a dataset each process writes
+    /// independently (its own selection). Collective.
+    pub fn create_shared_file(
+        &self,
+        path: &std::path::Path,
+    ) -> hdf5_metno::Result<hdf5_metno::File> {
+        let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes())
+            .map_err(|_| hdf5_metno::Error::from("a file name with a NUL byte"))?;
+        // Under the HDF5 crate's lock and after its initialisation (which keeps HDF5 from closing at exit
+        // what a failed write left open: a file whose flush failed on a full disk).
+        let id = hdf5_metno::sync::sync(|| {
+            // SAFETY: c outlives the call; the shim returns a new file identifier (or a negative value),
+            // whose single reference the File below takes over and closes when dropped.
+            unsafe { sys::mpmc_h5_create_shared(c.as_ptr()) }
+        });
+        if id < 0 {
+            return Err(hdf5_metno::Error::from(
+                format!("{}: H5Fcreate failed", path.display()).as_str(),
+            ));
+        }
+        // SAFETY: a valid file identifier just created, with one reference.
+        unsafe { hdf5_metno::from_id::<hdf5_metno::File>(id) }
+    }
+
     /// Sends records of `width` values: `send` holds `counts[r]` records for process `r`, in process
     /// order (`counts` has one entry per process). Returns the records sent to this process, ordered by
     /// source process and, from one source, in its order. Built on a PetscSF whose roots are the outgoing

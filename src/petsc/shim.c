@@ -2,6 +2,9 @@
 #include <dlfcn.h>
 #include "shim.h"
 #include <petscsf.h>
+#include <hdf5.h>
+
+_Static_assert(sizeof(hid_t) == sizeof(int64_t), "hid_t is 64-bit from HDF5 1.10 on");
 
 MPI_Comm mpmc_comm_world(void) { return PETSC_COMM_WORLD; }
 MPI_Comm mpmc_comm_self(void) { return PETSC_COMM_SELF; }
@@ -102,3 +105,29 @@ PetscErrorCode mpmc_exchange_records(PetscInt width, const PetscInt *sendcounts,
 }
 
 PetscErrorCode mpmc_free(void *p) { return PetscFree(p); }
+
+PetscErrorCode mpmc_xor_u32(uint32_t *buf, PetscInt n)
+{
+  PetscMPIInt count;
+  PetscFunctionBeginUser;
+  if (n <= 0) PetscFunctionReturn(0);
+  PetscCall(PetscMPIIntCast(n, &count));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, buf, count, MPI_UINT32_T, MPI_BXOR, PETSC_COMM_WORLD));
+  PetscFunctionReturn(0);
+}
+
+int64_t mpmc_h5_create_shared(const char *path)
+{
+  PetscMPIInt size = 1;
+  hid_t       fapl, file;
+  MPI_Comm_size(PETSC_COMM_WORLD, &size);
+  fapl = H5Pcreate(H5P_FILE_ACCESS);
+  if (fapl < 0) return -1;
+  if (size > 1 && H5Pset_fapl_mpio(fapl, PETSC_COMM_WORLD, MPI_INFO_NULL) < 0) {
+    H5Pclose(fapl);
+    return -1;
+  }
+  file = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
+  H5Pclose(fapl);
+  return file;
+}

@@ -3,6 +3,7 @@
 #ifndef MPM_CONCRETE_PETSC_SHIM_H
 #define MPM_CONCRETE_PETSC_SHIM_H
 #include <petscsys.h>
+#include <stdint.h>
 
 /* PETSC_COMM_WORLD (an extern variable, valid after PetscInitialize). */
 MPI_Comm mpmc_comm_world(void);
@@ -33,4 +34,10 @@ PetscErrorCode mpmc_min_doubles(double *buf, PetscInt n);
 PetscErrorCode mpmc_exchange_records(PetscInt width, const PetscInt *sendcounts, const double *send,
                                      PetscInt *nrecv, double **recv);
 PetscErrorCode mpmc_free(void *p);
+/* In place over PETSC_COMM_WORLD: the bitwise exclusive or of `buf` over all processes. Collective. */
+PetscErrorCode mpmc_xor_u32(uint32_t *buf, PetscInt n);
+/* Creates (truncating) the HDF5 file `path` for writing by every process of PETSC_COMM_WORLD: through
+ * MPI-IO (H5Pset_fapl_mpio) on several processes, HDF5's default driver on one. Returns the file's
+ * identifier (an hid_t, int64_t in HDF5 >= 1.10), negative on failure. Collective. */
+int64_t mpmc_h5_create_shared(const char *path);
 #endif

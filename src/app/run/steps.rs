@@ -1,4 +1,5 @@
-//! The time loop of a run and its records. Process 0 writes; every write it makes at a step is agreed by
+//! The time loop of a run and its records. Every process writes its points into the snapshots' and
+//! checkpoints' HDF5 files, process 0 the rest; every write at a step is agreed by
 //! all processes before the next collective step ([`agreed`]), so that they all stop after the same step
 //! (on a signal, a step that fails for good or a failed write) and none ends while process 0 is still
 //! writing (an MPI launcher kills the other processes when one ends with an error). At an output step the
@@ -9,7 +10,7 @@ use crate::app::{FailedElsewhere, error_line};
 use crate::checkpoint;
 use crate::config::RunConfig;
 use crate::crack;
-use crate::io::RunOutput;
+use crate::io::{RunOutput, SharedState};
 use crate::model::State;
 use crate::petsc::SessionGuard;
 use crate::rundir::{DirLock, RunIdentity, RunRecord};
@@ -17,7 +18,6 @@ use crate::solver::{Interrupt, Simulation, StepError, StepReport};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use nalgebra::Vector2;
-use std::borrow::Cow;
 use std::path::Path;
 
 /// `result` agreed by every process: an error on one is an error on all (on the others a
@@ -28,18 +28,6 @@ pub(super) fn agreed<T>(session: &SessionGuard, result: Result<T>) -> Result<T> 
         Ok(_) if failed => Err(FailedElsewhere.into()),
         other => other,
     }
-}
-
-/// The whole committed state of `sim` on process 0 (gathered where the points are shared out), `None`
-/// on the others, which write nothing. Collective ([`agreed`]).
-fn gather<'s, const D: usize>(
-    session: &SessionGuard,
-    sim: &'s Simulation<D>,
-) -> Result<Option<Cow<'s, State<D>>>> {
-    let whole = crate::partition::whole_state(session, &sim.state)
-        .context("gathering the points on process 0");
-    let root = session.rank() == 0;
-    agreed(session, whole).map(|w| w.filter(|_| root))
 }
 
 /// The records of a run in progress: its output and its run.json, and where they go.
@@ -58,43 +46,46 @@ pub(super) struct Records<'a> {
 }
 
 impl Records<'_> {
-    /// Keeps the current state (with the points shared out over processes, process 0 gathers them
-    /// first): [`Records::keep`]. Collective.
+    /// Keeps the current state of `sim`: [`Records::keep`]. Collective.
     fn save<const D: usize>(&mut self, session: &SessionGuard, sim: &Simulation<D>) -> Result<()> {
-        let whole = gather(session, sim)?;
-        self.keep(session, whole.as_deref())
+        self.keep(session, &sim.state)
     }
 
-    /// Writes the whole `state` (given on process 0): the checkpoint, then the snapshot (point fields,
-    /// crack, damage map), the force plots and run.json, which follows the checkpoint so that a run killed
-    /// outright shows how far it got. Collective ([`agreed`]).
+    /// Writes `state` (this process's points; every process writes its own into the shared files): the
+    /// checkpoint, then the snapshot (point fields, crack, damage map), the force plots and run.json, which
+    /// follows the checkpoint so that a run killed outright shows how far it got. Collective, each part
+    /// agreed ([`agreed`]) before the next.
     pub(super) fn keep<const D: usize>(
         &mut self,
         session: &SessionGuard,
-        state: Option<&State<D>>,
+        state: &State<D>,
     ) -> Result<()> {
-        let written = match state {
-            Some(state) => {
-                self.out.note_snapshot(state);
-                self.write_checkpoint(state)
-                    .and_then(|()| self.write_snapshot(state))
-            }
-            None => Ok(()),
-        };
-        agreed(session, written)
+        let shared = SharedState::new(session, state).context("sharing out the points' rows");
+        let shared = agreed(session, shared)?;
+        let noted = self.out.note_snapshot(&shared).map_err(anyhow::Error::from);
+        agreed(session, noted)?;
+        let checkpoint = self.write_checkpoint(&shared);
+        agreed(session, checkpoint)?;
+        let snapshot = self.write_snapshot(&shared);
+        agreed(session, snapshot)
     }
 
-    /// The checkpoint of `state` on process 0 (a resumed run writes the snapshot of its step if its files
-    /// are missing).
-    fn write_checkpoint<const D: usize>(&mut self, state: &State<D>) -> Result<()> {
-        checkpoint::save(self.dir, state, &self.out, self.identity)?;
-        self.checkpoint = Some(state.counters.step);
+    /// The checkpoint of the state of `shared` (a resumed run writes the snapshot of its step if its
+    /// files are missing). Collective.
+    fn write_checkpoint<const D: usize>(&mut self, shared: &SharedState<D>) -> Result<()> {
+        checkpoint::save(self.dir, shared, &self.out, self.identity)?;
+        self.checkpoint = Some(shared.state.counters.step);
         Ok(())
     }
 
-    /// The rest of [`Records::keep`] on process 0: the snapshot, the force plots and run.json.
-    fn write_snapshot<const D: usize>(&mut self, state: &State<D>) -> Result<()> {
-        self.out.write_snapshot(state)?;
+    /// The rest of [`Records::keep`]: the snapshot (collective), then on process 0 the force plots and
+    /// run.json.
+    fn write_snapshot<const D: usize>(&mut self, shared: &SharedState<D>) -> Result<()> {
+        self.out.write_snapshot(shared)?;
+        if !self.root {
+            return Ok(());
+        }
+        let state = shared.state;
         self.out.force_plots()?;
         self.record.snapshots = Some(self.out.snapshot_records());
         self.record.steps_done = state.counters.step;
@@ -257,11 +248,10 @@ impl Steps<'_> {
         self.bar.abandon();
         let (session, done) = (self.session, sim.state.counters.step);
         if session.any(records.root && records.checkpoint != Some(done)) {
-            let saved = gather(session, sim).and_then(|whole| {
-                let written = match whole.as_deref() {
-                    Some(state) => records.write_checkpoint(state),
-                    None => Ok(()),
-                };
+            let shared =
+                SharedState::new(session, &sim.state).context("sharing out the points' rows");
+            let saved = agreed(session, shared).and_then(|shared| {
+                let written = records.write_checkpoint(&shared);
                 agreed(session, written)
             });
             if let Err(e) = saved {
