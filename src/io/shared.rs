@@ -6,6 +6,7 @@
 use crate::model::State;
 use crate::petsc::{PetscError, SessionGuard};
 use hdf5_metno::types::H5Type;
+use std::borrow::Cow;
 use std::ops::Range;
 
 /// The points this process writes into a shared file, in the order of their ids, and the runs of
@@ -94,14 +95,27 @@ impl PointRows {
         &self.order
     }
 
-    /// `values` (this process's points in their local order, `width` per point) in the order of the ids
-    /// of the points it writes.
-    fn ordered<T: Copy>(&self, values: &[T], width: usize) -> Vec<T> {
-        self.order
-            .iter()
-            .flat_map(|&k| &values[k * width..(k + 1) * width])
-            .copied()
-            .collect()
+    /// The values of the run `(ids, at)` ([`PointRows::runs`]) of `values` (this process's points in
+    /// their local order, `width` per point) in the order of the ids: borrowed where the run's points are
+    /// consecutive in the local order too (one run in a serial run, nearly always in a band), else copied.
+    fn run_values<'v, T: Copy>(
+        &self,
+        values: &'v [T],
+        width: usize,
+        (ids, at): &(Range<usize>, usize),
+    ) -> Cow<'v, [T]> {
+        let local = &self.order[*at..at + ids.len()];
+        let first = local[0];
+        if local.iter().enumerate().all(|(j, &k)| k == first + j) {
+            return Cow::Borrowed(&values[first * width..(first + local.len()) * width]);
+        }
+        Cow::Owned(
+            local
+                .iter()
+                .flat_map(|&k| &values[k * width..(k + 1) * width])
+                .copied()
+                .collect(),
+        )
     }
 
     /// Creates the dataset `name` of every process's points, `width` values per point laid out as
@@ -135,9 +149,10 @@ impl PointRows {
         (width, layout): (usize, Layout),
         values: &[T],
     ) -> hdf5_metno::Result<()> {
-        let mine = self.ordered(values, width);
-        for (ids, at) in &self.runs {
-            let part = &mine[at * width..(at + ids.len()) * width];
+        for run in &self.runs {
+            let ids = &run.0;
+            let part = self.run_values(values, width, run);
+            let part = part.as_ref();
             match layout {
                 Layout::Flat => ds.write_slice(part, ids.start * width..ids.end * width)?,
                 Layout::Rows => {
@@ -261,12 +276,12 @@ impl SharedCrc {
         values: &[T],
         bytes: impl Fn(T) -> [u8; 8],
     ) {
-        let mine = rows.ordered(values, width);
         let mut at = 0;
         let mut buffer = Vec::with_capacity(8 * ZEROS.len());
-        for (ids, first) in &rows.runs {
+        for run in &rows.runs {
+            let ids = &run.0;
             self.zeros((ids.start - at) * width * 8);
-            for chunk in mine[first * width..(first + ids.len()) * width].chunks(ZEROS.len()) {
+            for chunk in rows.run_values(values, width, run).chunks(ZEROS.len()) {
                 buffer.clear();
                 buffer.extend(chunk.iter().flat_map(|&v| bytes(v)));
                 self.hasher.update(&buffer);
