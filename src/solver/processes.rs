@@ -44,6 +44,12 @@ pub(super) struct Processes<'s> {
 }
 
 impl<'s> Processes<'s> {
+    /// The session, for the exchanges of PETSc's distributed vectors (made on several processes whether
+    /// the points are shared out or not).
+    pub(super) fn session(&self) -> &'s SessionGuard {
+        self.session
+    }
+
     /// Sums `v` element-wise over the processes (collective where the points are shared out).
     pub(super) fn sum(&self, v: &mut [f64]) -> Result<(), petsc::PetscError> {
         match self.shared {

@@ -217,7 +217,9 @@ fn physical_residual<const D: usize>(
     (processes, read): (Processes<'_>, &[usize]),
     phys: &mut [f64],
 ) -> Result<Vec<f64>, StepError> {
-    let xs = sys.owned.gather_all(&sys.x)?;
+    let xs = sys
+        .owned
+        .gather_solution(processes.session(), &sys.x, read)?;
     let local = assembler
         .evaluate(input, &xs)
         .and_then(|()| assembler.residual(input, &xs, phys, true));

@@ -8,8 +8,8 @@ use crate::dofs::DofMap;
 use crate::grid::Grid;
 use crate::multigrid::Hierarchy;
 use crate::petsc::{
-    self, BlockCsr, GatherAll, GatherRange, IndexSet, Matrix, PetscInt, SessionGuard, Snes,
-    ThreadedOperator, Tolerances, Vector,
+    self, BlockCsr, GatherRange, IndexSet, Matrix, PetscInt, SessionGuard, Snes, ThreadedOperator,
+    Tolerances, Vector,
 };
 use nalgebra::SVector;
 use std::ops::Range;
@@ -28,9 +28,6 @@ pub(super) struct OwnedRows {
     pub(super) nf: usize,
     /// All unknowns of the step (over all processes).
     pub(super) total: usize,
-    /// More than one process: the gather of all unknowns (built once with the vector layout), for the
-    /// physical residual after a solve.
-    pub(super) gather: Option<GatherAll>,
     /// More than one process: the gather of the unknowns this process reads at an evaluation
     /// (`Step::unknowns_window`), rebuilt when the window moves
     /// ([`OwnedRows::set_window`]).
@@ -54,7 +51,6 @@ impl OwnedRows {
             cols,
             nf,
             total,
-            gather: None,
             window: None,
         }
     }
@@ -76,7 +72,7 @@ impl OwnedRows {
 
     /// The unknowns of the distributed vector `x` that this process reads at an evaluation, in a vector
     /// of all unknowns in [`DofMap`] order: those of its window ([`OwnedRows::set_window`]), zeros
-    /// elsewhere; all of them without a window.
+    /// elsewhere; all of them on one process (no window).
     pub(super) fn gather(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
         match &self.window {
             Some(w) => {
@@ -84,16 +80,39 @@ impl OwnedRows {
                 w.gather_into(x, &mut all)?;
                 Ok(all)
             }
-            None => self.gather_all(x),
+            None => x.read(|v| v.to_vec()),
         }
     }
 
-    /// All unknowns of the distributed vector `x`, in [`DofMap`] order, on every process.
-    pub(super) fn gather_all(&self, x: &Vector) -> Result<Vec<f64>, petsc::PetscError> {
-        match &self.gather {
-            Some(g) => g.gather(x),
-            None => x.read(|v| v.to_vec()),
+    /// The unknowns of the solution `x` that this process reads after a solve: those of its window
+    /// ([`OwnedRows::gather`]) and the unknowns `read` (the same list on every process: the constrained
+    /// and contact rows, whose statuses every process evaluates), each from its owner through one sum
+    /// over the processes (the others adding zeros: the same bits on every process). Zeros elsewhere.
+    /// Collective on several processes.
+    pub(super) fn gather_solution(
+        &self,
+        session: &SessionGuard,
+        x: &Vector,
+        read: &[usize],
+    ) -> Result<Vec<f64>, petsc::PetscError> {
+        let mut all = self.gather(x)?;
+        if self.window.is_none() {
+            return Ok(all);
         }
+        let own = self.scalars();
+        let mut values = x.read(|mine| {
+            read.iter()
+                .map(|&d| match own.contains(&d) {
+                    true => mine[d - own.start],
+                    false => 0.0,
+                })
+                .collect::<Vec<f64>>()
+        })?;
+        session.sum(&mut values)?;
+        for (&d, v) in read.iter().zip(values) {
+            all[d] = v;
+        }
+        Ok(all)
     }
 
     /// On more than one process: the gather of the unknowns `window` (indices in [`DofMap`] order, from
@@ -189,14 +208,11 @@ impl LinearSystem {
         rows: Range<usize>,
     ) -> Result<Self, StepError> {
         let nf = dofs.unknowns_per_node();
-        let mut owned = OwnedRows::new(asm, rows, nf, dofs.len());
+        let owned = OwnedRows::new(asm, rows, nf, dofs.len());
         let mut nonzeros = [(owned.cols.len() * nf * nf) as f64];
         session.sum(&mut nonzeros)?;
         let n = owned.scalars().len();
         let x = Vector::new(session, n, nf)?;
-        if session.size() > 1 {
-            owned.gather = Some(GatherAll::new(&x)?);
-        }
         let first = x.ownership_range()?.start;
         if first != owned.scalars().start {
             return Err(StepError::Setup(format!(
