@@ -306,6 +306,15 @@ pub fn apply<const D: usize>(
         petsc::set_option(session, "snes_lag_preconditioner", Some("1"))?;
         applied.retain(|o| *o != lag);
     }
+    // The defaults precondition GMRES from the right; another Krylov method given instead (CG and MINRES
+    // take the left side only, FGMRES the right) keeps PETSc's side for it.
+    let side = "-ksp_pc_side".to_owned();
+    if applied.contains(&side)
+        && petsc::option_string(session, "ksp_type")?.as_deref() != Some("gmres")
+    {
+        petsc::clear_option(session, "ksp_pc_side")?;
+        applied.retain(|o| *o != side);
+    }
     // A different preconditioner set in the config or on the command line replaces the class's.
     let own_pc = options
         .split_whitespace()

@@ -23,7 +23,7 @@ pub use ksp::LinearSolve;
 pub use matrix::{BlockCsr, BlockLayout, IndexSet, Matrix, matrix_type_for};
 pub use operator::ThreadedOperator;
 pub use options::{
-    apply_default_options, has_option, option_string, set_default_option, set_option,
+    apply_default_options, clear_option, has_option, option_string, set_default_option, set_option,
     unused_options,
 };
 pub use preconditioner::use_threaded_ilu;

@@ -22,6 +22,16 @@ pub fn set_option(_s: &SessionGuard, name: &str, value: Option<&str>) -> Result<
     )
 }
 
+/// Removes `-name` from the global options database (PETSc's own default applies again).
+pub fn clear_option(_s: &SessionGuard, name: &str) -> Result<()> {
+    let n = cstring(&dashed(name))?;
+    // SAFETY: PETSc reads the name during the call.
+    check(
+        unsafe { sys::PetscOptionsClearValue(std::ptr::null_mut(), n.as_ptr()) },
+        "PetscOptionsClearValue",
+    )
+}
+
 /// True if `-name` is present in the options database.
 pub fn has_option(_s: &SessionGuard, name: &str) -> Result<bool> {
     let n = cstring(&dashed(name))?;

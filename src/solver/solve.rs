@@ -4,7 +4,7 @@
 use super::contacts::ContactSet;
 use super::interrupt::Interrupt;
 use super::path;
-use super::prepare::StepPlan;
+use super::prepare::{LoadNodes, StepPlan};
 use super::problem::StepProblem;
 use super::processes::Processes;
 use super::report::{Failure, StepError};
@@ -12,6 +12,7 @@ use super::step::{Step, Workspace};
 use super::system::LinearSystem;
 use crate::assembly::{Assembler, StepInput};
 use crate::contact::{Converged, NodeStatus};
+use crate::dofs::DofMap;
 use crate::grid::Grid;
 use crate::petsc::{LogEvent, STALLED, SessionGuard, SolveInfo, Tolerances};
 use std::time::Instant;
@@ -229,17 +230,24 @@ fn physical_residual<const D: usize>(
     Ok(xs)
 }
 
-/// The unknowns whose rows of the physical residual every process reads after a solve: the constrained
-/// ones of `sets` (the reactions) and those the contact sets read ([`ContactSet::read_rows`]: their
-/// forces and statuses).
+/// The unknowns every process reads after a solve, of the solution and of the physical residual: the
+/// constrained ones of `sets` (the reactions), those the contact sets read ([`ContactSet::read_rows`]:
+/// their forces and statuses) and the displacements of the loads' nodes `load_nodes` (the loads'
+/// displacements and external work; `dofs` numbers them).
 fn read_rows<const D: usize>(
     sets: &[Vec<usize>],
     contacts: &[Box<dyn ContactSet<D>>],
-    nf: usize,
+    (load_nodes, dofs): (&LoadNodes, &DofMap),
 ) -> Vec<usize> {
+    let nf = dofs.unknowns_per_node();
     let mut rows: Vec<usize> = sets.iter().flatten().copied().collect();
     for c in contacts {
         c.read_rows(nf, &mut rows);
+    }
+    for &(node, _) in load_nodes.iter().flatten() {
+        if let Some(a) = dofs.active_index(node) {
+            rows.extend((0..D).map(|c| a * nf + c));
+        }
     }
     rows
 }
@@ -335,6 +343,7 @@ impl<const D: usize> Step<'_, D> {
             loading,
             path,
             sets,
+            load_nodes,
             ..
         } = plan;
         let input = Self::step_input(
@@ -350,7 +359,7 @@ impl<const D: usize> Step<'_, D> {
         let in_contact = contacts.iter().any(|c| c.in_play());
         let mut solves = Solves::default();
         let mut phys = vec![0.0; dofs.len()];
-        let read = read_rows(sets, contacts, nf);
+        let read = read_rows(sets, contacts, (load_nodes, dofs));
         let procs = (processes, read.as_slice());
         // During the solves each process evaluates the points of its own rows; the physical residual
         // after each solve and the commit evaluate them all.
