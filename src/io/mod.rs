@@ -55,6 +55,27 @@ pub struct Field {
     pub description: &'static str,
 }
 
+impl Field {
+    /// Values per point and their layout in the dataset: (N) for a scalar, (N, 3) for a vector.
+    fn shape(&self) -> (usize, Layout) {
+        match self.kind {
+            Kind::Scalar => (1, Layout::Flat),
+            Kind::Vector => (3, Layout::Rows),
+        }
+    }
+}
+
+/// The connectivity's values of this process's points in their local order: their ids, their rows.
+fn connectivity<const D: usize>(shared: &SharedState<D>) -> Vec<i64> {
+    shared
+        .state
+        .particles
+        .id
+        .iter()
+        .map(|&i| i as i64)
+        .collect()
+}
+
 /// The point indices 0..N-1 (int64, shape (N)): the XDMF topology, one vertex cell per material point,
 /// without which ParaView's default reader makes no cells and its Surface representation draws nothing.
 pub const CONNECTIVITY: Field = Field {
@@ -693,20 +714,9 @@ impl RunOutput {
     ) -> hdf5_metno::Result<()> {
         let rows = &shared.rows;
         let mut f = SharedFile::create(shared.session, path, rows);
-        let ids: Vec<i64> = shared
-            .state
-            .particles
-            .id
-            .iter()
-            .map(|&i| i as i64)
-            .collect();
-        f.column(CONNECTIVITY.name, (1, Layout::Flat), &ids);
+        f.column(CONNECTIVITY.name, (1, Layout::Flat), &connectivity(shared));
         for (field, values) in FIELDS.iter().zip(self.point_values(shared)) {
-            let layout = match field.kind {
-                Kind::Scalar => (1, Layout::Flat),
-                Kind::Vector => (3, Layout::Rows),
-            };
-            f.column(field.name, layout, &values);
+            f.column(field.name, field.shape(), &values);
         }
         f.close(shared.session)
     }
@@ -768,20 +778,9 @@ impl RunOutput {
         path: &Path,
     ) -> Result<String, OutputError> {
         let mut crc = SharedCrc::new();
-        let ids: Vec<i64> = shared
-            .state
-            .particles
-            .id
-            .iter()
-            .map(|&i| i as i64)
-            .collect();
-        crc.column(&shared.rows, 1, &ids, i64::to_le_bytes);
+        crc.column(&shared.rows, 1, &connectivity(shared), i64::to_le_bytes);
         for (field, values) in FIELDS.iter().zip(self.point_values(shared)) {
-            let width = match field.kind {
-                Kind::Scalar => 1,
-                Kind::Vector => 3,
-            };
-            crc.column(&shared.rows, width, &values, f64::to_le_bytes);
+            crc.column(&shared.rows, field.shape().0, &values, f64::to_le_bytes);
         }
         let crc = crc.finish(shared.session).map_err(exchange_err(path))?;
         Ok(format!("{crc:08x}"))
