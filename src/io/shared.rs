@@ -128,18 +128,29 @@ impl PointRows {
         (width, layout): (usize, Layout),
         values: &[T],
     ) -> hdf5_metno::Result<hdf5_metno::Dataset> {
-        let ds = match layout {
+        let ds = self.create::<T>(file, name, (width, layout))?;
+        self.write_into(&ds, (width, layout), values)?;
+        Ok(ds)
+    }
+
+    /// Creates the dataset `name` of every process's points, `width` values per point laid out as
+    /// `layout` (collective).
+    fn create<T: H5Type>(
+        &self,
+        file: &hdf5_metno::File,
+        name: &str,
+        (width, layout): (usize, Layout),
+    ) -> hdf5_metno::Result<hdf5_metno::Dataset> {
+        match layout {
             Layout::Flat => file
                 .new_dataset::<T>()
                 .shape(self.total * width)
-                .create(name)?,
+                .create(name),
             Layout::Rows => file
                 .new_dataset::<T>()
                 .shape((self.total, width))
-                .create(name)?,
-        };
-        self.write_into(&ds, (width, layout), values)?;
-        Ok(ds)
+                .create(name),
+        }
     }
 
     /// This process's runs of `values` into the dataset `ds` (independent).
@@ -193,17 +204,14 @@ impl<'r> SharedFile<'r> {
         let Some(file) = &self.file else {
             return;
         };
-        let written = match &self.failed {
-            None => self.rows.write(file, name, shape, values).map(drop),
-            // Only the creation, which every process makes.
-            Some(_) => PointRows {
-                order: Vec::new(),
-                runs: Vec::new(),
-                total: self.rows.total,
-            }
-            .write::<T>(file, name, shape, &[])
-            .map(drop),
-        };
+        // The creation every process makes; its own part only while nothing failed here.
+        let written = self
+            .rows
+            .create::<T>(file, name, shape)
+            .and_then(|ds| match self.failed {
+                None => self.rows.write_into(&ds, shape, values),
+                Some(_) => Ok(()),
+            });
         if let Err(e) = written {
             self.failed.get_or_insert(e);
         }
