@@ -160,6 +160,24 @@ fn main() -> std::process::ExitCode {
             }
         }
     }
+    // A plain run whose solve is PETSc's on one core per process starts itself on a process per core
+    // (`launch::processes_for`); `--processes N` or RAYON_NUM_THREADS chooses otherwise.
+    if let Command::Run(
+        flags @ RunFlags {
+            processes: None, ..
+        },
+    ) = &cli.command
+        && !launch::under_a_launcher()
+        && let Some((n, ratio)) = run::automatic_processes(flags)
+    {
+        tracing::info!(
+            "stiffness-dominated steps (r = {ratio:.2e}): PETSc's multigrid solves them on one core per \
+             process, so this run starts itself on {n} processes (`--processes 1`: one process with \
+             threads)"
+        );
+        let failure = launch::relaunch(n);
+        tracing::warn!("{failure}; running on one process with threads");
+    }
     if let Command::Compare(args) = &cli.command {
         return std::process::ExitCode::from(compare::run_cli(args, &petsc_args[1..]));
     }

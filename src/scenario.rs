@@ -18,6 +18,7 @@ use crate::material::Material;
 use crate::model::PathControl;
 use crate::model::{Method, Parameters, Setup};
 use crate::particles::{ParticleError, Particles, SeedingParameter};
+use crate::solver_defaults;
 use crate::space::{Frame, lift3};
 use nalgebra::{Vector2, Vector3};
 use std::collections::HashMap;
@@ -233,6 +234,27 @@ impl Plan<'_> {
     /// The configuration the plan was made from.
     pub fn config(&self) -> &RunConfig {
         self.cfg
+    }
+
+    /// The steps' inertia ratio `r` before anything is seeded (`None`: quasi-static), from the densities
+    /// and P-wave moduli of the deformable bodies as [`solver_defaults::inertia_ratio`] takes it from the
+    /// seeded points.
+    pub fn inertia_ratio(&self) -> Option<f64> {
+        let time = &self.cfg.time;
+        if time.quasi_static {
+            return None;
+        }
+        let rho_over_modulus = self
+            .bodies
+            .iter()
+            .map(|b| b.density / solver_defaults::p_wave_modulus(&b.material))
+            .fold(f64::INFINITY, f64::min);
+        Some(solver_defaults::ratio(
+            rho_over_modulus,
+            self.cfg.grid.cell_size,
+            time.beta,
+            time.dt,
+        ))
     }
 
     /// The material points of the plane set-up, deformable and rigid, as seeding will place them

@@ -14,6 +14,7 @@
 //! needs a multigrid or a direct method. Every choice below can be overridden by `run.petsc_options` and,
 //! with the final word, by the command line.
 
+use crate::material::Material;
 use crate::model::Setup;
 use crate::petsc::{self, SessionGuard};
 use crate::space::Frame;
@@ -220,29 +221,49 @@ pub fn inertia_ratio<const D: usize>(setup: &Setup<D>) -> Option<f64> {
         let b = p.body[i] as usize;
         rho[b] = rho[b].min(p.mass[i] / p.vol0[i]);
     }
-    let ratio = setup
+    let rho_over_modulus = setup
         .params
         .materials
         .iter()
         .zip(&rho)
         .filter(|(_, r)| r.is_finite())
-        .map(|(m, r)| {
-            let e = m.elastic_moduli();
-            r / (e.bulk + 4.0 * e.shear / 3.0)
-        })
+        .map(|(m, r)| r / p_wave_modulus(m))
         .fold(f64::INFINITY, f64::min);
-    let h = setup.params.grid.cell_size();
-    let dt = setup.params.time.dt;
-    Some(ratio * h * h / (setup.params.time.beta * dt * dt))
+    let time = &setup.params.time;
+    Some(ratio(
+        rho_over_modulus,
+        setup.params.grid.cell_size(),
+        time.beta,
+        time.dt,
+    ))
+}
+
+/// The P-wave modulus `M = K + 4G/3` of a material (MPa).
+pub fn p_wave_modulus(material: &Material) -> f64 {
+    let e = material.elastic_moduli();
+    e.bulk + 4.0 * e.shear / 3.0
+}
+
+/// `r = (rho / M) h^2 / (beta dt^2)` from the density over the P-wave modulus (t/mm^3 per MPa, s^2/mm^2),
+/// the cell size `h` (mm), Newmark's `beta` and the step `dt` (s).
+pub fn ratio(rho_over_modulus: f64, h: f64, beta: f64, dt: f64) -> f64 {
+    rho_over_modulus * h * h / (beta * dt * dt)
+}
+
+impl StepClass {
+    /// The class of steps with the inertia ratio `ratio` (`None`: quasi-static).
+    pub fn of(ratio: Option<f64>) -> Self {
+        match ratio {
+            None => Self::QuasiStatic,
+            Some(ratio) if ratio >= STIFFNESS_DOMINATED_BELOW => Self::InertiaDominated { ratio },
+            Some(ratio) => Self::StiffnessDominated { ratio },
+        }
+    }
 }
 
 /// The class of the model's steps.
 pub fn classify<const D: usize>(setup: &Setup<D>) -> StepClass {
-    match inertia_ratio(setup) {
-        None => StepClass::QuasiStatic,
-        Some(ratio) if ratio >= STIFFNESS_DOMINATED_BELOW => StepClass::InertiaDominated { ratio },
-        Some(ratio) => StepClass::StiffnessDominated { ratio },
-    }
+    StepClass::of(inertia_ratio(setup))
 }
 
 /// The default options of the main solver for a class of steps in `D` dimensions (2 or 3: a plate) on

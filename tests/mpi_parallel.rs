@@ -625,3 +625,51 @@ fn a_load_across_the_bands_moves_as_in_serial() {
     }
     std::fs::remove_dir_all(&base).ok();
 }
+
+/// A plain `run` of stiffness-dominated steps (the elastic cantilever at 40,960 points, PETSc's
+/// multigrid) starts itself on a process per core, at least 10,000 points each; `--processes 1` and
+/// `RAYON_NUM_THREADS` keep one process with threads, and so does a run of inertia-dominated steps.
+#[test]
+fn a_plain_run_of_stiffness_dominated_steps_starts_a_process_per_core() {
+    let exe = env!("CARGO_BIN_EXE_mpm-concrete");
+    let base = std::env::temp_dir().join(format!("mpmc-mpi-auto-{}", std::process::id()));
+    let root = env!("CARGO_MANIFEST_DIR");
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let processes_of = |name: &str, config: &str, extra: &[&str], threads: Option<&str>| -> usize {
+        let dir = base.join(name);
+        let mut cmd = Command::new(exe);
+        cmd.args([
+            "run",
+            &format!("{root}/{config}"),
+            "--steps",
+            "1",
+            "--quiet",
+        ])
+        .arg("--output")
+        .arg(&dir)
+        .arg("--overwrite")
+        .args(extra);
+        if let Some(n) = threads {
+            cmd.env("RAYON_NUM_THREADS", n);
+        }
+        let out = cmd.output().expect("run");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{config} {extra:?} failed:\n{stderr}");
+        let header = stderr
+            .lines()
+            .find(|l| l.contains("material points"))
+            .unwrap_or_else(|| panic!("no header line in:\n{stderr}"));
+        header
+            .split(", ")
+            .find_map(|w| w.strip_suffix(" processes")?.parse().ok())
+            .unwrap_or(1)
+    };
+    let cantilever = "configs/bench/cantilever-41k.toml";
+    assert_eq!(processes_of("plain", cantilever, &[], None), cores.min(4));
+    let one = ["--processes", "1"];
+    assert_eq!(processes_of("one", cantilever, &one, None), 1);
+    assert_eq!(processes_of("threads", cantilever, &[], Some("2")), 1);
+    // The CT demo at 4.3 m/s: inertia-dominated, threads.
+    assert_eq!(processes_of("ct", "configs/ct-demo.toml", &[], None), 1);
+    std::fs::remove_dir_all(&base).ok();
+}

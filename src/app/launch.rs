@@ -3,6 +3,7 @@
 //! included). The processes run the same command line, `--processes N` included, and check that the
 //! launcher gave them N.
 
+use crate::solver_defaults::StepClass;
 use std::ffi::OsString;
 use std::os::unix::process::CommandExt;
 use std::process::Command;
@@ -50,6 +51,61 @@ pub fn needs_launcher(processes: usize) -> Result<bool, String> {
     }
 }
 
+/// Points per process below which a plain `run` does not start a second process: the elastic
+/// cantilever's 10 steps at 10,240 points took the same time on 2 processes as on one with threads, at
+/// 40,960 points 0.75x (`docs/benchmarks.md`, "Both cores in the solve by default").
+pub const POINTS_PER_PROCESS: f64 = 10_000.0;
+
+/// What a plain `run` (no `--processes`, not under a launcher) knows when it chooses between threads and
+/// processes: the class of its steps, the points and memory its plan needs, the memory available, the
+/// cores.
+#[derive(Debug, Clone, Copy)]
+pub struct Machine {
+    /// The class of the run's steps (`solver_defaults::StepClass::of` the plan's inertia ratio).
+    pub class: StepClass,
+    /// The material points the plan seeds.
+    pub points: f64,
+    /// The memory one process of the run needs (bytes).
+    pub bytes: f64,
+    /// The memory available (bytes), if known.
+    pub available: Option<f64>,
+    /// The cores this process may use.
+    pub cores: usize,
+}
+
+/// How many processes a plain `run` starts itself on (issue 46 item 4: both cores busy in every phase,
+/// the solve included, without the user knowing `mpirun`). Threads share the point loops, GMRES's
+/// products and its ILU(0) (the inertia-dominated steps' solver), and there one process with threads is
+/// the faster on two cores (the half-resolution CT at 4.3 m/s: two processes 1.16x slower). The
+/// stiffness-dominated steps' multigrid and field split (BoomerAMG) are PETSc's, one core per process:
+/// there processes are the faster (the half-resolution CT at 0.035 m/s 0.81x the time of threads, the
+/// cantilever at 40,960 points 0.75x). So: one process per core for stiffness-dominated steps, at least
+/// [`POINTS_PER_PROCESS`] points each, if their memory fits; one process otherwise (1 is "threads").
+pub fn processes_for(m: Machine) -> usize {
+    if !matches!(m.class, StepClass::StiffnessDominated { .. }) {
+        return 1;
+    }
+    let by_points = (m.points / POINTS_PER_PROCESS).floor().max(1.0) as usize;
+    let mut n = m.cores.min(by_points).max(1);
+    if let Some(available) = m.available {
+        while n > 1 && m.bytes * n as f64 > available {
+            n -= 1;
+        }
+    }
+    n
+}
+
+/// Whether the launcher (`$MPIEXEC` or `mpirun`) can be found: a path, or a name on `PATH`.
+pub fn launcher_found() -> bool {
+    let launcher = std::env::var_os(LAUNCHER_VARIABLE).unwrap_or_else(|| "mpirun".into());
+    let path = std::path::Path::new(&launcher);
+    if path.components().count() > 1 {
+        return path.is_file();
+    }
+    std::env::var_os("PATH")
+        .is_some_and(|dirs| std::env::split_paths(&dirs).any(|d| d.join(path).is_file()))
+}
+
 /// The launcher's command for `processes` processes of this program with the same arguments `args`
 /// (the program's and PETSc's, without the program's name): `$MPIEXEC` or `mpirun`, `-n N`, this
 /// executable. For Open MPI the environment allows a run as root and more processes than cores (a
@@ -92,6 +148,47 @@ pub fn relaunch(processes: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn machine(ratio: f64, points: f64, cores: usize) -> Machine {
+        Machine {
+            class: StepClass::of(Some(ratio)),
+            points,
+            bytes: 5e8,
+            available: Some(8e9),
+            cores,
+        }
+    }
+
+    #[test]
+    fn stiffness_dominated_steps_run_on_a_process_per_core_inertia_dominated_on_threads() {
+        // The CT at 0.035 m/s (r = 0.0098) and at 4.3 m/s (r = 0.25), 155,600 points.
+        assert_eq!(processes_for(machine(0.0098, 155_600.0, 2)), 2);
+        assert_eq!(processes_for(machine(0.0098, 155_600.0, 64)), 15);
+        assert_eq!(processes_for(machine(0.25, 155_600.0, 2)), 1);
+        assert_eq!(processes_for(machine(0.0098, 155_600.0, 1)), 1);
+        let quasi_static = Machine {
+            class: StepClass::of(None),
+            ..machine(0.0, 155_600.0, 2)
+        };
+        assert_eq!(processes_for(quasi_static), 1);
+        // Too few points for two: the cantilever at 10,240 points.
+        assert_eq!(processes_for(machine(1e-4, 10_240.0, 2)), 1);
+        assert_eq!(processes_for(machine(1e-4, 40_960.0, 8)), 4);
+    }
+
+    #[test]
+    fn no_more_processes_than_the_memory_holds() {
+        let m = Machine {
+            bytes: 3e9,
+            ..machine(0.0098, 155_600.0, 8)
+        };
+        assert_eq!(processes_for(m), 2);
+        let m = Machine {
+            bytes: 9e9,
+            ..machine(0.0098, 155_600.0, 8)
+        };
+        assert_eq!(processes_for(m), 1);
+    }
 
     #[test]
     fn the_launcher_runs_this_program_with_the_same_arguments() {

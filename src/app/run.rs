@@ -13,7 +13,7 @@ mod steps;
 mod summary;
 
 use super::args::launcher_rank;
-use super::{bad, processes_per_node, share_cores};
+use super::{bad, launch, processes_per_node, share_cores};
 use crate::checkpoint;
 use crate::config::{self, ConfigError, RunConfig};
 use crate::io::RunOutput;
@@ -24,7 +24,7 @@ use crate::rundir::{self, DirLock, Holder, RunIdentity, RunRecord};
 use crate::scenario::{self, Plan, RunSetup};
 use crate::schema::file;
 use crate::solver::{Interrupt, Simulation, StepError, StepReport};
-use crate::solver_defaults::{self, FALLBACK_PREFIX};
+use crate::solver_defaults::{self, FALLBACK_PREFIX, StepClass};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use resume::{check_resume, command_line, refusal, resume_command};
@@ -69,7 +69,9 @@ pub struct RunFlags {
     pub set: Vec<String>,
     /// Run on N processes: the program starts itself N times under `mpirun -n N` (or the launcher named
     /// in `MPIEXEC`), each process using its share of the cores for its point loops. Under a launcher
-    /// already, N must be the number of processes it started.
+    /// already, N must be the number of processes it started. Without it a run of stiffness-dominated
+    /// steps starts itself on a process per core, any other on one process with threads
+    /// (docs/configuration.md); `--processes 1` keeps one process.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub processes: Option<u32>,
 }
@@ -153,6 +155,32 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
     }
     Session::finalize(session)?;
     Ok(())
+}
+
+/// The number of processes a plain `run` (no `--processes`, not under a launcher) starts itself on
+/// ([`launch::processes_for`]), with the inertia ratio of its steps; `None` where it runs here: one
+/// process is the faster, `RAYON_NUM_THREADS` chose threads, no launcher is installed, or the input is
+/// bad (which the run itself then reports).
+pub fn automatic_processes(flags: &RunFlags) -> Option<(usize, f64)> {
+    if std::env::var_os("RAYON_NUM_THREADS").is_some() || !launch::launcher_found() {
+        return None;
+    }
+    let mut overrides = flags.set.clone();
+    if let Some(n) = flags.steps {
+        overrides.push(format!("run.steps={n}"));
+    }
+    let (cfg, _) = RunConfig::load(&flags.config, &overrides).ok()?;
+    let plan = scenario::plan(&cfg).ok()?;
+    let ratio = plan.inertia_ratio()?;
+    let need = preflight::memory_need(&plan).ok()?;
+    let machine = launch::Machine {
+        class: StepClass::of(Some(ratio)),
+        points: need.points,
+        bytes: need.bytes,
+        available: preflight::memory_limit().map(|l| l.bytes),
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    Some((launch::processes_for(machine), ratio)).filter(|(n, _)| *n > 1)
 }
 
 /// The checks of the input before the run's plan: the configuration with its overrides (--steps is
