@@ -168,15 +168,15 @@ fn main() -> std::process::ExitCode {
         },
     ) = &cli.command
         && !launch::under_a_launcher()
-        && let Some((n, ratio)) = run::automatic_processes(flags)
+        && let Some((n, ratio)) = run::automatic_processes(flags, &petsc_args[1..])
     {
         tracing::info!(
-            "stiffness-dominated steps (r = {ratio:.2e}): PETSc's multigrid solves them on one core per \
-             process, so this run starts itself on {n} processes (`--processes 1`: one process with \
-             threads)"
+            "stiffness-dominated steps (r = {ratio:.2e}): their solver (multigrid or field split) is \
+             PETSc's, one core per process, so this run starts itself on {n} processes (`--processes \
+             1`: one process with threads)"
         );
         let failure = launch::relaunch(n);
-        tracing::warn!("{failure}; running on one process with threads");
+        tracing::warn!("{failure}; this run goes on with one process and threads");
     }
     if let Command::Compare(args) = &cli.command {
         return std::process::ExitCode::from(compare::run_cli(args, &petsc_args[1..]));

@@ -627,8 +627,9 @@ fn a_load_across_the_bands_moves_as_in_serial() {
 }
 
 /// A plain `run` of stiffness-dominated steps (the elastic cantilever at 40,960 points, PETSc's
-/// multigrid) starts itself on a process per core, at least 10,000 points each; `--processes 1` and
-/// `RAYON_NUM_THREADS` keep one process with threads, and so does a run of inertia-dominated steps.
+/// multigrid) starts itself on a process per core, at least 10,000 points each; `--processes 1`,
+/// `RAYON_NUM_THREADS` and a `-pc_type` of the user's keep one process with threads, and so does a run
+/// of inertia-dominated steps.
 #[test]
 fn a_plain_run_of_stiffness_dominated_steps_starts_a_process_per_core() {
     let exe = env!("CARGO_BIN_EXE_mpm-concrete");
@@ -669,6 +670,9 @@ fn a_plain_run_of_stiffness_dominated_steps_starts_a_process_per_core() {
     let one = ["--processes", "1"];
     assert_eq!(processes_of("one", cantilever, &one, None), 1);
     assert_eq!(processes_of("threads", cantilever, &[], Some("2")), 1);
+    // The user chose the preconditioner: one process.
+    let lu = ["-pc_type", "lu"];
+    assert_eq!(processes_of("chosen", cantilever, &lu, None), 1);
     // The CT demo at 4.3 m/s: inertia-dominated, threads.
     assert_eq!(processes_of("ct", "configs/ct-demo.toml", &[], None), 1);
     std::fs::remove_dir_all(&base).ok();

@@ -106,10 +106,16 @@ pub fn launcher_found() -> bool {
         .is_some_and(|dirs| std::env::split_paths(&dirs).any(|d| d.join(path).is_file()))
 }
 
+/// Seconds Open MPI's `mpirun` waits after Ctrl-C before it sends the processes SIGTERM, and again before
+/// SIGKILL (its default 1 s): time for the processes to write the checkpoint of the last finished step,
+/// which a large run may need more than a second for.
+const SIGKILL_TIMEOUT: &str = "10";
+
 /// The launcher's command for `processes` processes of this program with the same arguments `args`
 /// (the program's and PETSc's, without the program's name): `$MPIEXEC` or `mpirun`, `-n N`, this
 /// executable. For Open MPI the environment allows a run as root and more processes than cores (a
-/// container's user is often root; oversubscription only slows a run that asks for it).
+/// container's user is often root; oversubscription only slows a run that asks for it) and gives the
+/// processes [`SIGKILL_TIMEOUT`] s after Ctrl-C to save the run.
 pub fn command(processes: usize, args: &[OsString]) -> std::io::Result<Command> {
     let launcher = std::env::var_os(LAUNCHER_VARIABLE).unwrap_or_else(|| "mpirun".into());
     let mut cmd = Command::new(launcher);
@@ -121,6 +127,7 @@ pub fn command(processes: usize, args: &[OsString]) -> std::io::Result<Command> 
         ("OMPI_ALLOW_RUN_AS_ROOT", "1"),
         ("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1"),
         ("OMPI_MCA_rmaps_base_oversubscribe", "1"),
+        ("OMPI_MCA_odls_base_sigkill_timeout", SIGKILL_TIMEOUT),
     ] {
         if std::env::var_os(name).is_none() {
             cmd.env(name, value);
@@ -140,7 +147,7 @@ pub fn relaunch(processes: usize) -> String {
     };
     let launcher = std::env::var(LAUNCHER_VARIABLE).unwrap_or_else(|_| "mpirun".into());
     format!(
-        "--processes {processes}: cannot start `{launcher}` ({error}): install Open MPI \
+        "{processes} processes: cannot start `{launcher}` ({error}): install Open MPI \
          (scripts/install-deps.sh) or name the launcher in {LAUNCHER_VARIABLE}"
     )
 }

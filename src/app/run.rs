@@ -159,9 +159,11 @@ pub fn run(own_args: &[String], petsc_args: &[String], flags: RunFlags) -> Resul
 
 /// The number of processes a plain `run` (no `--processes`, not under a launcher) starts itself on
 /// ([`launch::processes_for`]), with the inertia ratio of its steps; `None` where it runs here: one
-/// process is the faster, `RAYON_NUM_THREADS` chose threads, no launcher is installed, or the input is
-/// bad (which the run itself then reports).
-pub fn automatic_processes(flags: &RunFlags) -> Option<(usize, f64)> {
+/// process is the faster, `RAYON_NUM_THREADS` chose threads, no launcher is installed, the user's PETSc
+/// options (`petsc_args`, the configuration's `run.petsc_options`, `PETSC_OPTIONS`) choose the
+/// preconditioner (`-pc_type`: e.g. `ilu`, which PETSc has for one process only), bodies move on their
+/// own velocity fields (one process only), or the input is bad (which the run itself then reports).
+pub fn automatic_processes(flags: &RunFlags, petsc_args: &[String]) -> Option<(usize, f64)> {
     if std::env::var_os("RAYON_NUM_THREADS").is_some() || !launch::launcher_found() {
         return None;
     }
@@ -170,7 +172,17 @@ pub fn automatic_processes(flags: &RunFlags) -> Option<(usize, f64)> {
         overrides.push(format!("run.steps={n}"));
     }
     let (cfg, _) = RunConfig::load(&flags.config, &overrides).ok()?;
+    let environment = std::env::var("PETSC_OPTIONS").unwrap_or_default();
+    let chosen = petsc_args
+        .iter()
+        .map(String::as_str)
+        .chain(cfg.run.petsc_options.split_whitespace())
+        .chain(environment.split_whitespace())
+        .any(|o| o == "-pc_type");
     let plan = scenario::plan(&cfg).ok()?;
+    if chosen || plan.num_fields() > 1 {
+        return None;
+    }
     let ratio = plan.inertia_ratio()?;
     let need = preflight::memory_need(&plan).ok()?;
     let machine = launch::Machine {

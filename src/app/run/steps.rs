@@ -275,7 +275,8 @@ impl Steps<'_> {
         )
     }
 
-    /// A step's line: on the progress bar, and with `--quiet` on standard error (process 0).
+    /// A step's line: on the progress bar, and on standard error (process 0) with `--quiet` or where no
+    /// bar is drawn.
     fn show(&self, report: &StepReport, root: bool) {
         let msg = format!(
             "t = {:.2} us, Newton {}, KSP {}, {}",
@@ -284,7 +285,9 @@ impl Steps<'_> {
             report.solve.linear_iterations,
             report.solve.reason_name
         );
-        if self.quiet && root {
+        // Log lines where no bar is drawn: --quiet, or stderr not a terminal (a file, or the pipe of
+        // an MPI launcher).
+        if (self.quiet || self.bar.is_hidden()) && root {
             eprintln!("step {}: {msg}, {:.2} s", report.step, report.wall_total);
         }
         self.bar.set_message(msg);
