@@ -61,7 +61,7 @@ fn main() {
         "Vec(AssemblyBegin|AssemblyEnd|GetArray|RestoreArray|GetArrayRead|RestoreArrayRead|GetLocalSize|GetSize)",
         "Vec(GetOwnershipRange|Norm|AXPY|WAXPY|Scale|Dot|ScatterCreate|ScatterCreateToAll|ScatterBegin|ScatterEnd|ScatterDestroy)",
         "Mat(Create|SetSizes|SetType|SetBlockSize|SetFromOptions|SetUp|Destroy|SetPreallocationCOO|SetValuesCOO)",
-        "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|SetOption)",
+        "Mat(SetValues|AssemblyBegin|AssemblyEnd|ZeroEntries|GetOwnershipRange|GetSize|GetLocalSize|Mult|MultAdd|SetOption|CreateVecs)",
         "Mat(SetNearNullSpace|NullSpaceCreate|NullSpaceDestroy|GetType|GetInfo|XAIJSetPreallocation|SetValuesBlocked)",
         "MatSeq(AIJ|BAIJ)(GetArray|RestoreArray)|MatSeqBAIJSetColumnIndices|MatCreateSeqAIJWithArrays|MatSeqAIJ(GetArrayRead|RestoreArrayRead)",
         "PetscContainer(Create|SetPointer|SetUserDestroy|Destroy)|PetscObjectCompose",
@@ -78,7 +78,7 @@ fn main() {
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",
         "SNES(GetConvergedReasonString|SetUp|GetLinearSolveFailures|GetTolerances|GetLagPreconditioner|SetLagPreconditioner)|KSPGetConvergedReasonString|MatNullSpaceCreateRigidBody",
         "SNES(SetConvergenceTest|ConvergedDefault)",
-        "IS(CreateGeneral|CreateStride|Destroy|SetBlockSize)",
+        "IS(CreateGeneral|CreateStride|CreateBlock|Destroy|SetBlockSize)",
         "mpmc_.*",
     ];
     let mut builder = bindgen::Builder::default()

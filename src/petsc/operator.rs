@@ -1,16 +1,21 @@
-//! The Jacobian's product with a vector on all of the process's threads: a PETSc shell matrix that GMRES
-//! uses as its operator while the preconditioner is built from the assembled Jacobian.
+//! The Jacobian's product with a vector by the solver's own kernel: a PETSc shell matrix that GMRES uses
+//! as its operator while the preconditioner is built from the assembled Jacobian.
 //!
-//! PETSc (Debian's build has no OpenMP) multiplies a matrix on one core. On one process with several
-//! threads the point loops run on all of them but the Krylov solver's products on one; this operator
-//! reads the values of the assembled Jacobian (PETSc's own arrays, no copy) and multiplies by block rows
-//! in parallel (rayon), each row summed in the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`),
-//! so that the product has PETSc's bits for the CT's block sizes. `SNESSetJacobian(snes, operator,
-//! jacobian)`: Krylov iterations use the operator, the preconditioner (ILU, field split, ...) the
-//! Jacobian.
+//! PETSc (Debian's build has no OpenMP) multiplies a matrix on one core, and its block kernel
+//! (`MatMult_SeqBAIJ_3`) took 2.99 ms per product of the half-resolution CT's Jacobian where this one
+//! takes 1.33 ms on the same core (`docs/benchmarks.md`, "The Jacobian's product by the solver's kernel
+//! on every process"). This operator reads the values of the assembled Jacobian (PETSc's own arrays, no
+//! copy) and multiplies by block rows in parallel on the process's threads (rayon), each row summed in
+//! the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`), so that the product has PETSc's bits for
+//! the CT's block sizes. On several processes (`mpibaij`) it multiplies the diagonal part so while the
+//! values of the other processes' columns arrive, then adds the off-diagonal part's product as PETSc's
+//! `MatMult_MPIBAIJ` does. `SNESSetJacobian(snes, operator, jacobian)`: Krylov iterations use the
+//! operator, the preconditioner (ILU, field split, ...) the Jacobian.
 
+use super::block_parts::block_pattern;
 use super::{
-    BlockCsr, BlockLayout, Matrix, PetscError, Result, Vector, check, comm_world, sys, to_petsc_int,
+    BlockCsr, BlockLayout, Matrix, PetscError, PetscInt, Result, Vector, check, comm_world, sys,
+    to_petsc_int,
 };
 use rayon::prelude::*;
 use std::ffi::c_void;
@@ -18,11 +23,22 @@ use std::ffi::c_void;
 /// Block rows per parallel task.
 const CHUNK: usize = 256;
 
-/// What the product needs: the Jacobian (a counted reference, released when PETSc destroys the shell)
-/// and its block pattern.
+/// What the product needs: the Jacobian (a counted reference, released when PETSc destroys the shell),
+/// the part of it the kernel multiplies (the Jacobian itself on one process, its diagonal part on
+/// several) with its block pattern, and on several processes what the off-diagonal part needs.
 struct Product {
     jacobian: sys::Mat,
+    local: sys::Mat,
     rows: Rows,
+    ghosts: Option<Ghosts>,
+}
+
+/// The off-diagonal part of a process's rows (`seqbaij`, columns compressed to the other processes'
+/// block columns it holds, PETSc's `garray`), the scatter of those entries of `x` and their values.
+struct Ghosts {
+    off: sys::Mat,
+    scatter: sys::VecScatter,
+    values: sys::PetscVec,
 }
 
 /// The block rows of the product: how the values are laid out, the block size and the block pattern.
@@ -39,21 +55,34 @@ pub struct ThreadedOperator {
 }
 
 impl ThreadedOperator {
-    /// The threaded product of `jacobian` (its whole pattern `pattern`), or `None` where it does not
-    /// apply: a matrix type whose values are not one process's CSR arrays (`seqaij`: scalar rows,
-    /// `seqbaij`: column-major blocks; the MPI types of several processes are not), one thread, or a
-    /// block size other than the 2 to 4 unknowns per node of 2D and 3D.
+    /// The product of `jacobian` (this process's rows of it: the block pattern `pattern`) by the solver's
+    /// kernel, or `None` where it does not apply: a matrix type whose values are not CSR arrays the
+    /// kernel reads (`seqaij`: scalar rows, `seqbaij`: column-major blocks, `mpibaij`: a process's
+    /// diagonal part in blocks; `mpiaij` is not), or a block size other than the 2 to 4 unknowns per
+    /// node of 2D and 3D. The type and block size are the same on every process, so every process
+    /// declines or makes the shell (collective) alike.
     pub fn over(jacobian: &Matrix, pattern: &BlockCsr<'_>) -> Result<Option<Self>> {
-        let layout = match jacobian.type_name()?.as_str() {
-            "seqaij" => BlockLayout::Rows,
-            "seqbaij" => BlockLayout::Blocks,
-            _ => return Ok(None),
-        };
-        if rayon::current_num_threads() < 2 || pattern.first != 0 || !(2..=4).contains(&pattern.bs)
-        {
+        if !(2..=4).contains(&pattern.bs) {
             return Ok(None);
         }
-        let n = to_petsc_int(pattern.block_rows() * pattern.bs, "MatCreateShell")?;
+        let kind = jacobian.type_name()?;
+        let seq = |layout| Rows {
+            layout,
+            bs: pattern.bs,
+            row_ptr: pattern.row_ptr.to_vec(),
+            cols: pattern.cols.to_vec(),
+        };
+        let (local, rows, ghosts) = match kind.as_str() {
+            "seqaij" if pattern.first == 0 => (jacobian.raw, seq(BlockLayout::Rows), None),
+            "seqbaij" if pattern.first == 0 => (jacobian.raw, seq(BlockLayout::Blocks), None),
+            // SAFETY: a valid assembled `mpibaij` matrix (its pattern set), kept alive by the shell.
+            "mpibaij" => unsafe { parts(jacobian.raw, pattern.bs)? },
+            _ => return Ok(None),
+        };
+        let n = to_petsc_int(
+            rows.row_ptr.len().saturating_sub(1) * rows.bs,
+            "MatCreateShell",
+        )?;
         // SAFETY: PETSc takes a reference to the Jacobian; released in `destroy` with the context.
         check(
             unsafe { sys::PetscObjectReference(jacobian.raw.cast()) },
@@ -61,18 +90,15 @@ impl ThreadedOperator {
         )?;
         let product = Box::new(Product {
             jacobian: jacobian.raw,
-            rows: Rows {
-                layout,
-                bs: pattern.bs,
-                row_ptr: pattern.row_ptr.to_vec(),
-                cols: pattern.cols.to_vec(),
-            },
+            local,
+            rows,
+            ghosts,
         });
         let ctx = Box::into_raw(product).cast::<c_void>();
         let mut raw: sys::Mat = std::ptr::null_mut();
         // SAFETY: out-parameter; the shell keeps `ctx` until its destroy operation frees it.
         let made = check(
-            unsafe { sys::MatCreateShell(comm_world(), n, n, n, n, ctx, &mut raw) },
+            unsafe { sys::MatCreateShell(comm_world(), n, n, -1, -1, ctx, &mut raw) },
             "MatCreateShell",
         );
         if let Err(e) = made {
@@ -126,6 +152,107 @@ impl ThreadedOperator {
     }
 }
 
+/// The diagonal part of the `mpibaij` matrix `m` with its block pattern, and its off-diagonal part with
+/// the scatter (collective) of the entries of `x` its columns stand for.
+///
+/// # Safety
+/// `m` is a valid `mpibaij` matrix whose structure is assembled; the parts are used while it lives.
+unsafe fn parts(m: sys::Mat, bs: usize) -> Result<(sys::Mat, Rows, Option<Ghosts>)> {
+    let (mut diag, mut off, mut garray): (sys::Mat, sys::Mat, *const PetscInt) =
+        (std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null());
+    // SAFETY: out-parameters; the parts and `garray` belong to the matrix.
+    check(
+        unsafe { sys::MatMPIBAIJGetSeqBAIJ(m, &mut diag, &mut off, &mut garray) },
+        "MatMPIBAIJGetSeqBAIJ",
+    )?;
+    // SAFETY: the diagonal part is a valid `seqbaij` matrix.
+    let (row_ptr, cols) = unsafe { block_pattern(diag)? }.ok_or_else(|| PetscError {
+        code: 83, // PETSC_ERR_USER
+        call: "MatGetRowIJ",
+        message: "PETSc gave no block pattern of the diagonal part".into(),
+    })?;
+    let (mut rows_off, mut n) = (0, 0);
+    // SAFETY: out-parameters of a valid matrix.
+    check(
+        unsafe { sys::MatGetLocalSize(off, &mut rows_off, &mut n) },
+        "MatGetLocalSize",
+    )?;
+    let compressed = usize::try_from(n).unwrap_or(0) / bs;
+    let columns: Vec<PetscInt> = if compressed == 0 || garray.is_null() {
+        Vec::new()
+    } else {
+        // SAFETY: `garray` lists the global block column of each of the part's `compressed` columns.
+        unsafe { std::slice::from_raw_parts(garray, compressed) }.to_vec()
+    };
+    let count = to_petsc_int(columns.len(), "ISCreateBlock")?;
+    let block = to_petsc_int(bs, "ISCreateBlock")?;
+    let mut ghosts = Ghosts {
+        off,
+        scatter: std::ptr::null_mut(),
+        values: std::ptr::null_mut(),
+    };
+    // SAFETY: a sequential vector of the ghost entries, an index set of their blocks (copied, destroyed
+    // below), a vector laid out like `m`'s columns (destroyed below) and the scatter between them, owned
+    // by `ghosts` (freed by `release`, or here on failure). Collective: every process makes its scatter.
+    let made = unsafe {
+        let self_comm = sys::mpmc_comm_self();
+        let mut code = sys::VecCreateSeq(self_comm, count * block, &mut ghosts.values);
+        let (mut from, mut like): (sys::IS, sys::PetscVec) =
+            (std::ptr::null_mut(), std::ptr::null_mut());
+        if code == 0 {
+            code = sys::ISCreateBlock(
+                self_comm,
+                block,
+                count,
+                columns.as_ptr(),
+                sys::PetscCopyMode_PETSC_COPY_VALUES,
+                &mut from,
+            );
+        }
+        if code == 0 {
+            code = sys::MatCreateVecs(m, &mut like, std::ptr::null_mut());
+        }
+        if code == 0 {
+            code = sys::VecScatterCreate(
+                like,
+                from,
+                ghosts.values,
+                std::ptr::null_mut(),
+                &mut ghosts.scatter,
+            );
+        }
+        sys::ISDestroy(&mut from);
+        sys::VecDestroy(&mut like);
+        code
+    };
+    if let Err(e) = check(made, "VecScatterCreate") {
+        // SAFETY: made above (null where not), not used afterwards.
+        unsafe { ghosts.free() };
+        return Err(e);
+    }
+    let rows = Rows {
+        layout: BlockLayout::Blocks,
+        bs,
+        row_ptr,
+        cols,
+    };
+    Ok((diag, rows, Some(ghosts)))
+}
+
+impl Ghosts {
+    /// Destroys the scatter and the ghost values.
+    ///
+    /// # Safety
+    /// Made by [`parts`]; not used afterwards.
+    unsafe fn free(&mut self) {
+        // SAFETY: the caller's contract; PETSc's destroy functions accept null handles.
+        unsafe {
+            sys::VecScatterDestroy(&mut self.scatter);
+            sys::VecDestroy(&mut self.values);
+        }
+    }
+}
+
 /// Frees a context made by [`ThreadedOperator::over`] and releases its reference to the Jacobian.
 ///
 /// # Safety
@@ -133,6 +260,10 @@ impl ThreadedOperator {
 unsafe fn release(ctx: *mut c_void) -> sys::PetscErrorCode {
     // SAFETY: the caller's contract.
     let mut product = unsafe { Box::from_raw(ctx.cast::<Product>()) };
+    if let Some(g) = product.ghosts.as_mut() {
+        // SAFETY: made by `parts` for this product, freed once.
+        unsafe { g.free() };
+    }
     // SAFETY: the reference taken in `over`.
     unsafe { sys::MatDestroy(&mut product.jacobian) }
 }
@@ -179,6 +310,17 @@ unsafe extern "C" fn multiply(
         let nnz = rows.row_ptr.last().copied().unwrap_or(0) * rows.bs * rows.bs;
         let (mut xa, mut ya, mut va): (*const f64, *mut f64, *const f64) =
             (std::ptr::null(), std::ptr::null_mut(), std::ptr::null());
+        let (forward, insert) = (
+            sys::ScatterMode_SCATTER_FORWARD,
+            sys::InsertMode_INSERT_VALUES,
+        );
+        if let Some(g) = &product.ghosts {
+            // SAFETY: the scatter of `x`'s layout into the ghost values, ended below.
+            check(
+                unsafe { sys::VecScatterBegin(g.scatter, x, g.values, insert, forward) },
+                "VecScatterBegin",
+            )?;
+        }
         // SAFETY: PETSc's arrays of the vectors and of the Jacobian's values, restored below; the read
         // accessors leave the Jacobian's state (and so its preconditioner) alone.
         unsafe {
@@ -186,13 +328,13 @@ unsafe extern "C" fn multiply(
             check(sys::VecGetArray(y, &mut ya), "VecGetArray")?;
             match rows.layout {
                 BlockLayout::Rows => check(
-                    sys::MatSeqAIJGetArrayRead(product.jacobian, &mut va),
+                    sys::MatSeqAIJGetArrayRead(product.local, &mut va),
                     "MatSeqAIJGetArrayRead",
                 )?,
                 BlockLayout::Blocks => {
                     let mut v: *mut f64 = std::ptr::null_mut();
                     check(
-                        sys::MatSeqBAIJGetArray(product.jacobian, &mut v),
+                        sys::MatSeqBAIJGetArray(product.local, &mut v),
                         "MatSeqBAIJGetArray",
                     )?;
                     va = v;
@@ -206,20 +348,30 @@ unsafe extern "C" fn multiply(
             rows.apply(vs, xs, ys);
             match rows.layout {
                 BlockLayout::Rows => check(
-                    sys::MatSeqAIJRestoreArrayRead(product.jacobian, &mut va),
+                    sys::MatSeqAIJRestoreArrayRead(product.local, &mut va),
                     "MatSeqAIJRestoreArrayRead",
                 )?,
                 BlockLayout::Blocks => {
                     // MatSeqBAIJRestoreArray does not mark the values changed (see fill_block_rows).
                     let mut v = va.cast_mut();
                     check(
-                        sys::MatSeqBAIJRestoreArray(product.jacobian, &mut v),
+                        sys::MatSeqBAIJRestoreArray(product.local, &mut v),
                         "MatSeqBAIJRestoreArray",
                     )?;
                 }
             }
             check(sys::VecRestoreArray(y, &mut ya), "VecRestoreArray")?;
             check(sys::VecRestoreArrayRead(x, &mut xa), "VecRestoreArrayRead")?;
+        }
+        if let Some(g) = &product.ghosts {
+            // SAFETY: the scatter begun above; then `y += off * ghosts`, as `MatMult_MPIBAIJ` adds it.
+            unsafe {
+                check(
+                    sys::VecScatterEnd(g.scatter, x, g.values, insert, forward),
+                    "VecScatterEnd",
+                )?;
+                check(sys::MatMultAdd(g.off, g.values, y, y), "MatMultAdd")?;
+            }
         }
         Ok(())
     };
