@@ -3,8 +3,8 @@
 //!
 //! PETSc (Debian's build has no OpenMP) multiplies a matrix on one core, and its block kernel
 //! (`MatMult_SeqBAIJ_3`) took 2.99 ms per product of the half-resolution CT's Jacobian where this one
-//! takes 1.33 ms on the same core (`docs/benchmarks.md`, "The Jacobian's product by the solver's kernel
-//! on every process"). This operator reads the values of the assembled Jacobian (PETSc's own arrays, no
+//! takes 1.33 ms on the same core (`docs/benchmarks.md`, "GMRES's product by the solver's kernel on one
+//! thread and on every process"). This operator reads the values of the assembled Jacobian (PETSc's own arrays, no
 //! copy) and multiplies by block rows in parallel on the process's threads (rayon), each row summed in
 //! the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`), so that the product has PETSc's bits for
 //! the CT's block sizes. On several processes (`mpibaij`) it multiplies the diagonal part so while the
@@ -82,12 +82,25 @@ impl ThreadedOperator {
         let n = to_petsc_int(
             rows.row_ptr.len().saturating_sub(1) * rows.bs,
             "MatCreateShell",
-        )?;
+        );
         // SAFETY: PETSc takes a reference to the Jacobian; released in `destroy` with the context.
-        check(
-            unsafe { sys::PetscObjectReference(jacobian.raw.cast()) },
-            "PetscObjectReference",
-        )?;
+        let referenced = n.and_then(|n| {
+            check(
+                unsafe { sys::PetscObjectReference(jacobian.raw.cast()) },
+                "PetscObjectReference",
+            )
+            .map(|()| n)
+        });
+        let n = match referenced {
+            Ok(n) => n,
+            Err(e) => {
+                if let Some(mut g) = ghosts {
+                    // SAFETY: made by `parts` just above, not used afterwards.
+                    unsafe { g.free() };
+                }
+                return Err(e);
+            }
+        };
         let product = Box::new(Product {
             jacobian: jacobian.raw,
             local,
@@ -321,59 +334,72 @@ unsafe extern "C" fn multiply(
                 "VecScatterBegin",
             )?;
         }
-        // SAFETY: PETSc's arrays of the vectors and of the Jacobian's values, restored below; the read
-        // accessors leave the Jacobian's state (and so its preconditioner) alone.
-        unsafe {
-            check(sys::VecGetArrayRead(x, &mut xa), "VecGetArrayRead")?;
-            check(sys::VecGetArray(y, &mut ya), "VecGetArray")?;
-            match rows.layout {
-                BlockLayout::Rows => check(
-                    sys::MatSeqAIJGetArrayRead(product.local, &mut va),
-                    "MatSeqAIJGetArrayRead",
-                )?,
-                BlockLayout::Blocks => {
-                    let mut v: *mut f64 = std::ptr::null_mut();
-                    check(
-                        sys::MatSeqBAIJGetArray(product.local, &mut v),
-                        "MatSeqBAIJGetArray",
-                    )?;
-                    va = v;
+        // This process's rows: the Jacobian's (or its diagonal part's) values times `x`'s own entries.
+        let mut local = || -> std::result::Result<(), PetscError> {
+            // SAFETY: PETSc's arrays of the vectors and of the Jacobian's values, restored below; the
+            // read accessors leave the Jacobian's state (and so its preconditioner) alone.
+            unsafe {
+                check(sys::VecGetArrayRead(x, &mut xa), "VecGetArrayRead")?;
+                check(sys::VecGetArray(y, &mut ya), "VecGetArray")?;
+                match rows.layout {
+                    BlockLayout::Rows => check(
+                        sys::MatSeqAIJGetArrayRead(product.local, &mut va),
+                        "MatSeqAIJGetArrayRead",
+                    )?,
+                    BlockLayout::Blocks => {
+                        let mut v: *mut f64 = std::ptr::null_mut();
+                        check(
+                            sys::MatSeqBAIJGetArray(product.local, &mut v),
+                            "MatSeqBAIJGetArray",
+                        )?;
+                        va = v;
+                    }
                 }
-            }
-            let (xs, ys, vs) = (
-                std::slice::from_raw_parts(xa, n),
-                std::slice::from_raw_parts_mut(ya, n),
-                std::slice::from_raw_parts(va, nnz),
-            );
-            rows.apply(vs, xs, ys);
-            match rows.layout {
-                BlockLayout::Rows => check(
-                    sys::MatSeqAIJRestoreArrayRead(product.local, &mut va),
-                    "MatSeqAIJRestoreArrayRead",
-                )?,
-                BlockLayout::Blocks => {
-                    // MatSeqBAIJRestoreArray does not mark the values changed (see fill_block_rows).
-                    let mut v = va.cast_mut();
-                    check(
-                        sys::MatSeqBAIJRestoreArray(product.local, &mut v),
-                        "MatSeqBAIJRestoreArray",
-                    )?;
+                // A process without rows (or an empty part) may be handed null arrays: nothing to multiply.
+                if n > 0 && nnz > 0 {
+                    let (xs, ys, vs) = (
+                        std::slice::from_raw_parts(xa, n),
+                        std::slice::from_raw_parts_mut(ya, n),
+                        std::slice::from_raw_parts(va, nnz),
+                    );
+                    rows.apply(vs, xs, ys);
+                } else if n > 0 {
+                    std::slice::from_raw_parts_mut(ya, n).fill(0.0);
                 }
+                match rows.layout {
+                    BlockLayout::Rows => check(
+                        sys::MatSeqAIJRestoreArrayRead(product.local, &mut va),
+                        "MatSeqAIJRestoreArrayRead",
+                    )?,
+                    BlockLayout::Blocks => {
+                        // MatSeqBAIJRestoreArray does not mark the values changed (see fill_block_rows).
+                        let mut v = va.cast_mut();
+                        check(
+                            sys::MatSeqBAIJRestoreArray(product.local, &mut v),
+                            "MatSeqBAIJRestoreArray",
+                        )?;
+                    }
+                }
+                check(sys::VecRestoreArray(y, &mut ya), "VecRestoreArray")?;
+                check(sys::VecRestoreArrayRead(x, &mut xa), "VecRestoreArrayRead")
             }
-            check(sys::VecRestoreArray(y, &mut ya), "VecRestoreArray")?;
-            check(sys::VecRestoreArrayRead(x, &mut xa), "VecRestoreArrayRead")?;
-        }
+        };
+        let done = local();
         if let Some(g) = &product.ghosts {
-            // SAFETY: the scatter begun above; then `y += off * ghosts`, as `MatMult_MPIBAIJ` adds it.
+            // SAFETY: the scatter begun above, ended whether the local product failed or not (so that
+            // the next product starts none while this one is in flight); then `y += off * ghosts`, as
+            // `MatMult_MPIBAIJ` adds it.
             unsafe {
                 check(
                     sys::VecScatterEnd(g.scatter, x, g.values, insert, forward),
                     "VecScatterEnd",
                 )?;
+                done?;
                 check(sys::MatMultAdd(g.off, g.values, y, y), "MatMultAdd")?;
             }
+            return Ok(());
         }
-        Ok(())
+        done
     };
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
         Ok(Ok(())) => 0,
