@@ -66,7 +66,7 @@ fn main() {
         "MatSeq(AIJ|BAIJ)(GetArray|RestoreArray)|MatSeqBAIJSetColumnIndices|MatCreateSeqAIJWithArrays|MatSeqAIJ(GetArrayRead|RestoreArrayRead)",
         "PetscContainer(Create|SetPointer|SetUserDestroy|Destroy)|PetscObjectCompose",
         "MatCreateShell|MatShell(SetOperation|GetContext)",
-        "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray|MatMPIBAIJGetSeqBAIJ",
+        "MatMPIAIJSetPreallocationCSR|MatUpdateMPIAIJWithArray|MatMPIBAIJGetSeqBAIJ|MatMPIAIJGetSeqAIJ",
         "KSP(GetIterationNumber|GetTotalIterations|GetConvergedReason|GetPC|SetType|GetType|SetTolerances|SetFromOptions)",
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix|MonitorSet)",
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType|GetOperators|SetFailedReason|SetUp|ASMGetSubKSP|BJacobiGetSubKSP)",

@@ -7,9 +7,9 @@
 //! thread and on every process"). This operator reads the values of the assembled Jacobian (PETSc's own arrays, no
 //! copy) and multiplies by block rows in parallel on the process's threads (rayon), each row summed in
 //! the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`), so that the product has PETSc's bits for
-//! the CT's block sizes. On several processes (`mpibaij`) it multiplies the diagonal part so while the
-//! values of the other processes' columns arrive, then adds the off-diagonal part's product as PETSc's
-//! `MatMult_MPIBAIJ` does. `SNESSetJacobian(snes, operator, jacobian)`: Krylov iterations use the
+//! the CT's block sizes. On several processes (`mpibaij`, `mpiaij`) it multiplies the diagonal part so
+//! while the values of the other processes' columns arrive, then adds the off-diagonal part's product as
+//! PETSc's `MatMult_MPIBAIJ` and `MatMult_MPIAIJ` do. `SNESSetJacobian(snes, operator, jacobian)`: Krylov iterations use the
 //! operator, the preconditioner (ILU, field split, ...) the Jacobian.
 
 use super::block_parts::block_pattern;
@@ -57,9 +57,9 @@ pub struct ThreadedOperator {
 impl ThreadedOperator {
     /// The product of `jacobian` (this process's rows of it: the block pattern `pattern`) by the solver's
     /// kernel, or `None` where it does not apply: a matrix type whose values are not CSR arrays the
-    /// kernel reads (`seqaij`: scalar rows, `seqbaij`: column-major blocks, `mpibaij`: a process's
-    /// diagonal part in blocks; `mpiaij` is not), or a block size other than the 2 to 4 unknowns per
-    /// node of 2D and 3D. The type and block size are the same on every process, so every process
+    /// kernel reads (`seqaij`: scalar rows, `seqbaij`: column-major blocks, `mpiaij` and `mpibaij`: a
+    /// process's diagonal part so), or a block size other than the 2 to 4 unknowns per node of 2D and
+    /// 3D. The type and block size are the same on every process, so every process
     /// declines or makes the shell (collective) alike.
     pub fn over(jacobian: &Matrix, pattern: &BlockCsr<'_>) -> Result<Option<Self>> {
         if !(2..=4).contains(&pattern.bs) {
@@ -76,7 +76,9 @@ impl ThreadedOperator {
             "seqaij" if pattern.first == 0 => (jacobian.raw, seq(BlockLayout::Rows), None),
             "seqbaij" if pattern.first == 0 => (jacobian.raw, seq(BlockLayout::Blocks), None),
             // SAFETY: a valid assembled `mpibaij` matrix (its pattern set), kept alive by the shell.
-            "mpibaij" => unsafe { parts(jacobian.raw, pattern.bs)? },
+            "mpibaij" => unsafe { parts(jacobian.raw, pattern.bs, BlockLayout::Blocks)? },
+            // SAFETY: as above, an `mpiaij` matrix of full node blocks (`Matrix::set_block_pattern`).
+            "mpiaij" => unsafe { parts(jacobian.raw, pattern.bs, BlockLayout::Rows)? },
             _ => return Ok(None),
         };
         let n = to_petsc_int(
@@ -165,24 +167,43 @@ impl ThreadedOperator {
     }
 }
 
-/// The diagonal part of the `mpibaij` matrix `m` with its block pattern, and its off-diagonal part with
-/// the scatter (collective) of the entries of `x` its columns stand for.
+/// The diagonal part of the `mpibaij` (`layout` Blocks) or `mpiaij` (Rows: full node blocks of `bs`
+/// unknowns, stored row by row) matrix `m` with its block pattern, and its off-diagonal part with the
+/// scatter (collective) of the entries of `x` its columns stand for.
 ///
 /// # Safety
-/// `m` is a valid `mpibaij` matrix whose structure is assembled; the parts are used while it lives.
-unsafe fn parts(m: sys::Mat, bs: usize) -> Result<(sys::Mat, Rows, Option<Ghosts>)> {
+/// `m` is a valid matrix of that type whose structure is assembled; the parts are used while it lives.
+unsafe fn parts(
+    m: sys::Mat,
+    bs: usize,
+    layout: BlockLayout,
+) -> Result<(sys::Mat, Rows, Option<Ghosts>)> {
     let (mut diag, mut off, mut garray): (sys::Mat, sys::Mat, *const PetscInt) =
         (std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null());
-    // SAFETY: out-parameters; the parts and `garray` belong to the matrix.
+    // SAFETY: out-parameters; the parts and `garray` (the off-diagonal part's global columns: of
+    // blocks for `mpibaij`, of unknowns for `mpiaij`) belong to the matrix.
     check(
-        unsafe { sys::MatMPIBAIJGetSeqBAIJ(m, &mut diag, &mut off, &mut garray) },
-        "MatMPIBAIJGetSeqBAIJ",
+        unsafe {
+            match layout {
+                BlockLayout::Blocks => {
+                    sys::MatMPIBAIJGetSeqBAIJ(m, &mut diag, &mut off, &mut garray)
+                }
+                BlockLayout::Rows => sys::MatMPIAIJGetSeqAIJ(m, &mut diag, &mut off, &mut garray),
+            }
+        },
+        "MatMPI(B)AIJGetSeq(B)AIJ",
     )?;
-    // SAFETY: the diagonal part is a valid `seqbaij` matrix.
-    let (row_ptr, cols) = unsafe { block_pattern(diag)? }.ok_or_else(|| PetscError {
+    // SAFETY: the diagonal part is a valid `seqbaij` or `seqaij` matrix.
+    let pattern = unsafe {
+        match layout {
+            BlockLayout::Blocks => block_pattern(diag)?,
+            BlockLayout::Rows => node_block_pattern(diag, bs)?,
+        }
+    };
+    let (row_ptr, cols) = pattern.ok_or_else(|| PetscError {
         code: 83, // PETSC_ERR_USER
         call: "MatGetRowIJ",
-        message: "PETSc gave no block pattern of the diagonal part".into(),
+        message: "the diagonal part holds no pattern of whole node blocks".into(),
     })?;
     let (mut rows_off, mut n) = (0, 0);
     // SAFETY: out-parameters of a valid matrix.
@@ -190,15 +211,19 @@ unsafe fn parts(m: sys::Mat, bs: usize) -> Result<(sys::Mat, Rows, Option<Ghosts
         unsafe { sys::MatGetLocalSize(off, &mut rows_off, &mut n) },
         "MatGetLocalSize",
     )?;
-    let compressed = usize::try_from(n).unwrap_or(0) / bs;
-    let columns: Vec<PetscInt> = if compressed == 0 || garray.is_null() {
+    // The off-diagonal part's columns: blocks of `bs` unknowns, or single unknowns.
+    let (width, count) = match layout {
+        BlockLayout::Blocks => (bs, usize::try_from(n).unwrap_or(0) / bs),
+        BlockLayout::Rows => (1, usize::try_from(n).unwrap_or(0)),
+    };
+    let columns: Vec<PetscInt> = if count == 0 || garray.is_null() {
         Vec::new()
     } else {
-        // SAFETY: `garray` lists the global block column of each of the part's `compressed` columns.
-        unsafe { std::slice::from_raw_parts(garray, compressed) }.to_vec()
+        // SAFETY: `garray` lists the global column of each of the part's `count` columns.
+        unsafe { std::slice::from_raw_parts(garray, count) }.to_vec()
     };
     let count = to_petsc_int(columns.len(), "ISCreateBlock")?;
-    let block = to_petsc_int(bs, "ISCreateBlock")?;
+    let block = to_petsc_int(width, "ISCreateBlock")?;
     let mut ghosts = Ghosts {
         off,
         scatter: std::ptr::null_mut(),
@@ -244,12 +269,84 @@ unsafe fn parts(m: sys::Mat, bs: usize) -> Result<(sys::Mat, Rows, Option<Ghosts
         return Err(e);
     }
     let rows = Rows {
-        layout: BlockLayout::Blocks,
+        layout,
         bs,
         row_ptr,
         cols,
     };
     Ok((diag, rows, Some(ghosts)))
+}
+
+/// The node-block pattern (row pointers, block columns) of a `seqaij` matrix whose rows come in whole
+/// blocks of `bs` unknowns (each block row's `bs` rows with the same columns, blocks of `bs` consecutive
+/// columns), read from its scalar CSR arrays; `None` if PETSc does not give them or they are not so.
+///
+/// # Safety
+/// `m` is a valid `seqaij` matrix.
+unsafe fn node_block_pattern(m: sys::Mat, bs: usize) -> Result<Option<(Vec<usize>, Vec<u32>)>> {
+    let (mut n, mut ia, mut ja, mut done): (PetscInt, *const PetscInt, *const PetscInt, _) = (
+        0,
+        std::ptr::null(),
+        std::ptr::null(),
+        sys::PetscBool_PETSC_FALSE,
+    );
+    let no = sys::PetscBool_PETSC_FALSE;
+    // SAFETY: out-parameters; the scalar CSR arrays, returned below.
+    check(
+        unsafe { sys::MatGetRowIJ(m, 0, no, no, &mut n, &mut ia, &mut ja, &mut done) },
+        "MatGetRowIJ",
+    )?;
+    if done != sys::PetscBool_PETSC_TRUE || ia.is_null() || n < 0 {
+        return Ok(None);
+    }
+    let rows = n as usize;
+    // SAFETY: `rows + 1` row pointers and `ia[rows]` columns, valid until restored.
+    let out = unsafe {
+        let ia = std::slice::from_raw_parts(ia, rows + 1);
+        let ja: &[PetscInt] = if ia[rows] == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ja, ia[rows] as usize)
+        };
+        blocks_of_rows(ia, ja, bs)
+    };
+    // SAFETY: as above.
+    check(
+        unsafe { sys::MatRestoreRowIJ(m, 0, no, no, &mut n, &mut ia, &mut ja, &mut done) },
+        "MatRestoreRowIJ",
+    )?;
+    Ok(out)
+}
+
+/// The node-block pattern of the scalar CSR `(ia, ja)` if its rows come in whole blocks of `bs`.
+fn blocks_of_rows(ia: &[PetscInt], ja: &[PetscInt], bs: usize) -> Option<(Vec<usize>, Vec<u32>)> {
+    let rows = ia.len().checked_sub(1)?;
+    if rows % bs != 0 {
+        return None;
+    }
+    let (mut row_ptr, mut cols) = (vec![0usize], Vec::new());
+    for a in 0..rows / bs {
+        let first = &ja[ia[a * bs] as usize..ia[a * bs + 1] as usize];
+        if first.len() % bs != 0 {
+            return None;
+        }
+        for chunk in first.chunks_exact(bs) {
+            let b = usize::try_from(chunk[0]).ok()?;
+            if b % bs != 0 || chunk.iter().enumerate().any(|(k, &c)| c as usize != b + k) {
+                return None;
+            }
+            cols.push(u32::try_from(b / bs).ok()?);
+        }
+        let same = (1..bs).all(|i| {
+            let r = a * bs + i;
+            ja[ia[r] as usize..ia[r + 1] as usize] == *first
+        });
+        if !same {
+            return None;
+        }
+        row_ptr.push(cols.len());
+    }
+    Some((row_ptr, cols))
 }
 
 impl Ghosts {
