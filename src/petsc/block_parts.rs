@@ -214,6 +214,21 @@ unsafe fn with_block_pattern<T>(
     m: sys::Mat,
     f: impl FnOnce(&[PetscInt], &[PetscInt]) -> T,
 ) -> Result<Option<T>> {
+    // SAFETY: the caller's promise.
+    unsafe { with_row_ij(m, true, f) }
+}
+
+/// `f` of the CSR arrays (row pointers, columns) of a sequential matrix as `MatGetRowIJ` gives them:
+/// with `compressed` a block matrix's block arrays, without it the scalar arrays of a `seqaij` matrix;
+/// `None` if PETSc does not give them.
+///
+/// # Safety
+/// `m` is a valid `seqbaij` (compressed) or `seqaij` matrix.
+pub(super) unsafe fn with_row_ij<T>(
+    m: sys::Mat,
+    compressed: bool,
+    f: impl FnOnce(&[PetscInt], &[PetscInt]) -> T,
+) -> Result<Option<T>> {
     let (mut n, mut ia, mut ja, mut done): (
         sys::PetscInt,
         *const sys::PetscInt,
@@ -226,10 +241,11 @@ unsafe fn with_block_pattern<T>(
         sys::PetscBool_PETSC_FALSE,
     );
     let (no, yes) = (sys::PetscBool_PETSC_FALSE, sys::PetscBool_PETSC_TRUE);
+    let blocks = if compressed { yes } else { no };
     // SAFETY: out-parameters; with block compression a block matrix gives its own block CSR arrays,
     // returned below.
     check(
-        unsafe { sys::MatGetRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
+        unsafe { sys::MatGetRowIJ(m, 0, no, blocks, &mut n, &mut ia, &mut ja, &mut done) },
         "MatGetRowIJ",
     )?;
     if done != yes || ia.is_null() || n < 0 {
@@ -248,7 +264,7 @@ unsafe fn with_block_pattern<T>(
     };
     // SAFETY: as above.
     check(
-        unsafe { sys::MatRestoreRowIJ(m, 0, no, yes, &mut n, &mut ia, &mut ja, &mut done) },
+        unsafe { sys::MatRestoreRowIJ(m, 0, no, blocks, &mut n, &mut ia, &mut ja, &mut done) },
         "MatRestoreRowIJ",
     )?;
     Ok(Some(out))

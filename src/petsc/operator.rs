@@ -12,7 +12,7 @@
 //! PETSc's `MatMult_MPIBAIJ` and `MatMult_MPIAIJ` do. `SNESSetJacobian(snes, operator, jacobian)`: Krylov iterations use the
 //! operator, the preconditioner (ILU, field split, ...) the Jacobian.
 
-use super::block_parts::block_pattern;
+use super::block_parts::{block_pattern, with_row_ij};
 use super::{
     BlockCsr, BlockLayout, Matrix, PetscError, PetscInt, Result, Vector, check, comm_world, sys,
     to_petsc_int,
@@ -284,38 +284,8 @@ unsafe fn parts(
 /// # Safety
 /// `m` is a valid `seqaij` matrix.
 unsafe fn node_block_pattern(m: sys::Mat, bs: usize) -> Result<Option<(Vec<usize>, Vec<u32>)>> {
-    let (mut n, mut ia, mut ja, mut done): (PetscInt, *const PetscInt, *const PetscInt, _) = (
-        0,
-        std::ptr::null(),
-        std::ptr::null(),
-        sys::PetscBool_PETSC_FALSE,
-    );
-    let no = sys::PetscBool_PETSC_FALSE;
-    // SAFETY: out-parameters; the scalar CSR arrays, returned below.
-    check(
-        unsafe { sys::MatGetRowIJ(m, 0, no, no, &mut n, &mut ia, &mut ja, &mut done) },
-        "MatGetRowIJ",
-    )?;
-    if done != sys::PetscBool_PETSC_TRUE || ia.is_null() || n < 0 {
-        return Ok(None);
-    }
-    let rows = n as usize;
-    // SAFETY: `rows + 1` row pointers and `ia[rows]` columns, valid until restored.
-    let out = unsafe {
-        let ia = std::slice::from_raw_parts(ia, rows + 1);
-        let ja: &[PetscInt] = if ia[rows] == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ja, ia[rows] as usize)
-        };
-        blocks_of_rows(ia, ja, bs)
-    };
-    // SAFETY: as above.
-    check(
-        unsafe { sys::MatRestoreRowIJ(m, 0, no, no, &mut n, &mut ia, &mut ja, &mut done) },
-        "MatRestoreRowIJ",
-    )?;
-    Ok(out)
+    // SAFETY: the caller's promise; the scalar CSR arrays.
+    Ok(unsafe { with_row_ij(m, false, |ia, ja| blocks_of_rows(ia, ja, bs))? }.flatten())
 }
 
 /// The node-block pattern of the scalar CSR `(ia, ja)` if its rows come in whole blocks of `bs`.
