@@ -444,13 +444,8 @@ pub fn run_one(
         .args(set.overrides.iter().flat_map(|o| ["--set", o.as_str()]))
         .args(set.allow_large.then_some("--allow-large"))
         // One process with threads, as every set before automatic processes: the sets compare solvers
-        // on the same footing (a set's own `--processes N` is passed with its options).
-        .args(
-            (!set.options.split_whitespace().any(|o| o == "--processes"))
-                .then_some(["--processes", "1"])
-                .into_iter()
-                .flatten(),
-        )
+        // on the same footing.
+        .args(["--processes", "1"])
         .args(set.options.split_whitespace())
         .arg("-log_view")
         .arg(format!(":{}", log.display()))

@@ -4,13 +4,14 @@
 //! PETSc (Debian's build has no OpenMP) multiplies a matrix on one core, and its block kernel
 //! (`MatMult_SeqBAIJ_3`) took 2.99 ms per product of the half-resolution CT's Jacobian where this one
 //! takes 1.33 ms on the same core (`docs/benchmarks.md`, "GMRES's product by the solver's kernel on one
-//! thread and on every process"). This operator reads the values of the assembled Jacobian (PETSc's own arrays, no
-//! copy) and multiplies by block rows in parallel on the process's threads (rayon), each row summed in
-//! the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`), so that the product has PETSc's bits for
-//! the CT's block sizes. On several processes (`mpibaij`, `mpiaij`) it multiplies the diagonal part so
-//! while the values of the other processes' columns arrive, then adds the off-diagonal part's product as
-//! PETSc's `MatMult_MPIBAIJ` and `MatMult_MPIAIJ` do. `SNESSetJacobian(snes, operator, jacobian)`: Krylov iterations use the
-//! operator, the preconditioner (ILU, field split, ...) the Jacobian.
+//! thread and on every process"). This operator reads the values of the assembled Jacobian (PETSc's own
+//! arrays, no copy) and multiplies by block rows in parallel on the process's threads (rayon), each row
+//! summed in the order of PETSc's block kernels (`MatMult_SeqBAIJ_2/3`), so that the product has PETSc's
+//! bits for the CT's block sizes. On several processes (`mpibaij`, `mpiaij`) it multiplies the diagonal
+//! part so while the values of the other processes' columns arrive, then adds the off-diagonal part's
+//! product as PETSc's `MatMult_MPIBAIJ` and `MatMult_MPIAIJ` do. `SNESSetJacobian(snes, operator,
+//! jacobian)`: Krylov iterations use the operator, the preconditioner (ILU, field split, ...) the
+//! Jacobian.
 
 use super::block_parts::{block_pattern, with_row_ij};
 use super::{
@@ -422,7 +423,8 @@ unsafe extern "C" fn multiply(
                         va = v;
                     }
                 }
-                // A process without rows (or an empty part) may be handed null arrays: nothing to multiply.
+                // A process without rows (or an empty part) may be handed null arrays: nothing to
+                // multiply.
                 if n > 0 && nnz > 0 {
                     let (xs, ys, vs) = (
                         std::slice::from_raw_parts(xa, n),
