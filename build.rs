@@ -71,8 +71,9 @@ fn main() {
         "KSP(Create|Destroy|SetOperators|Solve|SetOptionsPrefix|MonitorSet)",
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType|GetOperators|SetFailedReason|SetUp|ASMGetSubKSP|BJacobiGetSubKSP)",
         "KSPGetOperators|Mat(GetRowIJ|RestoreRowIJ|GetBlockSize)",
-        "PCShell(SetContext|GetContext|SetDestroy|SetSetUp|SetApply|SetName)",
-        "PCMG(SetLevels|GetLevels|SetGalerkin|SetInterpolation)|MatSetBlockSizes",
+        "PCShell(SetContext|GetContext|SetDestroy|SetSetUp|SetApply|SetApplyRichardson|SetName)",
+        "PCSORGet(Omega|Iterations|Symmetric)|PCSetUseAmat",
+        "PCMG(SetLevels|GetLevels|SetGalerkin|SetInterpolation|GetSmoother)|MatSetBlockSizes",
         "SNES(Create|Destroy|SetFunction|SetJacobian|SetFromOptions|SetOptionsPrefix|Solve|GetIterationNumber)",
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",
@@ -84,7 +85,7 @@ fn main() {
     let mut builder = bindgen::Builder::default()
         .header("wrapper.h")
         .allowlist_function(functions.join("|"))
-        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType|MatOperation|PCFailedReason)")
+        .allowlist_type("(SNESConvergedReason|KSPConvergedReason|InsertMode|NormType|ScatterMode|MatOption|PetscCopyMode|PetscErrorType|MatAssemblyType|MatInfoType|MatOperation|PCFailedReason|PCRichardsonConvergedReason|MatSORType)")
         .blocklist_item("FP_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .layout_tests(false)

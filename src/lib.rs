@@ -15,8 +15,9 @@
 //! [`preflight`], [`solver_defaults`]) and the step ([`solver`], [`partition`]) to the model ([`model`])
 //! and the physics ([`assembly`], [`transfer`], [`boundary`], [`contact`], [`material`], [`shape`]) on the
 //! geometry and the points; `docs/architecture.md` draws the layers. [`petsc`] holds the bindings and
-//! their safe wrappers (with a shell preconditioner over [`ilu`], the ILU(0) on one overlapping part of
-//! the grid per thread): `unsafe` code lives only there and in the microplane model's SIMD kernel;
+//! their safe wrappers (with shell preconditioners over [`ilu`], the ILU(0) on one overlapping part of
+//! the grid per thread, and over [`sor`], the multigrid's Gauss-Seidel smoother on one part per
+//! thread): `unsafe` code lives only there and in the microplane model's SIMD kernel;
 //! [`assembly`] (block layouts), [`partition`] (star forests), [`solver`], [`solver_defaults`] and
 //! [`app`] (the run, the PETSc smoke problem) use its safe types.
 
@@ -55,5 +56,6 @@ pub mod shape;
 pub mod solids;
 pub mod solver;
 pub mod solver_defaults;
+pub mod sor;
 pub mod space;
 pub mod transfer;

@@ -148,3 +148,76 @@ fn another_krylov_method_keeps_its_own_preconditioner_side() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The columns `newton_its` and `linear_its` summed, and the clamp's last vertical reaction (N/mm), of a
+/// run's `history.csv`.
+fn history_counts(dir: &std::path::Path) -> (usize, usize, f64) {
+    let text = std::fs::read_to_string(dir.join("history.csv")).expect("history.csv");
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (newton, linear, fy) = (col("newton_its"), col("linear_its"), col("clamp_fy"));
+    let (mut n, mut k, mut reaction) = (0, 0, 0.0);
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        n += f[newton].parse::<usize>().expect("newton_its");
+        k += f[linear].parse::<usize>().expect("linear_its");
+        reaction = f[fy].parse::<f64>().expect("clamp_fy");
+    }
+    (n, k, reaction)
+}
+
+/// Each multigrid level's symmetric SOR is the solver's own sweep (`src/sor.rs`, one part per thread)
+/// unless `-mpm_threaded_sor 0`: on one thread it is PETSc's sweep (the same Newton and Krylov
+/// iterations, the same reaction to round-off); on two threads the parts' coupling is Jacobi, which
+/// may cost an iteration but not the answer.
+#[test]
+fn the_threaded_sor_smooths_every_level_as_petsc_does() {
+    let dir = std::env::temp_dir().join(format!("mpmc-mg-sor-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch");
+    std::fs::write(dir.join("cantilever.toml"), cantilever(2.5)).expect("config");
+    let run = |name: &str, threads: &str, threaded: &str| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mpm-concrete"))
+            .current_dir(&dir)
+            .env("RAYON_NUM_THREADS", threads)
+            .args(["run", "cantilever.toml", "--overwrite", "--output", name])
+            .args(["-mpm_threaded_sor", threaded, "-snes_view"])
+            .output()
+            .expect("mpm-concrete");
+        let out = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        (out, history_counts(&dir.join(name)))
+    };
+    let (petsc_view, petsc) = run("petsc", "1", "0");
+    let levels = petsc_view
+        .lines()
+        .find_map(|l| l.split("levels=").nth(1))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|l| l.parse::<usize>().ok())
+        .expect("the multigrid's levels in -snes_view");
+    assert!(levels >= 2, "{levels} levels");
+    for (name, threads) in [("own-1", "1"), ("own-2", "2")] {
+        let (view, own) = run(name, threads, "1");
+        // Every smoothed level (all but the coarse solve) is the shell, in every step's view.
+        let shells = view.matches("symmetric SOR, one part per thread").count();
+        let steps = 2;
+        assert_eq!(shells, steps * (levels - 1), "{name}: {view}");
+        assert!(!view.contains("type: sor"), "{name} kept PETSc's SOR");
+        let rel = (own.2 - petsc.2).abs() / petsc.2.abs();
+        assert!(rel < 1e-7, "{name}: reaction {} against {}", own.2, petsc.2);
+        if threads == "1" {
+            assert_eq!((own.0, own.1), (petsc.0, petsc.1), "{name}: iterations");
+        } else {
+            assert!(
+                own.1 as f64 <= 1.25 * petsc.1 as f64,
+                "{name}: {own:?} against {petsc:?}"
+            );
+        }
+    }
+    assert!(!petsc_view.contains("one part per thread"));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -612,7 +612,7 @@ fn the_subdomains_ilu_becomes_the_threaded_one() {
                     let what = format!("{pc} {mat_type} threaded {threaded}");
                     results.push(solve_grid(&s, &mut snes, &mut m, (&row_ptr, &cols), &what));
                     let expected = usize::from(threaded && mat_type == "baij");
-                    assert_eq!(snes.threaded_subdomains(), expected, "{what}");
+                    assert_eq!(snes.threaded_preconditioners(), expected, "{what}");
                 }
                 let what = format!("{pc} {mat_type}");
                 if mat_type == "baij" {

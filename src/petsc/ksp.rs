@@ -45,7 +45,7 @@ impl Snes {
                 "KSPSetOperators",
             )?;
         }
-        self.install_subdomain_ilu(jac.raw, jac.raw)?;
+        self.install_replacement(jac.raw, jac.raw)?;
         // SAFETY: as above.
         unsafe {
             check(sys::KSPSolve(ksp, rhs.raw, x.raw), "KSPSolve")?;

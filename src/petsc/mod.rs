@@ -15,6 +15,7 @@ mod matrix;
 mod operator;
 mod options;
 mod preconditioner;
+mod smoother;
 mod snes;
 pub mod sys;
 mod vector;

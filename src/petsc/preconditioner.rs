@@ -230,7 +230,7 @@ pub(super) unsafe fn threaded_ilu_on_subdomains(
 ///
 /// # Safety
 /// `pc` is valid.
-unsafe fn pc_type(pc: sys::PC) -> Result<String> {
+pub(super) unsafe fn pc_type(pc: sys::PC) -> Result<String> {
     let mut name: *const std::ffi::c_char = std::ptr::null();
     // SAFETY: out-parameter; PETSc's own string.
     check(unsafe { sys::PCGetType(pc, &mut name) }, "PCGetType")?;
@@ -263,7 +263,9 @@ fn context_error(code: sys::PetscErrorCode) -> PetscError {
 }
 
 /// Runs `f`, turning a PETSc error into its code and a panic into PETSc's user error.
-fn guarded(f: impl FnOnce() -> std::result::Result<(), PetscError>) -> sys::PetscErrorCode {
+pub(super) fn guarded(
+    f: impl FnOnce() -> std::result::Result<(), PetscError>,
+) -> sys::PetscErrorCode {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
         Ok(Ok(())) => 0,
         Ok(Err(e)) => e.code,

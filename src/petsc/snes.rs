@@ -88,11 +88,23 @@ pub struct Snes {
     operator: Option<ThreadedOperator>,
     /// The state of the stall test of [`converged_cb`] (registered once with this box's address).
     stall: Box<Stall>,
-    /// The block size of the subdomains whose ILU(0) is to become the threaded one at the next
-    /// Jacobian ([`Snes::use_threaded_ilu_on_subdomains`]); `None` once done or not asked.
-    subdomain_ilu: Option<usize>,
-    /// How many subdomains' ILU(0) the last replacement made the threaded one.
-    threaded_subdomains: usize,
+    /// PETSc's preconditioners to become the solver's own threaded ones at the next Jacobian
+    /// ([`Snes::use_threaded_ilu_on_subdomains`], [`Snes::use_threaded_sor_on_levels`]); `None` once done
+    /// or not asked.
+    replacement: Option<Replacement>,
+    /// How many subdomains' ILU(0) or levels' SOR the last replacement made the threaded ones.
+    threaded: usize,
+}
+
+/// Which of PETSc's preconditioners inside the Krylov solver's the first Jacobian of a solve replaces by
+/// the solver's own threaded ones (PETSc makes them from assembled values at the first set-up).
+#[derive(Clone, Copy, Debug)]
+enum Replacement {
+    /// The ILU(0) of each subdomain of block Jacobi or additive Schwarz, for Jacobians of this block
+    /// size (`petsc::preconditioner::threaded_ilu_on_subdomains`).
+    SubdomainIlu(usize),
+    /// The symmetric SOR of each level of the multigrid (`petsc::smoother::threaded_sor_on_levels`).
+    LevelSor,
 }
 
 /// What [`converged_cb`] keeps between the iterations of a solve.
@@ -112,14 +124,32 @@ struct Context<'a> {
     problem: &'a mut dyn NonlinearProblem,
     fatal: Option<String>,
     domain: Vec<String>,
-    /// [`Snes::subdomain_ilu`] for this solve, taken by the first Jacobian.
-    subdomain_ilu: Option<usize>,
-    /// How many subdomains the first Jacobian's replacement reached.
-    threaded_subdomains: Option<usize>,
+    /// [`Snes::replacement`] for this solve, taken by the first Jacobian.
+    replacement: Option<Replacement>,
+    /// How many subdomains or levels the first Jacobian's replacement reached.
+    threaded: Option<usize>,
 }
 
 /// PETSc's generic user error code (`PETSC_ERR_USER`).
 const ERR_USER: sys::PetscErrorCode = 83;
+
+impl Replacement {
+    /// Replaces the preconditioners inside `ksp`'s (operators `a`, `p`); how many it replaced.
+    ///
+    /// # Safety
+    /// `ksp`, `a` and `p` are valid; `p` holds assembled values.
+    unsafe fn install(self, ksp: sys::KSP, a: sys::Mat, p: sys::Mat) -> Result<usize> {
+        // SAFETY: the caller's promise.
+        unsafe {
+            match self {
+                Self::SubdomainIlu(bs) => {
+                    super::preconditioner::threaded_ilu_on_subdomains(ksp, a, p, bs)
+                }
+                Self::LevelSor => super::smoother::threaded_sor_on_levels(ksp, a, p),
+            }
+        }
+    }
+}
 
 impl Snes {
     /// A SNES whose options are read with `prefix` (e.g. `Some("smoke_")` reads `-smoke_snes_rtol`); the
@@ -134,8 +164,8 @@ impl Snes {
             monitored: None,
             operator: None,
             stall: Box::default(),
-            subdomain_ilu: None,
-            threaded_subdomains: 0,
+            replacement: None,
+            threaded: 0,
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -270,7 +300,9 @@ impl Snes {
     /// Makes the preconditioner (of type `mg`) a multigrid over `interpolations.len() + 1` levels:
     /// `interpolations[l]` maps level `l + 1` to level `l`, level 0 being the Jacobian's (PETSc counts
     /// the other way, the finest level last). The coarse operators are Galerkin products `P^T A P`
-    /// (MatPtAP), formed at every set-up of the preconditioner from the Jacobian. The smoothers and the
+    /// (MatPtAP), formed at every set-up of the preconditioner from the assembled Jacobian (the
+    /// preconditioning matrix, on which every level works: the Krylov solver's operator may be a shell,
+    /// [`Snes::set_operator`]). The smoothers and the
     /// coarse solve keep PETSc's defaults and read `-mg_levels_*` and `-mg_coarse_*` (with the SNES
     /// prefix) when the preconditioner is set up.
     pub fn set_multigrid(&mut self, interpolations: &[Matrix]) -> Result<()> {
@@ -284,6 +316,13 @@ impl Snes {
         check(
             unsafe { sys::PCMGSetGalerkin(pc, sys::PCMGGalerkinType_PC_MG_GALERKIN_BOTH) },
             "PCMGSetGalerkin",
+        )?;
+        // The finest level on the assembled Jacobian (PETSc's multigrid would take the Krylov solver's
+        // operator, which may be a shell without the entries the Galerkin products need).
+        // SAFETY: valid PC.
+        check(
+            unsafe { sys::PCSetUseAmat(pc, sys::PetscBool_PETSC_FALSE) },
+            "PCSetUseAmat",
         )?;
         for (l, p) in interpolations.iter().enumerate() {
             let level = levels - 1 - l as sys::PetscInt;
@@ -349,25 +388,33 @@ impl Snes {
     /// (PETSc makes the subdomains' matrices from assembled values). Nothing changes where it does not
     /// apply (another preconditioner, point-wise storage).
     pub fn use_threaded_ilu_on_subdomains(&mut self, bs: usize) {
-        self.subdomain_ilu = Some(bs);
+        self.replacement = Some(Replacement::SubdomainIlu(bs));
     }
 
-    /// Replaces the subdomains' ILU(0) now if [`Snes::use_threaded_ilu_on_subdomains`] asked for it,
-    /// with the Krylov solver's operators `a` and `p` (assembled).
-    pub(super) fn install_subdomain_ilu(&mut self, a: sys::Mat, p: sys::Mat) -> Result<()> {
-        if let Some(bs) = self.subdomain_ilu.take() {
+    /// Makes the symmetric SOR of each level of the multigrid (`-pc_type mg`, `-mg_levels_pc_type sor`)
+    /// the solver's own sweep on all threads (`petsc::smoother::threaded_sor_on_levels`), at the first
+    /// Jacobian of the next solve (PETSc makes the levels' smoothers at the first set-up). Nothing
+    /// changes where it does not apply (another preconditioner or smoother, several processes).
+    pub fn use_threaded_sor_on_levels(&mut self) {
+        self.replacement = Some(Replacement::LevelSor);
+    }
+
+    /// Replaces PETSc's preconditioners now if [`Snes::use_threaded_ilu_on_subdomains`] or
+    /// [`Snes::use_threaded_sor_on_levels`] asked for it, with the Krylov solver's operators `a` and `p`
+    /// (assembled).
+    pub(super) fn install_replacement(&mut self, a: sys::Mat, p: sys::Mat) -> Result<()> {
+        if let Some(replacement) = self.replacement.take() {
             // SAFETY: the SNES's own KSP; the caller's matrices are valid and assembled.
-            self.threaded_subdomains = unsafe {
-                super::preconditioner::threaded_ilu_on_subdomains(self.ksp()?, a, p, bs)
-            }?;
+            self.threaded = unsafe { replacement.install(self.ksp()?, a, p) }?;
         }
         Ok(())
     }
 
-    /// How many of this process's subdomains precondition with the threaded ILU(0) after
-    /// [`Snes::use_threaded_ilu_on_subdomains`] (0 before the first Jacobian, or where it did not apply).
-    pub fn threaded_subdomains(&self) -> usize {
-        self.threaded_subdomains
+    /// How many of this process's subdomains (ILU(0)) or multigrid levels (SOR) precondition with the
+    /// solver's own threaded kernels after [`Snes::use_threaded_ilu_on_subdomains`] or
+    /// [`Snes::use_threaded_sor_on_levels`] (0 before the first Jacobian, or where it did not apply).
+    pub fn threaded_preconditioners(&self) -> usize {
+        self.threaded
     }
 
     /// Solves `problem` from the initial guess in `x` (overwritten by the solution), assembling the
@@ -390,8 +437,8 @@ impl Snes {
             problem,
             fatal: None,
             domain: Vec::new(),
-            subdomain_ilu: self.subdomain_ilu,
-            threaded_subdomains: None,
+            replacement: self.replacement,
+            threaded: None,
         };
         let ctx_ptr = (&mut ctx as *mut Context).cast::<c_void>();
         *LAST_ERROR.lock().unwrap_or_else(|e| e.into_inner()) = None;
@@ -436,11 +483,11 @@ impl Snes {
                 solved
             })
         };
-        if ctx.subdomain_ilu.is_none() {
-            self.subdomain_ilu = None;
+        if ctx.replacement.is_none() {
+            self.replacement = None;
         }
-        if let Some(n) = ctx.threaded_subdomains {
-            self.threaded_subdomains = n;
+        if let Some(n) = ctx.threaded {
+            self.threaded = n;
         }
         if let Err(mut e) = result {
             if let Some(msg) = ctx.fatal.take() {
@@ -689,19 +736,19 @@ unsafe extern "C" fn jacobian_cb(
                 return e.code;
             }
         }
-        // The first Jacobian of a solve asked to that succeeds: the subdomains' ILU(0) replaced, now
-        // that `p` holds values.
+        // The first Jacobian of a solve asked to that succeeds: PETSc's subdomain ILU(0) or level SOR
+        // replaced, now that `p` holds values.
         if code == 0
-            && let Some(bs) = (*ctx.cast::<Context>()).subdomain_ilu.take()
+            && let Some(replacement) = (*ctx.cast::<Context>()).replacement.take()
         {
             let installed = std::panic::catch_unwind(|| {
                 let mut ksp = std::ptr::null_mut();
                 check(sys::SNESGetKSP(snes, &mut ksp), "SNESGetKSP")
-                    .and_then(|()| super::preconditioner::threaded_ilu_on_subdomains(ksp, a, p, bs))
+                    .and_then(|()| replacement.install(ksp, a, p))
             });
             let c = &mut *ctx.cast::<Context>();
             match installed {
-                Ok(Ok(n)) => c.threaded_subdomains = Some(n),
+                Ok(Ok(n)) => c.threaded = Some(n),
                 Ok(Err(e)) => {
                     c.fatal = Some(e.to_string());
                     return e.code;

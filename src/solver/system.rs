@@ -230,9 +230,9 @@ impl LinearSystem {
         let mut jac = Matrix::with_type(session, n, nf, kind)?;
         jac.set_block_pattern(&owned.pattern())?;
         // The Krylov solver's products by the solver's kernel, on all threads (PETSc's own run on one
-        // core, and 2.25x slower there); on several processes over each process's diagonal part; not
-        // for the multigrid, whose Galerkin products need the assembled operator.
-        if pc.as_deref() != Some("mg") && flag(session, "mpm_threaded_operator")? {
+        // core, and 2.25x slower there); on several processes over each process's diagonal part. The
+        // multigrid's levels, residuals and Galerkin products work on the assembled Jacobian.
+        if flag(session, "mpm_threaded_operator")? {
             if let Some(op) = ThreadedOperator::over(&jac, &owned.pattern())? {
                 snes.set_operator(op);
             }
@@ -285,6 +285,10 @@ impl LinearSystem {
             let levels = mg_levels(session, prefix)?;
             let hierarchy = Hierarchy::build(grid, dofs, levels);
             snes.set_multigrid(&interpolations(session, &hierarchy, owned.rows.clone())?)?;
+            // Each level's symmetric SOR on all threads in place of PETSc's one-core sweep.
+            if flag(session, "mpm_threaded_sor")? {
+                snes.use_threaded_sor_on_levels();
+            }
             Some(constrained(dofs))
         } else {
             None
@@ -308,7 +312,8 @@ impl LinearSystem {
 
 /// A switch of the options database (`-NAME`): on unless it says 0, false or no. `mpm_threaded_operator`:
 /// the Krylov solver multiplies by the Jacobian on all threads (`petsc::ThreadedOperator`);
-/// `mpm_threaded_ilu`: ILU(0) factored and applied on all threads (`petsc::use_threaded_ilu`).
+/// `mpm_threaded_ilu`: ILU(0) factored and applied on all threads (`petsc::use_threaded_ilu`);
+/// `mpm_threaded_sor`: the multigrid's symmetric SOR swept on all threads (`crate::sor`).
 fn flag(session: &SessionGuard, name: &str) -> Result<bool, StepError> {
     Ok(match petsc::option_string(session, name)?.as_deref() {
         None | Some("" | "1" | "true" | "yes") => true,

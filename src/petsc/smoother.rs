@@ -1,0 +1,307 @@
+//! The geometric multigrid's SOR smoother on all threads: on each level whose smoother is PETSc's
+//! symmetric SOR (`-mg_levels_pc_type sor`, the default of stiffness-dominated elastic steps), a shell
+//! preconditioner over [`crate::sor`] takes its place.
+//!
+//! PETSc (Debian's build has no OpenMP) sweeps a level on one core, and the sweeps were the largest part
+//! of the multigrid's V-cycle (`docs/benchmarks.md`, "The multigrid's smoother on all threads"). The
+//! shell does what PETSc's SOR does under Richardson (`PCApplyRichardson`: the sweeps from the level's
+//! guess, or from zero) and as a preconditioner (`PCApply`: one sweep from zero), reading the level's
+//! matrix (`seqaij`) where PETSc keeps it at every application, so that it follows the Jacobian's
+//! values as PETSc's SOR does when SNES lags the rest of the hierarchy. It keeps nothing of the matrix
+//! between applications and needs no set-up.
+//!
+//! Replaced only where the result is PETSc's sweep: one process (`seqaij` levels), `omega = 1`, one
+//! iteration of one local sweep, symmetric. Other SOR settings keep PETSc's.
+
+use super::block_parts::with_row_ij;
+use super::preconditioner::{guarded, pc_type};
+use super::{Matrix, PetscError, Result, check, sys};
+use crate::sor::{self, Csr, SweepPlan, SweepWork};
+use std::ffi::c_void;
+
+/// The shell's plan of the level's pattern (remade at each set-up of the level and whenever it does
+/// not fit the matrix) and its work space.
+struct Context {
+    plan: Option<SweepPlan>,
+    work: SweepWork,
+}
+
+/// Makes every level's symmetric SOR of the multigrid preconditioner of `ksp` (operators `a`, `p`,
+/// which must hold assembled values) the threaded sweep: sets the operators and the preconditioner up
+/// (PETSc makes the levels and their smoothers from the options at the first set-up) and replaces each
+/// level's SOR that [`plain_sor`] accepts. Returns how many levels it replaced (0 where the
+/// preconditioner is not a multigrid).
+///
+/// # Safety
+/// `ksp`, `a` and `p` are valid; `p` holds assembled values.
+pub(super) unsafe fn threaded_sor_on_levels(
+    ksp: sys::KSP,
+    a: sys::Mat,
+    p: sys::Mat,
+) -> Result<usize> {
+    let mut pc: sys::PC = std::ptr::null_mut();
+    // SAFETY: valid KSP; out-parameter.
+    check(unsafe { sys::KSPGetPC(ksp, &mut pc) }, "KSPGetPC")?;
+    // SAFETY: valid PC.
+    if unsafe { pc_type(pc) }? != "mg" {
+        return Ok(0);
+    }
+    let mut levels: sys::PetscInt = 0;
+    // SAFETY: valid objects; the set-up makes the levels' smoothers from the options.
+    unsafe {
+        check(sys::KSPSetOperators(ksp, a, p), "KSPSetOperators")?;
+        check(sys::PCSetUp(pc), "PCSetUp")?;
+        check(sys::PCMGGetLevels(pc, &mut levels), "PCMGGetLevels")?;
+    }
+    let mut replaced = 0;
+    // Level 0 is the coarse solve.
+    for level in 1..levels {
+        let (mut smoother, mut level_pc): (sys::KSP, sys::PC) =
+            (std::ptr::null_mut(), std::ptr::null_mut());
+        // SAFETY: a level of the multigrid; borrowed references.
+        unsafe {
+            check(
+                sys::PCMGGetSmoother(pc, level, &mut smoother),
+                "PCMGGetSmoother",
+            )?;
+            check(sys::KSPGetPC(smoother, &mut level_pc), "KSPGetPC")?;
+        }
+        // SAFETY: the level's valid preconditioner.
+        if unsafe { plain_sor(level_pc) }? {
+            // SAFETY: as above.
+            unsafe { install(level_pc) }?;
+            replaced += 1;
+        }
+    }
+    Ok(replaced)
+}
+
+/// Whether `pc` is PETSc's SOR as the shell sweeps it: one symmetric sweep (local or not: one process)
+/// with `omega = 1` per application, on a `seqaij` matrix.
+///
+/// # Safety
+/// `pc` is a valid set-up preconditioner.
+unsafe fn plain_sor(pc: sys::PC) -> Result<bool> {
+    // SAFETY: valid PC.
+    if unsafe { pc_type(pc) }? != "sor" {
+        return Ok(false);
+    }
+    let (mut omega, mut its, mut local, mut kind) = (0.0, 0, 0, 0);
+    let (mut amat, mut pmat): (sys::Mat, sys::Mat) = (std::ptr::null_mut(), std::ptr::null_mut());
+    // SAFETY: an SOR preconditioner; out-parameters (borrowed matrices).
+    unsafe {
+        check(sys::PCSORGetOmega(pc, &mut omega), "PCSORGetOmega")?;
+        check(
+            sys::PCSORGetIterations(pc, &mut its, &mut local),
+            "PCSORGetIterations",
+        )?;
+        check(sys::PCSORGetSymmetric(pc, &mut kind), "PCSORGetSymmetric")?;
+        check(
+            sys::PCGetOperators(pc, &mut amat, &mut pmat),
+            "PCGetOperators",
+        )?;
+    }
+    let symmetric = kind == sys::MatSORType_SOR_SYMMETRIC_SWEEP
+        || kind == sys::MatSORType_SOR_LOCAL_SYMMETRIC_SWEEP;
+    // SAFETY: the preconditioner's valid matrix.
+    let seqaij = unsafe { Matrix::borrowed(pmat) }.type_name()? == "seqaij";
+    Ok(omega == 1.0 && its == 1 && local == 1 && symmetric && seqaij)
+}
+
+/// Makes `pc` the threaded sweep's shell.
+///
+/// # Safety
+/// `pc` is valid and its matrix a `seqaij` one at every application.
+unsafe fn install(pc: sys::PC) -> Result<()> {
+    let context = Context {
+        plan: None,
+        work: SweepWork::default(),
+    };
+    let ctx = Box::into_raw(Box::new(context)).cast::<c_void>();
+    // SAFETY: valid PC; the shell keeps `ctx` until its destroy callback frees it. The callbacks match
+    // PETSc's signatures for the shell's operations.
+    unsafe {
+        if let Err(e) = check(sys::PCSetType(pc, c"shell".as_ptr()), "PCSetType") {
+            drop(Box::from_raw(ctx.cast::<Context>()));
+            return Err(e);
+        }
+        check(sys::PCShellSetContext(pc, ctx), "PCShellSetContext")?;
+        check(
+            sys::PCShellSetDestroy(pc, Some(destroy)),
+            "PCShellSetDestroy",
+        )?;
+        check(sys::PCShellSetSetUp(pc, Some(set_up)), "PCShellSetSetUp")?;
+        check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")?;
+        check(
+            sys::PCShellSetApplyRichardson(pc, Some(apply_richardson)),
+            "PCShellSetApplyRichardson",
+        )?;
+        check(
+            sys::PCShellSetName(pc, c"symmetric SOR, one part per thread".as_ptr()),
+            "PCShellSetName",
+        )?;
+    }
+    Ok(())
+}
+
+/// `PCShellSetDestroy`: frees the context.
+unsafe extern "C" fn destroy(pc: sys::PC) -> sys::PetscErrorCode {
+    let mut ctx: *mut c_void = std::ptr::null_mut();
+    // SAFETY: out-parameter; PETSc calls this once, for our shell.
+    let code = unsafe { sys::PCShellGetContext(pc, (&mut ctx as *mut *mut c_void).cast()) };
+    if code == 0 && !ctx.is_null() {
+        // SAFETY: made by `Box::into_raw` in `install`, not used afterwards.
+        drop(unsafe { Box::from_raw(ctx.cast::<Context>()) });
+    }
+    code
+}
+
+/// The shell's context.
+///
+/// # Safety
+/// `pc` is a shell made by [`install`].
+unsafe fn context<'a>(pc: sys::PC) -> Result<&'a mut Context> {
+    let mut ctx: *mut c_void = std::ptr::null_mut();
+    // SAFETY: out-parameter (PETSc 3.18 takes the address of the context pointer as `void *`).
+    check(
+        unsafe { sys::PCShellGetContext(pc, (&mut ctx as *mut *mut c_void).cast()) },
+        "PCShellGetContext",
+    )?;
+    if ctx.is_null() {
+        return Err(PetscError {
+            code: 1,
+            call: "PCShellGetContext",
+            message: "the threaded SOR's context is missing".into(),
+        });
+    }
+    // SAFETY: PETSc calls the shell's operations one at a time; the context lives until `destroy`.
+    Ok(unsafe { &mut *ctx.cast::<Context>() })
+}
+
+/// `PCShellSetSetUp`: the level's matrix may be another (a new pattern): its plan is remade at the next
+/// sweep.
+unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
+    guarded(|| {
+        // SAFETY: our shell.
+        unsafe { context(pc) }?.plan = None;
+        Ok(())
+    })
+}
+
+/// `sweeps` symmetric sweeps of the shell `pc`'s matrix from `x` (or zero) towards `b`.
+///
+/// # Safety
+/// `pc` is a shell made by [`install`]; `b` and `x` are distinct valid vectors.
+unsafe fn sweep(
+    pc: sys::PC,
+    b: sys::PetscVec,
+    x: sys::PetscVec,
+    sweeps: usize,
+    zero_guess: bool,
+) -> Result<()> {
+    // SAFETY: our shell.
+    let ctx = unsafe { context(pc) }?;
+    let (mut amat, mut pmat): (sys::Mat, sys::Mat) = (std::ptr::null_mut(), std::ptr::null_mut());
+    // SAFETY: borrowed references to the operators.
+    check(
+        unsafe { sys::PCGetOperators(pc, &mut amat, &mut pmat) },
+        "PCGetOperators",
+    )?;
+    // SAFETY: the level's `seqaij` matrix (checked when the shell was made); its scalar CSR arrays and
+    // values are read while PETSc holds them, and restored before returning.
+    let done = unsafe {
+        with_row_ij(pmat, false, |ia, ja| -> Result<()> {
+            let n = ia.len() - 1;
+            for v in [b, x] {
+                let mut len = 0;
+                check(sys::VecGetLocalSize(v, &mut len), "VecGetLocalSize")?;
+                if len as usize != n {
+                    return Err(PetscError {
+                        code: 60, // PETSC_ERR_ARG_SIZ
+                        call: "PCApply_Shell",
+                        message: format!("the threaded SOR's matrix has {n} rows, a vector {len}"),
+                    });
+                }
+            }
+            if n == 0 {
+                return Ok(());
+            }
+            let mut vals: *const f64 = std::ptr::null();
+            check(
+                sys::MatSeqAIJGetArrayRead(pmat, &mut vals),
+                "MatSeqAIJGetArrayRead",
+            )?;
+            let (mut ba, mut xa): (*const f64, *mut f64) = (std::ptr::null(), std::ptr::null_mut());
+            check(sys::VecGetArrayRead(b, &mut ba), "VecGetArrayRead")?;
+            check(sys::VecGetArray(x, &mut xa), "VecGetArray")?;
+            let a = Csr {
+                row_ptr: ia,
+                cols: ja,
+                vals: std::slice::from_raw_parts(vals, ja.len()),
+            };
+            let parts = rayon::current_num_threads();
+            let plan = match ctx.plan.take() {
+                Some(plan) if plan.fits(a, parts) => plan,
+                _ => SweepPlan::new(a, parts),
+            };
+            sor::symmetric_sweeps(
+                a,
+                &plan,
+                std::slice::from_raw_parts(ba, n),
+                std::slice::from_raw_parts_mut(xa, n),
+                sweeps,
+                zero_guess,
+                &mut ctx.work,
+            );
+            ctx.plan = Some(plan);
+            check(sys::VecRestoreArray(x, &mut xa), "VecRestoreArray")?;
+            check(sys::VecRestoreArrayRead(b, &mut ba), "VecRestoreArrayRead")?;
+            check(
+                sys::MatSeqAIJRestoreArrayRead(pmat, &mut vals),
+                "MatSeqAIJRestoreArrayRead",
+            )
+        })
+    }?;
+    done.unwrap_or_else(|| {
+        Err(PetscError {
+            code: 56, // PETSC_ERR_SUP
+            call: "MatGetRowIJ",
+            message: "the threaded SOR cannot read the level's matrix".into(),
+        })
+    })
+}
+
+/// `PCShellSetApply`: one symmetric sweep from zero, as PETSc's SOR applies as a preconditioner.
+unsafe extern "C" fn apply(pc: sys::PC, b: sys::PetscVec, x: sys::PetscVec) -> sys::PetscErrorCode {
+    // SAFETY: PETSc's shell and vectors.
+    guarded(|| unsafe { sweep(pc, b, x, 1, true) })
+}
+
+/// `PCShellSetApplyRichardson`: `its` symmetric sweeps from `x`, or from zero if `zero_guess`, as
+/// PETSc's SOR under Richardson (which then skips its own residual); the tolerances do not apply (the
+/// multigrid's smoothers run a fixed number of iterations).
+#[allow(clippy::too_many_arguments)]
+unsafe extern "C" fn apply_richardson(
+    pc: sys::PC,
+    b: sys::PetscVec,
+    x: sys::PetscVec,
+    _work: sys::PetscVec,
+    _rtol: f64,
+    _abstol: f64,
+    _dtol: f64,
+    its: sys::PetscInt,
+    zero_guess: sys::PetscBool,
+    done: *mut sys::PetscInt,
+    reason: *mut sys::PCRichardsonConvergedReason,
+) -> sys::PetscErrorCode {
+    guarded(|| {
+        let sweeps = usize::try_from(its).unwrap_or(0);
+        // SAFETY: PETSc's shell and vectors; the out-parameters are PETSc's.
+        unsafe {
+            sweep(pc, b, x, sweeps, zero_guess == sys::PetscBool_PETSC_TRUE)?;
+            *done = its;
+            *reason = sys::PCRichardsonConvergedReason_PCRICHARDSON_CONVERGED_ITS;
+        }
+        Ok(())
+    })
+}
