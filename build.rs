@@ -72,7 +72,7 @@ fn main() {
         "PC(SetType|GetType|FieldSplitSetIS|FactorSetMatSolverType|GetOperators|SetFailedReason|SetUp|ASMGetSubKSP|BJacobiGetSubKSP)",
         "KSPGetOperators|Mat(GetRowIJ|RestoreRowIJ|GetBlockSize)",
         "PCShell(SetContext|GetContext|SetDestroy|SetSetUp|SetApply|SetApplyRichardson|SetName)",
-        "PCSORGet(Omega|Iterations|Symmetric)|PCSetUseAmat",
+        "PCSORGet(Omega|Iterations|Symmetric)|PCSetUseAmat|PCGetOptionsPrefix|MatGetNonzeroState",
         "PCMG(SetLevels|GetLevels|SetGalerkin|SetInterpolation|GetSmoother)|MatSetBlockSizes",
         "SNES(Create|Destroy|SetFunction|SetJacobian|SetFromOptions|SetOptionsPrefix|Solve|GetIterationNumber)",
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",

@@ -1,36 +1,19 @@
-//! Symmetric Gauss-Seidel sweeps (SOR with `omega = 1`) on a point-wise (CSR) matrix, on all threads:
-//! the multigrid's smoother (`petsc::smoother`), in place of PETSc's `MatSOR`, which runs on one core.
+//! Symmetric block Gauss-Seidel sweeps (SOR with `omega = 1`) on a point-wise (CSR) matrix, on all
+//! threads: the multigrid's smoother (`petsc::smoother`), in place of PETSc's `MatSOR`, which runs on one
+//! core.
 //!
-//! The rows are cut into `parts` contiguous ranges of about equal nonzeros. A sweep updates each part's
-//! unknowns in place, forward through its rows and then backward, reading the other parts' unknowns as
-//! they stood when the sweep began: Gauss-Seidel inside a part, Jacobi between parts, as PETSc's
+//! Consecutive rows with the same columns (a grid node's unknowns: PETSc's "inodes", at most
+//! [`MAX_GROUP`] rows) form a group, whose diagonal block is solved exactly at each visit, as PETSc's
+//! `MatSOR_SeqAIJ_Inode` does with `omega = 1`: `x_g = D_g^-1 (b_g - sum_{h != g} A_gh x_h)`. The groups
+//! are cut into `parts` contiguous ranges of about equal nonzeros. A sweep updates each part's unknowns in
+//! place, forward through its groups and then backward, reading the other parts' unknowns as they stood
+//! when the sweep began: Gauss-Seidel inside a part, Jacobi between parts, as PETSc's
 //! `SOR_LOCAL_SYMMETRIC_SWEEP` treats the rows of other processes. With one part it is PETSc's symmetric
-//! sweep of the whole matrix (`-pc_sor_symmetric`, `omega = 1`, one local iteration), up to the order of
-//! the sums: a row is `x_i = (b_i - sum_{j != i} a_ij x_j) / a_ii`, and consecutive rows with the same
-//! columns (a grid node's unknowns) are read together. A zero or missing diagonal makes the sweep
-//! non-finite, which the Krylov solver meets as a breakdown (as it does a zero pivot).
+//! sweep of the whole matrix (`-pc_sor_symmetric`, one local iteration) up to the order of the sums, as
+//! long as PETSc groups the same rows. A singular diagonal block or a missing diagonal entry makes the
+//! sweep non-finite, which the Krylov solver meets as a breakdown (as it does a zero pivot).
 
 use rayon::prelude::*;
-
-/// Row boundaries of `parts` contiguous ranges of about equal nonzeros of the CSR row pointers
-/// `row_ptr`: `parts + 1` increasing values from 0 to the number of rows (some ranges may be empty).
-pub fn part_bounds(row_ptr: &[i32], parts: usize) -> Vec<usize> {
-    let rows = row_ptr.len().saturating_sub(1);
-    let parts = parts.max(1);
-    let total = row_ptr.last().copied().unwrap_or(0) as f64;
-    let mut bounds = Vec::with_capacity(parts + 1);
-    bounds.push(0);
-    let mut r = 0;
-    for p in 1..parts {
-        let target = total * p as f64 / parts as f64;
-        while r < rows && (row_ptr[r] as f64) < target {
-            r += 1;
-        }
-        bounds.push(r);
-    }
-    bounds.push(rows);
-    bounds
-}
 
 /// A matrix in CSR form as PETSc's `seqaij` keeps it: row pointers, column indices (sorted in each
 /// row) and values.
@@ -49,38 +32,42 @@ impl Csr<'_> {
     pub fn rows(&self) -> usize {
         self.row_ptr.len().saturating_sub(1)
     }
+
+    /// The column indices of row `i`.
+    fn cols_of(&self, i: usize) -> &[i32] {
+        &self.cols[self.row_ptr[i] as usize..self.row_ptr[i + 1] as usize]
+    }
 }
 
-/// Largest number of consecutive rows with one column pattern that the sweeps take together.
-const MAX_GROUP: usize = 4;
+/// Largest number of consecutive rows with one column pattern that a group takes (PETSc's inode limit).
+const MAX_GROUP: usize = 5;
 
-/// A run of consecutive rows of one part with the same columns (the unknowns of one grid node in the
-/// Jacobian and the multigrid's Galerkin operators), which the sweeps read together: each column index
-/// and each unknown it names loaded once for all of them, as PETSc's `MatSOR_SeqAIJ_Inode` does. Positions
-/// are offsets into each row's entries.
+/// A run of consecutive rows with the same columns, whose diagonal block a sweep solves at once; the
+/// sweeps also read each column index and each unknown it names once for all its rows. Positions are
+/// offsets into each row's entries.
 #[derive(Debug, Clone, Copy)]
 struct Group {
     /// First row.
     row: u32,
     /// Number of rows (1 to [`MAX_GROUP`]).
     len: u8,
-    /// The first entry of a column in the rows' part.
+    /// The first entry of a column in the group's part.
     first: u32,
-    /// The entry of column `row` (the group's diagonal block starts there, `len` entries wide).
+    /// The entry of column `row`: the diagonal block's `len` columns start there.
     diag: u32,
     /// The first entry of a column after the part.
     last: u32,
 }
 
-/// How the rows of a pattern split for the sweeps on given parts: runs of rows with the same columns
-/// ([`Group`]), and in each the entries of columns before the part, of the part before the group's own
-/// columns, the group's diagonal block, after it, and after the part. Made once per pattern and parts
-/// ([`SweepPlan::new`]); a sweep then sums each range without a branch per entry.
-#[derive(Debug, Default)]
+/// How the rows of a pattern split for the sweeps on given parts: the groups of rows ([`Group`]) and
+/// in each the entries of columns before the part, of the part before the diagonal block, the block,
+/// after it, and after the part. Made once per pattern and parts ([`SweepPlan::new`]); a sweep then sums
+/// each range without a branch per entry.
+#[derive(Debug)]
 pub struct SweepPlan {
-    /// Row boundaries of the parts ([`part_bounds`]).
+    /// Row boundaries of the parts (`parts + 1` values from 0 to the number of rows; at group starts).
     bounds: Vec<usize>,
-    /// The groups of each part, in row order (`parts[p]` indexes `groups`).
+    /// The groups, in row order; `parts[p]` indexes those of part `p`.
     groups: Vec<Group>,
     parts: Vec<std::ops::Range<usize>>,
     /// A row without its diagonal entry: every sweep is then not finite.
@@ -90,42 +77,58 @@ pub struct SweepPlan {
 }
 
 impl SweepPlan {
-    /// The plan of the pattern of `a` on `parts` parts.
+    /// The plan of the pattern of `a` on `parts` parts of about equal nonzeros, cut between groups.
     pub fn new(a: Csr<'_>, parts: usize) -> Self {
-        let bounds = part_bounds(a.row_ptr, parts);
         let n = a.rows();
-        let cols = |i: usize| &a.cols[a.row_ptr[i] as usize..a.row_ptr[i + 1] as usize];
         let below = |c: usize| move |&j: &i32| (j as usize) < c;
-        let (mut groups, mut ranges, mut missing_diagonal) = (Vec::new(), Vec::new(), false);
-        for w in bounds.windows(2) {
-            let (lo, hi) = (w[0], w[1]);
-            let begin = groups.len();
-            let mut i = lo;
-            while i < hi {
-                let row = cols(i);
-                let diag = row.partition_point(below(i));
-                if row.get(diag).map(|&c| c as usize) != Some(i) {
-                    missing_diagonal = true;
-                }
-                // The following rows with the same columns, whose own columns follow the diagonal.
-                let mut len = 1;
+        // The groups: (first row, rows, the diagonal's entry in the first row).
+        let (mut runs, mut missing_diagonal) = (Vec::new(), false);
+        let mut i = 0;
+        while i < n {
+            let row = a.cols_of(i);
+            let diag = row.partition_point(below(i));
+            let mut len = 1;
+            if row.get(diag).map(|&c| c as usize) == Some(i) {
                 while len < MAX_GROUP
-                    && i + len < hi
-                    && cols(i + len) == row
+                    && i + len < n
+                    && a.cols_of(i + len) == row
                     && row.get(diag + len).map(|&c| c as usize) == Some(i + len)
                 {
                     len += 1;
                 }
-                let first = row.partition_point(below(lo));
-                let last = diag + row[diag..].partition_point(below(hi));
+            } else {
+                missing_diagonal = true;
+            }
+            runs.push((i, len, diag));
+            i += len;
+        }
+        // Part bounds at group starts, about equal nonzeros each.
+        let parts = parts.max(1);
+        let total = a.cols.len() as f64;
+        let mut bounds = vec![0];
+        let mut next = 1;
+        for &(row, _, _) in &runs {
+            while next < parts && a.row_ptr[row] as f64 >= total * next as f64 / parts as f64 {
+                bounds.push(row);
+                next += 1;
+            }
+        }
+        bounds.resize(parts, n);
+        bounds.push(n);
+        let (mut groups, mut ranges) = (Vec::with_capacity(runs.len()), Vec::new());
+        let mut runs = runs.into_iter().peekable();
+        for w in bounds.windows(2) {
+            let (lo, hi) = (w[0], w[1]);
+            let begin = groups.len();
+            while let Some((row, len, diag)) = runs.next_if(|r| r.0 < hi) {
+                let cols = a.cols_of(row);
                 groups.push(Group {
-                    row: i as u32,
+                    row: row as u32,
                     len: len as u8,
-                    first: first as u32,
+                    first: cols.partition_point(below(lo)) as u32,
                     diag: diag as u32,
-                    last: last as u32,
+                    last: (diag + cols[diag..].partition_point(below(hi))) as u32,
                 });
-                i += len;
             }
             ranges.push(begin..groups.len());
         }
@@ -138,8 +141,8 @@ impl SweepPlan {
         }
     }
 
-    /// Whether the plan was made for a pattern of this size on `parts` parts (a pattern PETSc keeps
-    /// for the life of a matrix: the caller remakes the plan when the matrix is another).
+    /// Whether the plan was made for a pattern of this size on `parts` parts (the caller remakes the
+    /// plan when the matrix is another or its pattern changed).
     pub fn fits(&self, a: Csr<'_>, parts: usize) -> bool {
         self.size == (a.rows(), a.cols.len()) && self.bounds.len() == parts.max(1) + 1
     }
@@ -186,24 +189,59 @@ impl Sweep<'_> {
         let rest = pairs.remainder();
         for (j, c) in pairs.enumerate() {
             let (x0, x1) = (x[c[0] as usize - lo], x[c[1] as usize - lo]);
-            for k in 0..G {
-                s[k] += vals[k][2 * j] * x0;
-                odd[k] += vals[k][2 * j + 1] * x1;
+            for (k, v) in vals.iter().enumerate() {
+                s[k] += v[2 * j] * x0;
+                odd[k] += v[2 * j + 1] * x1;
             }
         }
         if let Some(&c) = rest.first() {
             let xj = x[c as usize - lo];
-            for k in 0..G {
-                s[k] += vals[k][cols.len() - 1] * xj;
+            for (k, v) in vals.iter().enumerate() {
+                s[k] += v[cols.len() - 1] * xj;
             }
         }
-        for k in 0..G {
-            s[k] += odd[k];
+        for (s, o) in s.iter_mut().zip(odd) {
+            *s += o;
         }
     }
 
-    /// The group `g` of rows swept from zero, forward (`partial` keeps `b_i` less the entries left of
-    /// each diagonal) or, after it, backward.
+    /// `D^-1 r` for the diagonal block `D` of the group `g` (rows `g.row..`, entries `g.diag..` of
+    /// each), by elimination with partial pivoting; a singular block gives non-finite values.
+    #[inline(always)]
+    fn solve<const G: usize>(&self, g: Group, mut r: [f64; G]) -> [f64; G] {
+        let (row, d) = (g.row as usize, g.diag as usize);
+        let mut m: [[f64; G]; G] = std::array::from_fn(|k| {
+            let start = self.a.row_ptr[row + k] as usize + d;
+            std::array::from_fn(|j| self.a.vals[start + j])
+        });
+        for c in 0..G {
+            let p = (c..G)
+                .max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs()))
+                .unwrap_or(c);
+            m.swap(c, p);
+            r.swap(c, p);
+            let (pivot, below) = m.split_at_mut(c + 1);
+            let pivot = &pivot[c];
+            for (i, row) in below.iter_mut().enumerate() {
+                let f = row[c] / pivot[c];
+                for (v, &p) in row[c..].iter_mut().zip(&pivot[c..]) {
+                    *v -= f * p;
+                }
+                r[c + 1 + i] -= f * r[c];
+            }
+        }
+        for c in (0..G).rev() {
+            let mut t = r[c];
+            for j in c + 1..G {
+                t -= m[c][j] * r[j];
+            }
+            r[c] = t / m[c][c];
+        }
+        r
+    }
+
+    /// The group `g` swept from zero, forward (`partial` keeps `b` less the entries left of the
+    /// diagonal block: every unknown right of it is still zero) or, after it, backward.
     #[inline(always)]
     fn sweep_from_zero<const G: usize>(
         &self,
@@ -213,35 +251,24 @@ impl Sweep<'_> {
         forward: bool,
     ) {
         let (lo, r, d) = (self.lo, g.row as usize, g.diag as usize);
-        let v = |k: usize, m: usize| self.a.vals[self.a.row_ptr[r + k] as usize + d + m];
+        let at = r - lo;
         let mut s = [0.0; G];
-        if forward {
+        let t: [f64; G] = if forward {
             self.gather::<G>(r, g.first as usize..d, lo, own, &mut s);
-            for k in 0..G {
-                let mut t = self.b[r + k] - s[k];
-                for m in 0..k {
-                    t -= v(k, m) * own[r + m - lo];
-                }
-                partial[r + k - lo] = t;
-                own[r + k - lo] = t / v(k, k);
-            }
+            let t = std::array::from_fn(|k| self.b[r + k] - s[k]);
+            partial[at..at + G].copy_from_slice(&t);
+            t
         } else {
             self.gather::<G>(r, d + G..g.last as usize, lo, own, &mut s);
-            for k in (0..G).rev() {
-                let mut t = partial[r + k - lo] - s[k];
-                for m in k + 1..G {
-                    t -= v(k, m) * own[r + m - lo];
-                }
-                own[r + k - lo] = t / v(k, k);
-            }
-        }
+            std::array::from_fn(|k| partial[at + k] - s[k])
+        };
+        own[at..at + G].copy_from_slice(&self.solve::<G>(g, t));
     }
 
-    /// The group `g` of rows swept from the current unknowns, forward or backward.
+    /// The group `g` swept from the current unknowns.
     #[inline(always)]
-    fn sweep_from_guess<const G: usize>(&self, g: Group, own: &mut [f64], forward: bool) {
+    fn sweep_from_guess<const G: usize>(&self, g: Group, own: &mut [f64]) {
         let (lo, r, d) = (self.lo, g.row as usize, g.diag as usize);
-        let v = |k: usize, m: usize| self.a.vals[self.a.row_ptr[r + k] as usize + d + m];
         let end = (self.a.row_ptr[r + 1] - self.a.row_ptr[r]) as usize;
         let mut s = [0.0; G];
         self.gather::<G>(r, g.first as usize..d, lo, own, &mut s);
@@ -250,18 +277,8 @@ impl Sweep<'_> {
             self.gather::<G>(r, 0..g.first as usize, 0, self.others, &mut s);
             self.gather::<G>(r, g.last as usize..end, 0, self.others, &mut s);
         }
-        let mut update = |k: usize| {
-            let mut t = self.b[r + k] - s[k];
-            for m in (0..G).filter(|&m| m != k) {
-                t -= v(k, m) * own[r + m - lo];
-            }
-            own[r + k - lo] = t / v(k, k);
-        };
-        if forward {
-            (0..G).for_each(&mut update);
-        } else {
-            (0..G).rev().for_each(&mut update);
-        }
+        let t = std::array::from_fn(|k| self.b[r + k] - s[k]);
+        own[r - lo..r - lo + G].copy_from_slice(&self.solve::<G>(g, t));
     }
 }
 
@@ -272,15 +289,16 @@ macro_rules! by_len {
             1 => $f::<1>($($arg),*),
             2 => $f::<2>($($arg),*),
             3 => $f::<3>($($arg),*),
-            _ => $f::<4>($($arg),*),
+            4 => $f::<4>($($arg),*),
+            _ => $f::<5>($($arg),*),
         }
     };
 }
 
-/// `sweeps` symmetric Gauss-Seidel sweeps of `a x = b` on the parts of `plan` (made for `a`'s
+/// `sweeps` symmetric block Gauss-Seidel sweeps of `a x = b` on the parts of `plan` (made for `a`'s
 /// pattern), from `x` or, if `zero_guess`, from zero. From zero the first sweep reads each row once, as
-/// PETSc's does: forward the entries left of the diagonal (every other unknown is still zero), keeping
-/// `b_i` less that sum, backward the entries right of it.
+/// PETSc's does: forward the entries left of each diagonal block (every unknown right of it is still
+/// zero), keeping `b` less that sum, backward the entries right of it.
 pub fn symmetric_sweeps(
     a: Csr<'_>,
     plan: &SweepPlan,
@@ -311,7 +329,7 @@ pub fn symmetric_sweeps(
             work.before.extend_from_slice(x);
         }
         let others: &[f64] = if parts > 1 { &work.before } else { &[] };
-        // Each part's rows with their slices of x (and of the partial sums).
+        // Each part's groups with its slices of x (and of the partial sums).
         let mut jobs = Vec::with_capacity(parts);
         let (mut xs, mut ps) = (&mut *x, &mut work.partial[..]);
         for (w, groups) in plan.bounds.windows(2).zip(&plan.parts) {
@@ -337,11 +355,8 @@ pub fn symmetric_sweeps(
                     by_len!(g, zero, &sweep, g, own, partial, false);
                 }
             } else {
-                for &g in groups {
-                    by_len!(g, guess, &sweep, g, own, true);
-                }
-                for &g in groups.iter().rev() {
-                    by_len!(g, guess, &sweep, g, own, false);
+                for &g in groups.iter().chain(groups.iter().rev()) {
+                    by_len!(g, guess, &sweep, g, own);
                 }
             }
         };
@@ -367,8 +382,8 @@ fn zero<const G: usize>(
 
 /// [`Sweep::sweep_from_guess`] for a group of `G` rows.
 #[inline(always)]
-fn guess<const G: usize>(s: &Sweep<'_>, g: Group, own: &mut [f64], forward: bool) {
-    s.sweep_from_guess::<G>(g, own, forward);
+fn guess<const G: usize>(s: &Sweep<'_>, g: Group, own: &mut [f64]) {
+    s.sweep_from_guess::<G>(g, own);
 }
 
 #[cfg(test)]
@@ -412,35 +427,55 @@ mod tests {
         (ia, ja, va)
     }
 
-    /// One symmetric sweep as the plan defines it, entry by entry: on each part forward then
-    /// backward Gauss-Seidel, the other parts' unknowns as the sweep found them.
+    /// One symmetric sweep as the plan defines it, written out densely: on each part forward then
+    /// backward over its groups (consecutive rows with the same columns and their diagonal block, at
+    /// most `MAX_GROUP`), each group's block solved by LU, the other parts' unknowns as the sweep found
+    /// them.
     fn reference(a: Csr<'_>, bounds: &[usize], b: &[f64], x: &mut [f64]) {
         let before = x.to_vec();
         for w in bounds.windows(2) {
-            let rows: Vec<usize> = (w[0]..w[1]).chain((w[0]..w[1]).rev()).collect();
-            for i in rows {
-                let (mut s, mut d) = (b[i], 0.0);
-                for k in a.row_ptr[i] as usize..a.row_ptr[i + 1] as usize {
-                    let c = a.cols[k] as usize;
-                    if c == i {
-                        d = a.vals[k];
-                    } else {
-                        s -= a.vals[k]
-                            * if (w[0]..w[1]).contains(&c) {
+            let mut groups = Vec::new();
+            let mut i = w[0];
+            while i < w[1] {
+                let mut len = 1;
+                while len < MAX_GROUP && i + len < w[1] && a.cols_of(i + len) == a.cols_of(i) {
+                    len += 1;
+                }
+                groups.push(i..i + len);
+                i += len;
+            }
+            let order: Vec<_> = groups.iter().chain(groups.iter().rev()).cloned().collect();
+            for g in order {
+                let m = g.len();
+                let mut block = nalgebra::DMatrix::<f64>::zeros(m, m);
+                let mut rhs = nalgebra::DVector::<f64>::zeros(m);
+                for (r, row) in g.clone().enumerate() {
+                    rhs[r] = b[row];
+                    for k in a.row_ptr[row] as usize..a.row_ptr[row + 1] as usize {
+                        let c = a.cols[k] as usize;
+                        if g.contains(&c) {
+                            block[(r, c - g.start)] = a.vals[k];
+                        } else {
+                            let xc = if (w[0]..w[1]).contains(&c) {
                                 x[c]
                             } else {
                                 before[c]
                             };
+                            rhs[r] -= a.vals[k] * xc;
+                        }
                     }
                 }
-                x[i] = s / d;
+                let y = block.lu().solve(&rhs).expect("a regular block");
+                for (r, row) in g.enumerate() {
+                    x[row] = y[r];
+                }
             }
         }
     }
 
     #[test]
-    fn node_rows_swept_together_are_gauss_seidel_row_by_row() {
-        for bs in [1, 2, 3, 4, 5] {
+    fn node_rows_are_swept_as_blocks() {
+        for bs in [1, 2, 3, 4, 5, 6] {
             let n = 11 * bs;
             let (ia, ja, va) = blocks(11, bs);
             let a = Csr {
@@ -451,11 +486,20 @@ mod tests {
             let b: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).cos()).collect();
             for parts in [1, 2, 3] {
                 let plan = SweepPlan::new(a, parts);
-                // The rows of a node go together (up to four; a part may cut a node).
+                // A node's rows go together (up to five), and parts are cut between groups.
+                let starts: Vec<usize> = plan.groups.iter().map(|g| g.row as usize).collect();
                 assert!(
-                    plan.groups.len() <= 11 * bs.div_ceil(MAX_GROUP) + parts,
+                    plan.bounds[..parts].iter().all(|r| starts.contains(r)),
                     "bs {bs}"
                 );
+                if bs <= MAX_GROUP {
+                    assert!(
+                        plan.bounds.iter().all(|&r| r % bs == 0),
+                        "bs {bs}: {:?}",
+                        plan.bounds
+                    );
+                }
+                assert_eq!(plan.groups.len(), 11 * bs.div_ceil(MAX_GROUP), "bs {bs}");
                 for zero_guess in [true, false] {
                     let guess: Vec<f64> = (0..n).map(|i| 0.1 * i as f64).collect();
                     let mut expected = if zero_guess {
@@ -541,10 +585,9 @@ mod tests {
             })
             .collect();
         for parts in [1, 2, 3, 8] {
-            let bounds = part_bounds(&ia, parts);
-            assert_eq!(bounds.len(), parts + 1);
-            assert!(bounds.windows(2).all(|w| w[0] <= w[1]));
             let plan = SweepPlan::new(a, parts);
+            assert_eq!(plan.bounds.len(), parts + 1);
+            assert!(plan.bounds.windows(2).all(|w| w[0] <= w[1]));
             assert!(plan.fits(a, parts) && !plan.fits(a, parts + 1));
             let mut x = vec![0.0; n];
             symmetric_sweeps(a, &plan, &b, &mut x, 60, true, &mut SweepWork::default());

@@ -158,8 +158,6 @@ impl ThreadedOperator {
                 ),
                 "MatShellSetOperation",
             )?;
-            // The layouts set up, so that the multigrid can make the finest level's vectors from it.
-            check(sys::MatSetUp(shell.raw), "MatSetUp")?;
         }
         Ok(Some(Self { shell }))
     }

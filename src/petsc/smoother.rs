@@ -5,24 +5,25 @@
 //! PETSc (Debian's build has no OpenMP) sweeps a level on one core, and the sweeps were the largest part
 //! of the multigrid's V-cycle (`docs/benchmarks.md`, "The multigrid's smoother on all threads"). The
 //! shell does what PETSc's SOR does under Richardson (`PCApplyRichardson`: the sweeps from the level's
-//! guess, or from zero) and as a preconditioner (`PCApply`: one sweep from zero), reading the level's
-//! matrix (`seqaij`) where PETSc keeps it at every application, so that it follows the Jacobian's
-//! values as PETSc's SOR does when SNES lags the rest of the hierarchy. It keeps nothing of the matrix
-//! between applications and needs no set-up.
+//! guess, or from zero) and as a preconditioner (`PCApply`: one sweep from zero): block Gauss-Seidel over
+//! a node's rows, as PETSc's sweep of a matrix with "inodes". It reads the level's matrix (`seqaij`) where
+//! PETSc keeps it at every application, so that it follows the Jacobian's values as PETSc's SOR does
+//! when SNES lags the rest of the hierarchy, and keeps only the plan of its pattern
+//! ([`crate::sor::SweepPlan`], remade when the matrix or its nonzero pattern changes).
 //!
-//! Replaced only where the result is PETSc's sweep: one process (`seqaij` levels), `omega = 1`, one
-//! iteration of one local sweep, symmetric. Other SOR settings keep PETSc's.
+//! Replaced only where PETSc would sweep the same way: one process (`seqaij` levels), `omega = 1`, one
+//! iteration of one local sweep, symmetric, no diagonal shift. Other SOR settings keep PETSc's.
 
 use super::block_parts::with_row_ij;
 use super::preconditioner::{guarded, pc_type};
-use super::{Matrix, PetscError, Result, check, sys};
+use super::{Matrix, PetscError, Result, Vector, check, sys};
 use crate::sor::{self, Csr, SweepPlan, SweepWork};
-use std::ffi::c_void;
+use std::ffi::{CStr, CString, c_void};
 
-/// The shell's plan of the level's pattern (remade at each set-up of the level and whenever it does
-/// not fit the matrix) and its work space.
+/// The shell's plan of the level's pattern, with the matrix and nonzero state it was made for, and its
+/// work space.
 struct Context {
-    plan: Option<SweepPlan>,
+    plan: Option<(sys::Mat, sys::PetscObjectState, SweepPlan)>,
     work: SweepWork,
 }
 
@@ -54,7 +55,8 @@ pub(super) unsafe fn threaded_sor_on_levels(
         check(sys::PCMGGetLevels(pc, &mut levels), "PCMGGetLevels")?;
     }
     let mut replaced = 0;
-    // Level 0 is the coarse solve.
+    // Level 0 is the coarse solve. The down-smoother is also the up-smoother unless
+    // `-pc_mg_distinct_smoothup` made another, which keeps PETSc's SOR.
     for level in 1..levels {
         let (mut smoother, mut level_pc): (sys::KSP, sys::PC) =
             (std::ptr::null_mut(), std::ptr::null_mut());
@@ -77,7 +79,7 @@ pub(super) unsafe fn threaded_sor_on_levels(
 }
 
 /// Whether `pc` is PETSc's SOR as the shell sweeps it: one symmetric sweep (local or not: one process)
-/// with `omega = 1` per application, on a `seqaij` matrix.
+/// with `omega = 1` and no diagonal shift per application, on a `seqaij` matrix.
 ///
 /// # Safety
 /// `pc` is a valid set-up preconditioner.
@@ -87,8 +89,9 @@ unsafe fn plain_sor(pc: sys::PC) -> Result<bool> {
         return Ok(false);
     }
     let (mut omega, mut its, mut local, mut kind) = (0.0, 0, 0, 0);
-    let (mut amat, mut pmat): (sys::Mat, sys::Mat) = (std::ptr::null_mut(), std::ptr::null_mut());
-    // SAFETY: an SOR preconditioner; out-parameters (borrowed matrices).
+    let mut pmat: sys::Mat = std::ptr::null_mut();
+    let mut prefix: *const std::ffi::c_char = std::ptr::null();
+    // SAFETY: an SOR preconditioner; out-parameters (a borrowed matrix, PETSc's own prefix string).
     unsafe {
         check(sys::PCSORGetOmega(pc, &mut omega), "PCSORGetOmega")?;
         check(
@@ -97,15 +100,52 @@ unsafe fn plain_sor(pc: sys::PC) -> Result<bool> {
         )?;
         check(sys::PCSORGetSymmetric(pc, &mut kind), "PCSORGetSymmetric")?;
         check(
-            sys::PCGetOperators(pc, &mut amat, &mut pmat),
+            sys::PCGetOperators(pc, std::ptr::null_mut(), &mut pmat),
             "PCGetOperators",
         )?;
+        check(
+            sys::PCGetOptionsPrefix(pc, &mut prefix),
+            "PCGetOptionsPrefix",
+        )?;
     }
+    // PCSOR has no getter of its diagonal shift: the option is read where PETSc reads it.
+    let prefix = if prefix.is_null() {
+        String::new()
+    } else {
+        // SAFETY: a NUL-terminated string owned by PETSc.
+        unsafe { CStr::from_ptr(prefix) }
+            .to_string_lossy()
+            .into_owned()
+    };
+    let shift =
+        CString::new(format!("-{prefix}pc_sor_diagonal_shift")).map_err(|_| PetscError {
+            code: 62, // PETSC_ERR_ARG_WRONG
+            call: "PCGetOptionsPrefix",
+            message: format!("an options prefix with a NUL byte: {prefix:?}"),
+        })?;
+    let mut shifted = sys::PetscBool_PETSC_FALSE;
+    // SAFETY: PETSc reads the name during the call; out-parameter.
+    check(
+        unsafe {
+            sys::PetscOptionsHasName(
+                std::ptr::null_mut(),
+                std::ptr::null(),
+                shift.as_ptr(),
+                &mut shifted,
+            )
+        },
+        "PetscOptionsHasName",
+    )?;
     let symmetric = kind == sys::MatSORType_SOR_SYMMETRIC_SWEEP
         || kind == sys::MatSORType_SOR_LOCAL_SYMMETRIC_SWEEP;
     // SAFETY: the preconditioner's valid matrix.
     let seqaij = unsafe { Matrix::borrowed(pmat) }.type_name()? == "seqaij";
-    Ok(omega == 1.0 && its == 1 && local == 1 && symmetric && seqaij)
+    Ok(omega == 1.0
+        && its == 1
+        && local == 1
+        && symmetric
+        && shifted != sys::PetscBool_PETSC_TRUE
+        && seqaij)
 }
 
 /// Makes `pc` the threaded sweep's shell.
@@ -130,7 +170,6 @@ unsafe fn install(pc: sys::PC) -> Result<()> {
             sys::PCShellSetDestroy(pc, Some(destroy)),
             "PCShellSetDestroy",
         )?;
-        check(sys::PCShellSetSetUp(pc, Some(set_up)), "PCShellSetSetUp")?;
         check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")?;
         check(
             sys::PCShellSetApplyRichardson(pc, Some(apply_richardson)),
@@ -178,16 +217,6 @@ unsafe fn context<'a>(pc: sys::PC) -> Result<&'a mut Context> {
     Ok(unsafe { &mut *ctx.cast::<Context>() })
 }
 
-/// `PCShellSetSetUp`: the level's matrix may be another (a new pattern): its plan is remade at the next
-/// sweep.
-unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
-    guarded(|| {
-        // SAFETY: our shell.
-        unsafe { context(pc) }?.plan = None;
-        Ok(())
-    })
-}
-
 /// `sweeps` symmetric sweeps of the shell `pc`'s matrix from `x` (or zero) towards `b`.
 ///
 /// # Safety
@@ -201,65 +230,69 @@ unsafe fn sweep(
 ) -> Result<()> {
     // SAFETY: our shell.
     let ctx = unsafe { context(pc) }?;
-    let (mut amat, mut pmat): (sys::Mat, sys::Mat) = (std::ptr::null_mut(), std::ptr::null_mut());
-    // SAFETY: borrowed references to the operators.
-    check(
-        unsafe { sys::PCGetOperators(pc, &mut amat, &mut pmat) },
-        "PCGetOperators",
-    )?;
+    let mut pmat: sys::Mat = std::ptr::null_mut();
+    let mut state: sys::PetscObjectState = 0;
+    // SAFETY: a borrowed reference to the preconditioning matrix; out-parameter.
+    unsafe {
+        check(
+            sys::PCGetOperators(pc, std::ptr::null_mut(), &mut pmat),
+            "PCGetOperators",
+        )?;
+        check(
+            sys::MatGetNonzeroState(pmat, &mut state),
+            "MatGetNonzeroState",
+        )?;
+    }
+    // SAFETY: valid vectors for the duration of the call; their arrays are restored by the wrappers.
+    let (b, mut x) = unsafe { (Vector::borrowed(b), Vector::borrowed(x)) };
     // SAFETY: the level's `seqaij` matrix (checked when the shell was made); its scalar CSR arrays and
     // values are read while PETSc holds them, and restored before returning.
     let done = unsafe {
         with_row_ij(pmat, false, |ia, ja| -> Result<()> {
             let n = ia.len() - 1;
-            for v in [b, x] {
-                let mut len = 0;
-                check(sys::VecGetLocalSize(v, &mut len), "VecGetLocalSize")?;
-                if len as usize != n {
-                    return Err(PetscError {
-                        code: 60, // PETSC_ERR_ARG_SIZ
-                        call: "PCApply_Shell",
-                        message: format!("the threaded SOR's matrix has {n} rows, a vector {len}"),
-                    });
-                }
-            }
-            if n == 0 {
-                return Ok(());
-            }
             let mut vals: *const f64 = std::ptr::null();
             check(
                 sys::MatSeqAIJGetArrayRead(pmat, &mut vals),
                 "MatSeqAIJGetArrayRead",
             )?;
-            let (mut ba, mut xa): (*const f64, *mut f64) = (std::ptr::null(), std::ptr::null_mut());
-            check(sys::VecGetArrayRead(b, &mut ba), "VecGetArrayRead")?;
-            check(sys::VecGetArray(x, &mut xa), "VecGetArray")?;
             let a = Csr {
                 row_ptr: ia,
                 cols: ja,
-                vals: std::slice::from_raw_parts(vals, ja.len()),
+                vals: if ja.is_empty() {
+                    &[]
+                } else {
+                    std::slice::from_raw_parts(vals, ja.len())
+                },
             };
             let parts = rayon::current_num_threads();
             let plan = match ctx.plan.take() {
-                Some(plan) if plan.fits(a, parts) => plan,
+                Some((m, s, plan)) if m == pmat && s == state && plan.fits(a, parts) => plan,
                 _ => SweepPlan::new(a, parts),
             };
-            sor::symmetric_sweeps(
-                a,
-                &plan,
-                std::slice::from_raw_parts(ba, n),
-                std::slice::from_raw_parts_mut(xa, n),
-                sweeps,
-                zero_guess,
-                &mut ctx.work,
-            );
-            ctx.plan = Some(plan);
-            check(sys::VecRestoreArray(x, &mut xa), "VecRestoreArray")?;
-            check(sys::VecRestoreArrayRead(b, &mut ba), "VecRestoreArrayRead")?;
-            check(
+            let swept = b.read(|b| {
+                x.write(|x| {
+                    if b.len() != n || x.len() != n {
+                        return Err(PetscError {
+                            code: 60, // PETSC_ERR_ARG_SIZ
+                            call: "PCApply_Shell",
+                            message: format!(
+                                "the threaded SOR's matrix has {n} rows, the vectors {} and {}",
+                                b.len(),
+                                x.len()
+                            ),
+                        });
+                    }
+                    sor::symmetric_sweeps(a, &plan, b, x, sweeps, zero_guess, &mut ctx.work);
+                    Ok(())
+                })
+            });
+            ctx.plan = Some((pmat, state, plan));
+            let restored = check(
                 sys::MatSeqAIJRestoreArrayRead(pmat, &mut vals),
                 "MatSeqAIJRestoreArrayRead",
-            )
+            );
+            swept.and_then(|w| w).and_then(|s| s)?;
+            restored
         })
     }?;
     done.unwrap_or_else(|| {

@@ -317,8 +317,9 @@ impl Snes {
             unsafe { sys::PCMGSetGalerkin(pc, sys::PCMGGalerkinType_PC_MG_GALERKIN_BOTH) },
             "PCMGSetGalerkin",
         )?;
-        // The finest level on the assembled Jacobian (PETSc's multigrid would take the Krylov solver's
-        // operator, which may be a shell without the entries the Galerkin products need).
+        // Every level on the assembled Jacobian, even under `-pc_use_amat` (set with the options
+        // before this): the Krylov solver's operator may be a shell without the entries the Galerkin
+        // products need.
         // SAFETY: valid PC.
         check(
             unsafe { sys::PCSetUseAmat(pc, sys::PetscBool_PETSC_FALSE) },
