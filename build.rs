@@ -78,7 +78,7 @@ fn main() {
         "SNES(GetLinearSolveIterations|GetConvergedReason|GetKSP|SetTolerances|SetFunctionDomainError|SetType)",
         "SNES(SetJacobianDomainError|SetConvergenceHistory|GetConvergenceHistory|GetFunction|GetType|SetMaxLinearSolveFailures)",
         "SNES(GetConvergedReasonString|SetUp|GetLinearSolveFailures|GetTolerances|GetLagPreconditioner|SetLagPreconditioner)|KSPGetConvergedReasonString|MatNullSpaceCreateRigidBody",
-        "SNES(SetConvergenceTest|ConvergedDefault)",
+        "SNES(SetConvergenceTest|ConvergedDefault|SetUpdate)|KSPGetTolerances",
         "IS(CreateGeneral|CreateStride|CreateBlock|Destroy|SetBlockSize)",
         "mpmc_.*",
     ];

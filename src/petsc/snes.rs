@@ -94,6 +94,9 @@ pub struct Snes {
     replacement: Option<Replacement>,
     /// How many subdomains' ILU(0) or levels' SOR the last replacement made the threaded ones.
     threaded: usize,
+    /// The linear solver's relative tolerance at the first Newton iteration of a solve
+    /// ([`Snes::set_first_linear_rtol`]); `None`: the configured one at every iteration.
+    first_linear_rtol: Option<f64>,
 }
 
 /// Which of PETSc's preconditioners inside the Krylov solver's the first Jacobian of a solve replaces by
@@ -128,6 +131,9 @@ struct Context<'a> {
     replacement: Option<Replacement>,
     /// How many subdomains or levels the first Jacobian's replacement reached.
     threaded: Option<usize>,
+    /// The linear solver's relative tolerance at the first Newton iteration and at the others
+    /// ([`update_cb`]).
+    linear_rtol: Option<(f64, f64)>,
 }
 
 /// PETSc's generic user error code (`PETSC_ERR_USER`).
@@ -166,6 +172,7 @@ impl Snes {
             stall: Box::default(),
             replacement: None,
             threaded: 0,
+            first_linear_rtol: None,
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -249,6 +256,42 @@ impl Snes {
             unsafe { sys::SNESSetTolerances(self.raw, t.atol, t.rtol, t.stol, t.max_it, t.max_f) },
             "SNESSetTolerances",
         )
+    }
+
+    /// Solves the linear system of the first Newton iteration of every solve to the relative tolerance
+    /// `rtol` only, and those of the later iterations to the configured one (`None`: the configured one
+    /// everywhere). The first iteration of an inertia-dominated step carries the prescribed motion and
+    /// the contact of the devices into the interior, and its residual is left at a few thousandths of
+    /// where it started by the nonlinearity, whatever the linear solve reaches; the later iterations
+    /// converge quadratically from there on solves to the configured tolerance, as before
+    /// (`docs/theory.md`, "Solver defaults").
+    pub fn set_first_linear_rtol(&mut self, rtol: Option<f64>) {
+        self.first_linear_rtol = rtol;
+    }
+
+    /// The linear solver's relative tolerance (`-ksp_rtol`).
+    fn linear_rtol(&self) -> Result<f64> {
+        let mut rtol = 0.0;
+        // SAFETY: valid KSP; out-parameters (null: not asked).
+        check(
+            unsafe {
+                sys::KSPGetTolerances(
+                    self.ksp()?,
+                    &mut rtol,
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                    std::ptr::null_mut(),
+                )
+            },
+            "KSPGetTolerances",
+        )?;
+        Ok(rtol)
+    }
+
+    /// Sets the linear solver's relative tolerance, the others unchanged.
+    fn set_linear_rtol(&self, rtol: f64) -> Result<()> {
+        // SAFETY: valid KSP.
+        unsafe { set_ksp_rtol(self.ksp()?, rtol) }
     }
 
     /// The lag of the preconditioner (`-snes_lag_preconditioner`): 1 builds it at every Newton
@@ -440,7 +483,11 @@ impl Snes {
             domain: Vec::new(),
             replacement: self.replacement,
             threaded: None,
+            linear_rtol: None,
         };
+        if let Some(first) = self.first_linear_rtol {
+            ctx.linear_rtol = Some((first, self.linear_rtol()?));
+        }
         let ctx_ptr = (&mut ctx as *mut Context).cast::<c_void>();
         *LAST_ERROR.lock().unwrap_or_else(|e| e.into_inner()) = None;
         // SAFETY: ctx outlives SNESSolve, the only place PETSc calls the callbacks; they are re-set on
@@ -471,6 +518,10 @@ impl Snes {
             })
             .and_then(|()| self.monitor_linear_solver())
             .and_then(|()| {
+                let update = ctx.linear_rtol.map(|_| update_cb as UpdateFn);
+                check(sys::SNESSetUpdate(self.raw, update), "SNESSetUpdate")
+            })
+            .and_then(|()| {
                 if let Some(slot) = &self.monitored {
                     slot.set(ctx_ptr);
                 }
@@ -486,6 +537,10 @@ impl Snes {
         };
         if ctx.replacement.is_none() {
             self.replacement = None;
+        }
+        // The configured tolerance again for whoever reads it after the solve.
+        if let Some((_, rest)) = ctx.linear_rtol {
+            self.set_linear_rtol(rest)?;
         }
         if let Some(n) = ctx.threaded {
             self.threaded = n;
@@ -641,6 +696,48 @@ unsafe extern "C" fn linear_monitor_cb(
                 panic_message(p.as_ref())
             ));
             ERR_USER
+        }
+    }
+}
+
+/// `SNESSetUpdate`'s callback.
+type UpdateFn = unsafe extern "C" fn(sys::SNES, sys::PetscInt) -> sys::PetscErrorCode;
+
+/// Sets the relative tolerance of `ksp`, its other tolerances unchanged (`PETSC_DEFAULT`).
+///
+/// # Safety
+/// `ksp` is valid.
+unsafe fn set_ksp_rtol(ksp: sys::KSP, rtol: f64) -> Result<()> {
+    const KEEP: f64 = -2.0; // PETSC_DEFAULT
+    // SAFETY: the caller's promise.
+    check(
+        unsafe { sys::KSPSetTolerances(ksp, rtol, KEEP, KEEP, -2) },
+        "KSPSetTolerances",
+    )
+}
+
+/// Before each Newton iteration `step` (PETSc's `SNESSetUpdate`): the linear solver's relative
+/// tolerance of that iteration, from the solve's context ([`Snes::set_first_linear_rtol`]).
+unsafe extern "C" fn update_cb(snes: sys::SNES, step: sys::PetscInt) -> sys::PetscErrorCode {
+    let mut ctx: *mut c_void = std::ptr::null_mut();
+    let mut ksp: sys::KSP = std::ptr::null_mut();
+    // SAFETY: PETSc's SNES during SNESSolve; the function's context is the solve's `Context`, alive
+    // until SNESSolve returns (set with the function at every solve).
+    unsafe {
+        let code = sys::SNESGetFunction(snes, std::ptr::null_mut(), std::ptr::null_mut(), &mut ctx);
+        if code != 0 || ctx.is_null() {
+            return if code != 0 { code } else { ERR_USER };
+        }
+        let Some((first, rest)) = (*ctx.cast::<Context>()).linear_rtol else {
+            return 0;
+        };
+        let code = sys::SNESGetKSP(snes, &mut ksp);
+        if code != 0 {
+            return code;
+        }
+        match set_ksp_rtol(ksp, if step == 0 { first } else { rest }) {
+            Ok(()) => 0,
+            Err(e) => e.code,
         }
     }
 }

@@ -293,6 +293,20 @@ impl LinearSystem {
         } else {
             None
         };
+        // The first Newton iteration's linear tolerance (`-mpm_first_ksp_rtol R`, 0: the configured one).
+        let first = format!("{}mpm_first_ksp_rtol", prefix.unwrap_or(""));
+        if let Some(v) = petsc::option_string(session, &first)? {
+            let rtol = v
+                .parse::<f64>()
+                .ok()
+                .filter(|r| r.is_finite() && (0.0..1.0).contains(r));
+            let Some(rtol) = rtol else {
+                return Err(StepError::Setup(format!(
+                    "-{first} {v}: allowed is a relative tolerance from 0 (off) to below 1"
+                )));
+            };
+            snes.set_first_linear_rtol((rtol > 0.0).then_some(rtol));
+        }
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
