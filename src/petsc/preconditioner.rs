@@ -95,24 +95,43 @@ unsafe fn install(
         failure,
         failed: false,
     };
+    // SAFETY: the caller's promise; the callbacks read a `Context`.
+    unsafe {
+        make_shell(pc, context, name, |pc| {
+            check(sys::PCShellSetSetUp(pc, Some(set_up)), "PCShellSetSetUp")?;
+            check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")
+        })
+    }
+}
+
+/// Makes `pc` a shell preconditioner named `name` that owns `context` (freed when PETSc destroys the
+/// shell or changes its type: [`destroy_context`]) and whose operations `operations` registers; the
+/// operations read the context with [`shell_context`].
+///
+/// # Safety
+/// `pc` is a valid PC; the operations `operations` registers read a `T` as the context.
+pub(super) unsafe fn make_shell<T>(
+    pc: sys::PC,
+    context: T,
+    name: &CStr,
+    operations: impl FnOnce(sys::PC) -> Result<()>,
+) -> Result<()> {
     let ctx = Box::into_raw(Box::new(context)).cast::<c_void>();
     // SAFETY: valid PC; the shell keeps `ctx` until its destroy callback frees it. The callbacks match
     // PETSc's signatures for the shell's operations.
     unsafe {
         if let Err(e) = check(sys::PCSetType(pc, c"shell".as_ptr()), "PCSetType") {
-            drop(Box::from_raw(ctx.cast::<Context>()));
+            drop(Box::from_raw(ctx.cast::<T>()));
             return Err(e);
         }
         check(sys::PCShellSetContext(pc, ctx), "PCShellSetContext")?;
         check(
-            sys::PCShellSetDestroy(pc, Some(destroy)),
+            sys::PCShellSetDestroy(pc, Some(destroy_context::<T>)),
             "PCShellSetDestroy",
         )?;
-        check(sys::PCShellSetSetUp(pc, Some(set_up)), "PCShellSetSetUp")?;
-        check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")?;
-        check(sys::PCShellSetName(pc, name.as_ptr()), "PCShellSetName")?;
+        operations(pc)?;
+        check(sys::PCShellSetName(pc, name.as_ptr()), "PCShellSetName")
     }
-    Ok(())
 }
 
 /// The ILU(0) of every subdomain of block Jacobi or additive Schwarz (`-pc_type bjacobi` or `asm` with
@@ -238,28 +257,24 @@ pub(super) unsafe fn pc_type(pc: sys::PC) -> Result<String> {
     Ok(unsafe { super::reason_name(name, "") })
 }
 
-/// The shell's context.
+/// The context of a shell made by [`make_shell`] with a `T`.
 ///
 /// # Safety
-/// `pc` is a shell made by [`use_threaded_ilu`].
-unsafe fn context<'a>(pc: sys::PC) -> std::result::Result<&'a mut Context, sys::PetscErrorCode> {
+/// `pc` is such a shell.
+pub(super) unsafe fn shell_context<'a, T>(pc: sys::PC) -> Result<&'a mut T> {
     let mut ctx: *mut c_void = std::ptr::null_mut();
     // SAFETY: out-parameter (PETSc 3.18 takes the address of the context pointer as `void *`).
     let code = unsafe { sys::PCShellGetContext(pc, (&mut ctx as *mut *mut c_void).cast()) };
     if code != 0 || ctx.is_null() {
-        return Err(if code != 0 { code } else { 1 });
+        return Err(PetscError {
+            code: if code != 0 { code } else { 1 },
+            call: "PCShellGetContext",
+            message: "a shell preconditioner's context is missing".into(),
+        });
     }
-    // SAFETY: PETSc calls the shell's operations one at a time; the context lives until `destroy`.
-    Ok(unsafe { &mut *ctx.cast::<Context>() })
-}
-
-/// The error of a shell whose context cannot be read.
-fn context_error(code: sys::PetscErrorCode) -> PetscError {
-    PetscError {
-        code,
-        call: "PCShellGetContext",
-        message: "the threaded ILU's context is missing".into(),
-    }
+    // SAFETY: PETSc calls the shell's operations one at a time; the context lives until
+    // `destroy_context`.
+    Ok(unsafe { &mut *ctx.cast::<T>() })
 }
 
 /// Runs `f`, turning a PETSc error into its code and a panic into PETSc's user error.
@@ -273,14 +288,14 @@ pub(super) fn guarded(
     }
 }
 
-/// `PCShellSetDestroy`: frees the context.
-unsafe extern "C" fn destroy(pc: sys::PC) -> sys::PetscErrorCode {
+/// `PCShellSetDestroy` of a shell made by [`make_shell`] with a `T`: frees the context.
+unsafe extern "C" fn destroy_context<T>(pc: sys::PC) -> sys::PetscErrorCode {
     let mut ctx: *mut c_void = std::ptr::null_mut();
     // SAFETY: out-parameter; PETSc calls this once, for our shell.
     let code = unsafe { sys::PCShellGetContext(pc, (&mut ctx as *mut *mut c_void).cast()) };
     if code == 0 && !ctx.is_null() {
-        // SAFETY: made by `Box::into_raw` in `use_threaded_ilu`, not used afterwards.
-        drop(unsafe { Box::from_raw(ctx.cast::<Context>()) });
+        // SAFETY: made by `Box::into_raw` in `make_shell`, not used afterwards.
+        drop(unsafe { Box::from_raw(ctx.cast::<T>()) });
     }
     code
 }
@@ -290,7 +305,7 @@ unsafe extern "C" fn destroy(pc: sys::PC) -> sys::PetscErrorCode {
 unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
     guarded(|| {
         // SAFETY: our shell.
-        let ctx = unsafe { context(pc) }.map_err(context_error)?;
+        let ctx = unsafe { shell_context::<Context>(pc) }?;
         let (mut amat, mut pmat): (sys::Mat, sys::Mat) =
             (std::ptr::null_mut(), std::ptr::null_mut());
         let mut values: *mut f64 = std::ptr::null_mut();
@@ -377,7 +392,7 @@ unsafe extern "C" fn set_up(pc: sys::PC) -> sys::PetscErrorCode {
 unsafe extern "C" fn apply(pc: sys::PC, x: sys::PetscVec, y: sys::PetscVec) -> sys::PetscErrorCode {
     guarded(|| {
         // SAFETY: our shell.
-        let ctx = unsafe { context(pc) }.map_err(context_error)?;
+        let ctx = unsafe { shell_context::<Context>(pc) }?;
         let n = ctx.ilu.rows();
         for v in [x, y] {
             let mut len = 0;

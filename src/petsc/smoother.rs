@@ -15,10 +15,10 @@
 //! iteration of one local sweep, symmetric, no diagonal shift. Other SOR settings keep PETSc's.
 
 use super::block_parts::with_row_ij;
-use super::preconditioner::{guarded, pc_type};
+use super::preconditioner::{guarded, make_shell, pc_type, shell_context};
 use super::{Matrix, PetscError, Result, Vector, check, sys};
 use crate::sor::{self, Csr, SweepPlan, SweepWork};
-use std::ffi::{CStr, CString, c_void};
+use std::ffi::{CStr, CString};
 
 /// The shell's plan of the level's pattern, with the matrix and nonzero state it was made for, and its
 /// work space.
@@ -157,64 +157,16 @@ unsafe fn install(pc: sys::PC) -> Result<()> {
         plan: None,
         work: SweepWork::default(),
     };
-    let ctx = Box::into_raw(Box::new(context)).cast::<c_void>();
-    // SAFETY: valid PC; the shell keeps `ctx` until its destroy callback frees it. The callbacks match
-    // PETSc's signatures for the shell's operations.
+    // SAFETY: the caller's promise; the callbacks read a `Context`.
     unsafe {
-        if let Err(e) = check(sys::PCSetType(pc, c"shell".as_ptr()), "PCSetType") {
-            drop(Box::from_raw(ctx.cast::<Context>()));
-            return Err(e);
-        }
-        check(sys::PCShellSetContext(pc, ctx), "PCShellSetContext")?;
-        check(
-            sys::PCShellSetDestroy(pc, Some(destroy)),
-            "PCShellSetDestroy",
-        )?;
-        check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")?;
-        check(
-            sys::PCShellSetApplyRichardson(pc, Some(apply_richardson)),
-            "PCShellSetApplyRichardson",
-        )?;
-        check(
-            sys::PCShellSetName(pc, c"symmetric SOR, one part per thread".as_ptr()),
-            "PCShellSetName",
-        )?;
+        make_shell(pc, context, c"symmetric SOR, one part per thread", |pc| {
+            check(sys::PCShellSetApply(pc, Some(apply)), "PCShellSetApply")?;
+            check(
+                sys::PCShellSetApplyRichardson(pc, Some(apply_richardson)),
+                "PCShellSetApplyRichardson",
+            )
+        })
     }
-    Ok(())
-}
-
-/// `PCShellSetDestroy`: frees the context.
-unsafe extern "C" fn destroy(pc: sys::PC) -> sys::PetscErrorCode {
-    let mut ctx: *mut c_void = std::ptr::null_mut();
-    // SAFETY: out-parameter; PETSc calls this once, for our shell.
-    let code = unsafe { sys::PCShellGetContext(pc, (&mut ctx as *mut *mut c_void).cast()) };
-    if code == 0 && !ctx.is_null() {
-        // SAFETY: made by `Box::into_raw` in `install`, not used afterwards.
-        drop(unsafe { Box::from_raw(ctx.cast::<Context>()) });
-    }
-    code
-}
-
-/// The shell's context.
-///
-/// # Safety
-/// `pc` is a shell made by [`install`].
-unsafe fn context<'a>(pc: sys::PC) -> Result<&'a mut Context> {
-    let mut ctx: *mut c_void = std::ptr::null_mut();
-    // SAFETY: out-parameter (PETSc 3.18 takes the address of the context pointer as `void *`).
-    check(
-        unsafe { sys::PCShellGetContext(pc, (&mut ctx as *mut *mut c_void).cast()) },
-        "PCShellGetContext",
-    )?;
-    if ctx.is_null() {
-        return Err(PetscError {
-            code: 1,
-            call: "PCShellGetContext",
-            message: "the threaded SOR's context is missing".into(),
-        });
-    }
-    // SAFETY: PETSc calls the shell's operations one at a time; the context lives until `destroy`.
-    Ok(unsafe { &mut *ctx.cast::<Context>() })
 }
 
 /// `sweeps` symmetric sweeps of the shell `pc`'s matrix from `x` (or zero) towards `b`.
@@ -229,7 +181,7 @@ unsafe fn sweep(
     zero_guess: bool,
 ) -> Result<()> {
     // SAFETY: our shell.
-    let ctx = unsafe { context(pc) }?;
+    let ctx = unsafe { shell_context::<Context>(pc) }?;
     let mut pmat: sys::Mat = std::ptr::null_mut();
     let mut state: sys::PetscObjectState = 0;
     // SAFETY: a borrowed reference to the preconditioning matrix; out-parameter.
