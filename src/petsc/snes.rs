@@ -261,8 +261,9 @@ impl Snes {
     /// Solves the linear system of the first Newton iteration of every solve to the relative tolerance
     /// `rtol` only (or the configured one if that is looser), and those of the later iterations to the
     /// configured one (`None`: the configured one everywhere). Eisenstat-Walker's forcing
-    /// (`-snes_ksp_ew`) sets every iteration's tolerance inside the Krylov solve and so overrides it. The first iteration of an inertia-dominated step carries the prescribed motion and
-    /// the contact of the devices into the interior, and its residual is left at a few thousandths of
+    /// (`-snes_ksp_ew`) sets every iteration's tolerance inside the Krylov solve and so overrides it.
+    /// The first iteration of an inertia-dominated step carries the prescribed motion and the contact
+    /// of the devices into the interior, and its residual is left at a few thousandths of
     /// where it started by the nonlinearity, whatever the linear solve reaches; the later iterations
     /// converge quadratically from there on solves to the configured tolerance, as before
     /// (`docs/theory.md`, "Solver defaults").

@@ -293,20 +293,7 @@ impl LinearSystem {
         } else {
             None
         };
-        // The first Newton iteration's linear tolerance (`-mpm_first_ksp_rtol R`, 0: the configured one).
-        let first = format!("{}mpm_first_ksp_rtol", prefix.unwrap_or(""));
-        if let Some(v) = petsc::option_string(session, &first)? {
-            let rtol = v
-                .parse::<f64>()
-                .ok()
-                .filter(|r| r.is_finite() && (0.0..1.0).contains(r));
-            let Some(rtol) = rtol else {
-                return Err(StepError::Setup(format!(
-                    "-{first} {v}: allowed is a relative tolerance from 0 (off) to below 1"
-                )));
-            };
-            snes.set_first_linear_rtol((rtol > 0.0).then_some(rtol));
-        }
+        snes.set_first_linear_rtol(first_linear_rtol(session, prefix)?);
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
@@ -321,6 +308,24 @@ impl LinearSystem {
             nonzeros: nonzeros[0] as usize,
             multigrid,
         })
+    }
+}
+
+/// The first Newton iteration's linear tolerance, `-[PREFIX]mpm_first_ksp_rtol R` (`None`: unset or 0,
+/// the configured `-ksp_rtol` at every iteration; `Snes::set_first_linear_rtol`).
+fn first_linear_rtol(
+    session: &SessionGuard,
+    prefix: Option<&str>,
+) -> Result<Option<f64>, StepError> {
+    let name = format!("{}mpm_first_ksp_rtol", prefix.unwrap_or(""));
+    let Some(v) = petsc::option_string(session, &name)? else {
+        return Ok(None);
+    };
+    match v.parse::<f64>() {
+        Ok(rtol) if (0.0..1.0).contains(&rtol) => Ok((rtol > 0.0).then_some(rtol)),
+        _ => Err(StepError::Setup(format!(
+            "-{name} {v}: allowed is a relative tolerance from 0 (off) to below 1"
+        ))),
     }
 }
 
