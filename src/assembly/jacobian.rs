@@ -8,8 +8,20 @@ use nalgebra::SVector;
 use std::cell::RefCell;
 
 thread_local! {
-    /// Each worker's column positions of the row it fills ([`ColumnSlots`]).
-    static COLUMNS: RefCell<ColumnSlots> = const { RefCell::new(ColumnSlots::new()) };
+    /// Each worker's column positions and scratch for the row it fills ([`RowWorker`]).
+    static WORKER: RefCell<RowWorker> = const {
+        RefCell::new(RowWorker {
+            columns: ColumnSlots::new(),
+            scratch: Vec::new(),
+        })
+    };
+}
+
+/// What a worker keeps from row to row: the column positions and, for the [`BlockLayout::Rows`] order,
+/// the row summed block by block before it is reordered.
+struct RowWorker {
+    columns: ColumnSlots,
+    scratch: Vec<f64>,
 }
 
 /// Per worker, for every grid node: the tag of the last row that placed it among its columns and its
@@ -95,36 +107,59 @@ pub(super) fn fill_rows<const D: usize>(
     );
 }
 
-/// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`].
+/// One block row of the Jacobian (active node `a`), ordered by the context's [`BlockLayout`]: the
+/// kernel for the row's block size (`D` displacements, and `eta_bar` after them in the nonlocal model).
 fn fill_row<const D: usize>(ctx: &JacobianRows<'_, D>, a: usize, row: &mut [f64]) {
-    COLUMNS.with_borrow_mut(|columns| fill_row_with(ctx, a, row, columns));
+    debug_assert!(
+        ctx.nf == D || ctx.nf == D + 1,
+        "{} unknowns per node",
+        ctx.nf
+    );
+    WORKER.with_borrow_mut(|worker| match ctx.nf {
+        2 => fill_row_with::<D, 2>(ctx, a, row, worker),
+        3 => fill_row_with::<D, 3>(ctx, a, row, worker),
+        4 => fill_row_with::<D, 4>(ctx, a, row, worker),
+        nf => unreachable!("{nf} unknowns per node"),
+    });
 }
 
-/// [`fill_row`] with the worker's column positions.
-fn fill_row_with<const D: usize>(
+/// [`fill_row`] for `NF` unknowns per node with the worker's column positions and scratch. The row is
+/// summed block by block, each block column-major (the [`BlockLayout::Blocks`] order: in place for
+/// that layout, in the worker's scratch and then reordered for the other), so that a point's
+/// contribution to one column node is a handful of adds at fixed places in one `NF x NF` block.
+fn fill_row_with<const D: usize, const NF: usize>(
     ctx: &JacobianRows<'_, D>,
     a: usize,
     row: &mut [f64],
-    columns: &mut ColumnSlots,
+    worker: &mut RowWorker,
 ) {
-    let (asm, input, nf) = (&ctx.asm, ctx.input, ctx.nf);
+    let (asm, input) = (&ctx.asm, ctx.input);
     let (table, particles, dofs) = (input.table, input.particles, input.dofs);
     let s = input.row_scale;
     let cols = &asm.cols[asm.row_ptr[a]..asm.row_ptr[a + 1]];
     // Each support node's position in this row, looked up by grid node: `slots[g]` under this row's tag.
     let grid = dofs.active_nodes();
+    let RowWorker { columns, scratch } = worker;
     let tag = columns.place(
         dofs.node_indices().len(),
         cols.iter().map(|&c| grid[c as usize] as usize),
     );
     let slots = columns.slots.as_slice();
-    let (ncols, layout) = (cols.len(), ctx.layout);
-    let at = |i: usize, pos: usize, k: usize| layout.offset(ncols, nf, i, pos, k);
-    // The same offsets as strides: entry (i, pos, k) at `pos * block + i * si + k * sk`, so that the
-    // inner loop over a point's support nodes computes one base per node and no layout branch.
-    let (block, si, sk) = (at(0, 1, 0), at(1, 0, 0), at(0, 0, 1));
-    let eta_bar = dofs.layout().eta_bar();
-    row.fill(0.0);
+    let ncols = cols.len();
+    let blocks: &mut [f64] = match ctx.layout {
+        BlockLayout::Blocks => &mut *row,
+        BlockLayout::Rows => {
+            scratch.clear();
+            scratch.resize(row.len(), 0.0);
+            scratch.as_mut_slice()
+        }
+    };
+    blocks.fill(0.0);
+    // Entry (i, k) of the block at position `pos`: `blocks[pos * NF * NF + at(i, k)]`.
+    let at = |i: usize, k: usize| k * NF + i;
+    let bb = NF * NF;
+    // `eta_bar` is the unknown after the displacements when the row has one more than `D`.
+    let nonlocal = NF > D;
     let node = dofs.node(a);
     let first = asm.inc_offsets[node];
     let diag = cols.binary_search(&(a as u32)).ok();
@@ -134,8 +169,8 @@ fn fill_row_with<const D: usize>(
         let ws = table.weights(p);
         if ev.eroded {
             // No stiffness; the lumped anchor of eta_bar on the diagonal (see `Assembler::residual`).
-            if let (Some(e), Some(d)) = (eta_bar, diag) {
-                row[at(e, d, e)] += s * particles.vol[p] * ws[k].value;
+            if let (true, Some(d)) = (nonlocal, diag) {
+                blocks[d * bb + at(D, D)] += s * particles.vol[p] * ws[k].value;
             }
             continue;
         }
@@ -162,20 +197,20 @@ fn fill_row_with<const D: usize>(
             if t != tag {
                 continue; // a node without unknowns
             }
-            let base = pos as usize * block;
-            for (i, mi) in m.iter().enumerate() {
-                for (kk, mik) in mi.iter().enumerate() {
-                    row[base + i * si + kk * sk] += v0 * mik.dot(gj0);
+            let block = &mut blocks[pos as usize * bb..][..bb];
+            for kk in 0..D {
+                for (i, mi) in m.iter().enumerate() {
+                    block[at(i, kk)] += v0 * mi[kk].dot(gj0);
                 }
             }
-            if let Some(e) = eta_bar {
+            if nonlocal {
                 let (sj, gj) = (wj.value, wj.grad);
                 let h = ev.deta_dx * gj;
                 for i in 0..D {
-                    row[base + i * si + e * sk] += vq[i] * sj;
-                    row[base + e * si + i * sk] -= coupling * h[i];
+                    block[at(i, D)] += vq[i] * sj;
+                    block[at(D, i)] -= coupling * h[i];
                 }
-                row[base + e * (si + sk)] += svn * (s_i * sj + c * gi.dot(&gj) + dc_deb * sj);
+                block[at(D, D)] += svn * (s_i * sj + c * gi.dot(&gj) + dc_deb * sj);
             }
         }
     }
@@ -185,18 +220,24 @@ fn fill_row_with<const D: usize>(
     if let (Some(nm), Some(d)) = (input.newmark, diag) {
         let mf = input.mass[node] * nm.mass_factor();
         for i in 0..D {
-            row[at(i, d, i)] += mf;
+            blocks[d * bb + at(i, i)] += mf;
         }
     }
-    for i in 0..nf {
-        if dofs.is_constrained(a * nf + i) {
-            for pos in 0..ncols {
-                for k in 0..nf {
-                    row[at(i, pos, k)] = 0.0;
-                }
+    for i in 0..NF {
+        if dofs.is_constrained(a * NF + i) {
+            for column in blocks.chunks_exact_mut(NF) {
+                column[i] = 0.0;
             }
             if let Some(d) = diag {
-                row[at(i, d, i)] = s;
+                blocks[d * bb + at(i, i)] = s;
+            }
+        }
+    }
+    if ctx.layout == BlockLayout::Rows {
+        for (b, column) in scratch.chunks_exact(NF).enumerate() {
+            let (pos, k) = (b / NF, b % NF);
+            for (i, &v) in column.iter().enumerate() {
+                row[ctx.layout.offset(ncols, NF, i, pos, k)] = v;
             }
         }
     }
