@@ -4,7 +4,7 @@
 use super::contacts::{self, Attempt, Sets};
 use super::input::Loading;
 use super::path;
-use super::processes::largest;
+use super::processes::{self, largest};
 use super::report::StepError;
 use super::step::Step;
 use super::system::LinearSystem;
@@ -68,10 +68,13 @@ impl<const D: usize> Step<'_, D> {
             .begin_assembly(self.model, &self.state.particles, &plan.loading);
         let new_pattern = self.linear_system(session, prefix)?;
         let xs = self.first_guess(&plan, &eta_bar);
-        let window = self.unknowns_window(session);
+        let rows = self.own_rows(session);
+        let (table, dofs) = (&self.work.table, &self.work.dofs);
         let sys = self.work.system.as_mut().expect("linear system just built");
         sys.owned.scatter(&xs, &mut sys.x)?;
-        sys.owned.set_window(session, &sys.x, window)?;
+        sys.owned.set_window(session, &sys.x, || {
+            processes::unknowns_window(table, dofs, rows)
+        })?;
         Ok(StepPlan {
             new_pattern,
             ..plan

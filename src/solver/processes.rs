@@ -10,9 +10,12 @@ use super::contacts;
 use super::report::StepError;
 use super::step::Step;
 use crate::assembly::AssemblyError;
+use crate::dofs::DofMap;
 use crate::partition::{self, NodalWindows, Partition};
 use crate::petsc::{self, CallbackError, SessionGuard};
+use crate::shape::ShapeTable;
 use nalgebra::SVector;
+use rayon::prelude::*;
 use std::ops::Range;
 
 /// A domain error (an inverted point, a failed material update) on any process, reported on all: SNES
@@ -299,25 +302,6 @@ impl<const D: usize> Step<'_, D> {
         }
     }
 
-    /// The unknowns (indices in [`DofMap`](crate::dofs::DofMap) order) this process reads at an evaluation:
-    /// those of the active nodes from the lowest to the highest node in the support of its points (its own
-    /// and the ghosts; all points where they are not shared out) and of its own block rows, a contiguous
-    /// range because the nodes are numbered row by row.
-    pub(super) fn unknowns_window(&self, session: &SessionGuard) -> Range<usize> {
-        let table = &self.work.table;
-        let (lo, hi) = (0..table.len())
-            .flat_map(|p| table.weights(p))
-            .fold((u32::MAX, 0), |(lo, hi), w| {
-                (lo.min(w.node), hi.max(w.node))
-            });
-        let rows = self.own_rows(session);
-        let active = self.work.dofs.active_nodes();
-        let first = active.partition_point(|&a| a < lo).min(rows.start);
-        let last = active.partition_point(|&a| a <= hi).max(rows.end);
-        let nf = self.work.dofs.unknowns_per_node();
-        first * nf..last * nf
-    }
-
     /// The node rows of the step's nodal sums on every process ([`Partition::windows`]): this process
     /// touches the rows its own points reach and reads its own node rows and those its own points and
     /// ghosts reach.
@@ -379,4 +363,28 @@ impl<const D: usize> Step<'_, D> {
         }
         Ok(())
     }
+}
+
+/// The unknowns (indices in [`DofMap`] order) a process reads at an evaluation: those of the active
+/// nodes from the lowest to the highest node in the support of its points in `table` (its own and the
+/// ghosts; all points where they are not shared out) and of its own block rows `rows`, a contiguous
+/// range because the nodes are numbered row by row.
+pub(super) fn unknowns_window<const D: usize>(
+    table: &ShapeTable<D>,
+    dofs: &DofMap,
+    rows: Range<usize>,
+) -> Range<usize> {
+    let (lo, hi) = (0..table.len())
+        .into_par_iter()
+        .map(|p| {
+            table.weights(p).iter().fold((u32::MAX, 0), |(lo, hi), w| {
+                (lo.min(w.node), hi.max(w.node))
+            })
+        })
+        .reduce(|| (u32::MAX, 0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    let active = dofs.active_nodes();
+    let first = active.partition_point(|&a| a < lo).min(rows.start);
+    let last = active.partition_point(|&a| a <= hi).max(rows.end);
+    let nf = dofs.unknowns_per_node();
+    first * nf..last * nf
 }

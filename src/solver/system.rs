@@ -29,7 +29,7 @@ pub(super) struct OwnedRows {
     /// All unknowns of the step (over all processes).
     pub(super) total: usize,
     /// More than one process: the gather of the unknowns this process reads at an evaluation
-    /// (`Step::unknowns_window`), rebuilt when the window moves
+    /// (`processes::unknowns_window`), rebuilt when the window moves
     /// ([`OwnedRows::set_window`]).
     pub(super) window: Option<GatherRange>,
 }
@@ -115,18 +115,19 @@ impl OwnedRows {
         Ok(all)
     }
 
-    /// On more than one process: the gather of the unknowns `window` (indices in [`DofMap`] order, from
-    /// `Step::unknowns_window`) for the evaluations of the step, built anew
+    /// On more than one process: the gather of the unknowns `window()` (indices in [`DofMap`] order,
+    /// from `processes::unknowns_window`, read only there) for the evaluations of the step, built anew
     /// if any process's window moved (collective).
     pub(super) fn set_window(
         &mut self,
         session: &SessionGuard,
         x: &Vector,
-        window: Range<usize>,
+        window: impl FnOnce() -> Range<usize>,
     ) -> Result<(), petsc::PetscError> {
         if session.size() == 1 {
             return Ok(());
         }
+        let window = window();
         let same = self.window.as_ref().is_some_and(|w| w.range() == window);
         if session.any(!same) {
             self.window = None; // free the old scatter first
