@@ -135,6 +135,9 @@ pub enum AssemblyError {
 /// Block columns of one Jacobian row at most: the fill keeps a column's position in a `u16`.
 const MAX_COLUMNS: usize = u16::MAX as usize;
 
+/// Grid nodes per run of [`Assembler::incidence`]'s parallel copy.
+const INCIDENCE_RUN: usize = 1024;
+
 /// Cached constitutive evaluation of one particle at the current iterate.
 #[derive(Debug, Clone, Copy)]
 struct PointEval<const D: usize> {
@@ -249,6 +252,47 @@ struct ScatterChunk<const D: usize> {
     force: Vec<SVector<f64, D>>,
     /// The Helmholtz rows' point sums per node from `first_node`.
     helmholtz: Vec<f64>,
+    /// The chunk's own incidence, CSR per node from `first_node`: the (point, slot) entries of its
+    /// points, in increasing point order.
+    inc_offsets: Vec<usize>,
+    inc_entries: Vec<(u32, u8)>,
+}
+
+impl<const D: usize> ScatterChunk<D> {
+    /// The chunk's incidence over its nodes by a counting sort of its points' supports in `table`.
+    fn count_incidence(&mut self, table: &ShapeTable<D>) {
+        let (first, span) = (self.first_node, self.force.len());
+        self.inc_offsets.clear();
+        self.inc_offsets.resize(span + 1, 0);
+        for p in self.points.clone() {
+            for w in table.weights(p) {
+                self.inc_offsets[w.node as usize - first + 1] += 1;
+            }
+        }
+        for i in 0..span {
+            self.inc_offsets[i + 1] += self.inc_offsets[i];
+        }
+        self.inc_entries.clear();
+        self.inc_entries.resize(self.inc_offsets[span], (0, 0));
+        let mut fill = self.inc_offsets[..span].to_vec();
+        for p in self.points.clone() {
+            for (k, w) in table.weights(p).iter().enumerate() {
+                let slot = &mut fill[w.node as usize - first];
+                self.inc_entries[*slot] = (p as u32, k as u8);
+                *slot += 1;
+            }
+        }
+    }
+
+    /// The chunk's entries on grid node `n` (none outside its span).
+    fn entries_of(&self, n: usize) -> &[(u32, u8)] {
+        match n.checked_sub(self.first_node) {
+            Some(i) if i < self.force.len() => {
+                &self.inc_entries[self.inc_offsets[i]..self.inc_offsets[i + 1]]
+            }
+            _ => &[],
+        }
+    }
 }
 
 impl<const D: usize> Default for Assembler<D> {
@@ -292,8 +336,9 @@ impl<const D: usize> Assembler<D> {
         self.layout = dofs.layout();
         let nodes = dofs.node_indices().len();
         let np = particles.len();
-        self.incidence(table, np, nodes);
-        self.scatter_chunks(table, np, nodes);
+        self.point_chunks(table, np);
+        self.incidence(nodes);
+        self.mark_seams(nodes);
         self.block_pattern_of_step(input);
         let stride = table.stride();
         // G = F_n^T g per slot.
@@ -317,38 +362,68 @@ impl<const D: usize> Assembler<D> {
         self.owned_points.clear();
     }
 
-    /// The incidence node -> (point, slot in the point's weights), by a counting sort over the `np`
-    /// points' supports on `nodes` grid nodes.
-    fn incidence(&mut self, table: &ShapeTable<D>, np: usize, nodes: usize) {
-        self.inc_offsets.clear();
-        self.inc_offsets.resize(nodes + 1, 0);
-        for p in 0..np {
-            for w in table.weights(p) {
-                self.inc_offsets[w.node as usize + 1] += 1;
-            }
-        }
-        for i in 0..nodes {
-            self.inc_offsets[i + 1] += self.inc_offsets[i];
-        }
-        self.inc_entries.clear();
-        self.inc_entries.resize(self.inc_offsets[nodes], (0, 0));
-        let mut fill = self.inc_offsets.clone();
-        for p in 0..np {
-            for (k, w) in table.weights(p).iter().enumerate() {
-                let slot = &mut fill[w.node as usize];
-                self.inc_entries[*slot] = (p as u32, k as u8);
-                *slot += 1;
-            }
-        }
-    }
-
-    /// Cuts the `np` points into one contiguous chunk per worker and marks each grid node with the
-    /// chunk all of whose points reach it ([`SEAM`] otherwise); from [`Self::incidence`], whose entries
-    /// list each node's points in increasing order.
-    fn scatter_chunks(&mut self, table: &ShapeTable<D>, np: usize, nodes: usize) {
+    /// Cuts the `np` points into one contiguous chunk per worker, each with the span of grid nodes its
+    /// points reach and its own incidence over them ([`ScatterChunk::count_incidence`]), in parallel.
+    fn point_chunks(&mut self, table: &ShapeTable<D>, np: usize) {
         let chunks = rayon::current_num_threads().clamp(1, np.max(1));
         self.scatter.resize_with(chunks, ScatterChunk::default);
-        let starts: Vec<usize> = (0..chunks).map(|c| c * np / chunks).collect();
+        self.scatter
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(c, chunk)| {
+                chunk.points = c * np / chunks..(c + 1) * np / chunks;
+                let reached = chunk
+                    .points
+                    .clone()
+                    .flat_map(|p| table.weights(p).iter().map(|w| w.node as usize));
+                let (lo, hi) =
+                    reached.fold((usize::MAX, 0), |(lo, hi), n| (lo.min(n), hi.max(n + 1)));
+                chunk.first_node = lo.min(hi);
+                chunk.force.resize(hi.saturating_sub(lo), SVector::zeros());
+                chunk.helmholtz.resize(hi.saturating_sub(lo), 0.0);
+                chunk.count_incidence(table);
+            });
+    }
+
+    /// The incidence node -> (point, slot in the point's weights) over `nodes` grid nodes: each node's
+    /// entries from the chunks' own incidences, chunk after chunk, so in increasing point order (what a
+    /// counting sort over all points gives). Runs of nodes are copied in parallel.
+    fn incidence(&mut self, nodes: usize) {
+        let chunks = &self.scatter;
+        self.inc_offsets.clear();
+        self.inc_offsets.push(0);
+        let mut total = 0;
+        for n in 0..nodes {
+            total += chunks.iter().map(|c| c.entries_of(n).len()).sum::<usize>();
+            self.inc_offsets.push(total);
+        }
+        self.inc_entries.clear();
+        self.inc_entries.resize(total, (0, 0));
+        let mut runs = Vec::new();
+        let mut rest = self.inc_entries.as_mut_slice();
+        for first in (0..nodes).step_by(INCIDENCE_RUN) {
+            let last = (first + INCIDENCE_RUN).min(nodes);
+            let len = self.inc_offsets[last] - self.inc_offsets[first];
+            let (run, tail) = std::mem::take(&mut rest).split_at_mut(len);
+            runs.push((first..last, run));
+            rest = tail;
+        }
+        runs.into_par_iter().for_each(|(nodes, out)| {
+            let mut at = 0;
+            for n in nodes {
+                for chunk in chunks {
+                    let entries = chunk.entries_of(n);
+                    out[at..at + entries.len()].copy_from_slice(entries);
+                    at += entries.len();
+                }
+            }
+        });
+    }
+
+    /// Marks each grid node with the chunk all of whose points reach it ([`SEAM`] otherwise); from
+    /// [`Self::incidence`], whose entries list each node's points in increasing order.
+    fn mark_seams(&mut self, nodes: usize) {
+        let starts: Vec<usize> = self.scatter.iter().map(|c| c.points.start).collect();
         let (entries, offsets) = (&self.inc_entries, &self.inc_offsets);
         let chunk_of = |p: u32| starts.partition_point(|&s| s <= p as usize) as u32 - 1;
         self.node_chunk.clear();
@@ -360,21 +435,6 @@ impl<const D: usize> Assembler<D> {
                     [(first, _), ..] => chunk_of(*first),
                 }
             }));
-        self.scatter
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(c, chunk)| {
-                chunk.points = starts[c]..starts.get(c + 1).copied().unwrap_or(np);
-                let reached = chunk
-                    .points
-                    .clone()
-                    .flat_map(|p| table.weights(p).iter().map(|w| w.node as usize));
-                let (lo, hi) =
-                    reached.fold((usize::MAX, 0), |(lo, hi), n| (lo.min(n), hi.max(n + 1)));
-                chunk.first_node = lo.min(hi);
-                chunk.force.resize(hi.saturating_sub(lo), SVector::zeros());
-                chunk.helmholtz.resize(hi.saturating_sub(lo), 0.0);
-            });
     }
 
     /// The block pattern of the step: row pointers and block columns per active node, the sorted union
