@@ -81,8 +81,9 @@ pub(super) struct JacobianRows<'a, const D: usize> {
 }
 
 /// Fills the block rows `rows` whose values start at `base` in the global value array, splitting the
-/// range in two (rayon::join) until it is small: parallel, allocation-free and race-free because block
-/// rows own disjoint value ranges.
+/// range in two (rayon::join) until it is small: parallel and race-free because block rows own disjoint
+/// value ranges; allocation-free once each worker's column slots and scratch have grown to the grid and
+/// the widest row.
 pub(super) fn fill_rows<const D: usize>(
     ctx: &JacobianRows<'_, D>,
     rows: std::ops::Range<usize>,

@@ -232,7 +232,8 @@ pub struct Assembler<const D: usize = 2> {
     /// Per point, whether it supports a block row this process owns ([`Assembler::restrict_to_rows`]);
     /// empty: every point.
     owned_points: Vec<bool>,
-    /// The residual's point-wise sums: the points cut into contiguous chunks, one per worker.
+    /// The points cut into contiguous chunks, one per worker: each chunk's incidence (merged into the
+    /// one above) and the residual's point-wise sums.
     scatter: Vec<ScatterChunk<D>>,
     /// Per grid node, the chunk all of whose points reach it, or [`SEAM`] (points of several chunks, or
     /// none): the residual sums a chunk's nodes point by point and gathers the seams node by node.
@@ -242,7 +243,8 @@ pub struct Assembler<const D: usize = 2> {
 /// [`Assembler::node_chunk`] of a node reached by the points of several chunks, or by none.
 const SEAM: u32 = u32::MAX;
 
-/// A contiguous range of points and the internal-force sums they alone make on their nodes.
+/// A contiguous range of points, their incidence over the nodes they reach and the internal-force sums
+/// they alone make on their nodes.
 #[derive(Default)]
 struct ScatterChunk<const D: usize> {
     points: std::ops::Range<usize>,
