@@ -340,7 +340,6 @@ impl<const D: usize> Assembler<D> {
         let np = particles.len();
         self.point_chunks(table, np);
         self.incidence(nodes);
-        self.mark_seams(nodes);
         self.block_pattern_of_step(input);
         let stride = table.stride();
         // G = F_n^T g per slot.
@@ -389,15 +388,26 @@ impl<const D: usize> Assembler<D> {
 
     /// The incidence node -> (point, slot in the point's weights) over `nodes` grid nodes: each node's
     /// entries from the chunks' own incidences, chunk after chunk, so in increasing point order (what a
-    /// counting sort over all points gives). Runs of nodes are copied in parallel.
+    /// counting sort over all points gives); runs of nodes are copied in parallel. With it each node's
+    /// chunk: the one chunk whose points reach it, or [`SEAM`].
     fn incidence(&mut self, nodes: usize) {
         let chunks = &self.scatter;
         self.inc_offsets.clear();
         self.inc_offsets.push(0);
+        self.node_chunk.clear();
         let mut total = 0;
         for n in 0..nodes {
-            total += chunks.iter().map(|c| c.entries_of(n).len()).sum::<usize>();
+            // No chunk reaching the node stays a seam, as do two or more.
+            let (mut chunk, mut reaching) = (SEAM, 0);
+            for (c, entries) in chunks.iter().map(|c| c.entries_of(n).len()).enumerate() {
+                if entries > 0 {
+                    (chunk, reaching) = (c as u32, reaching + 1);
+                    total += entries;
+                }
+            }
             self.inc_offsets.push(total);
+            self.node_chunk
+                .push(if reaching == 1 { chunk } else { SEAM });
         }
         self.inc_entries.clear();
         self.inc_entries.resize(total, (0, 0));
@@ -420,23 +430,6 @@ impl<const D: usize> Assembler<D> {
                 }
             }
         });
-    }
-
-    /// Marks each grid node with the chunk all of whose points reach it ([`SEAM`] otherwise); from
-    /// [`Self::incidence`], whose entries list each node's points in increasing order.
-    fn mark_seams(&mut self, nodes: usize) {
-        let starts: Vec<usize> = self.scatter.iter().map(|c| c.points.start).collect();
-        let (entries, offsets) = (&self.inc_entries, &self.inc_offsets);
-        let chunk_of = |p: u32| starts.partition_point(|&s| s <= p as usize) as u32 - 1;
-        self.node_chunk.clear();
-        self.node_chunk
-            .par_extend((0..nodes).into_par_iter().map(|n| {
-                match &entries[offsets[n]..offsets[n + 1]] {
-                    [] => SEAM,
-                    [(first, _), .., (last, _)] if chunk_of(*first) != chunk_of(*last) => SEAM,
-                    [(first, _), ..] => chunk_of(*first),
-                }
-            }));
     }
 
     /// The block pattern of the step: row pointers and block columns per active node, the sorted union
