@@ -556,6 +556,16 @@ pub struct EnergyBooks {
     /// in FEM mode and quasi-statically (zero in checkpoints that predate it).
     #[serde(default)]
     pub transfer: f64,
+    /// Work of the points' stresses by the time integration's trapezoidal rule: per step `sum_p V^0
+    /// (P_n + P) : (F - F_n) / 2` ([`crate::assembly::Assembler::stress_work`]), so that
+    /// [`EnergyBooks::law_remainder`] is what the rule took out of the law's books and the rest of the
+    /// integration remainder the grid's (zero in checkpoints that predate it).
+    #[serde(default)]
+    pub stress_work: f64,
+    /// The part of `stress_work` done in the step after a point eroded by the half of its last stress
+    /// that the trapezoidal rule still charges (the point carries none at the step's end).
+    #[serde(default)]
+    pub eroded_work: f64,
 }
 
 impl EnergyBooks {
@@ -569,6 +579,15 @@ impl EnergyBooks {
     /// grid (Newmark, the time rule of the damage dissipation) and the solver tolerances took out (N mm).
     pub fn integration_remainder(&self, work: f64, initial: f64, kinetic: f64, stored: f64) -> f64 {
         self.remainder(work, initial, kinetic, stored) - self.transfer
+    }
+
+    /// The part of the integration remainder that the time rule of the stresses took: their
+    /// trapezoidal work less what the law stored (`stored`, N mm) and released, `stress_work - Psi -
+    /// damage - erosion` (N mm). Zero for a law integrated exactly along the step (a linear elastic
+    /// one); the rest of [`EnergyBooks::integration_remainder`] is the grid's (Newmark's start from the
+    /// projected acceleration, contact, the solver tolerances).
+    pub fn law_remainder(&self, stored: f64) -> f64 {
+        self.stress_work - stored - self.damage - self.erosion
     }
 }
 

@@ -204,7 +204,7 @@ pub mod history {
     ];
 
     /// The columns after the per-set columns.
-    pub static TRAILING: [Column; 17] = [
+    pub static TRAILING: [Column; 19] = [
         column(
             "contact_solves",
             "-",
@@ -277,6 +277,21 @@ pub mod history {
             "energy_remainder - transfer_loss: what the time integration on the grid and the solver \
              tolerances took out",
             |r| Cell::Number(remainder(r) - r.books.transfer, 9),
+        ).in_units_line("energy"),
+        column(
+            "law_remainder",
+            "N mm",
+            "the part of integration_remainder the time rule of the stresses took: their trapezoidal \
+             work sum_p V^0 (P_n + P) : (F - F_n) / 2 less stored_energy, damage_dissipation and \
+             erosion_energy",
+            |r| Cell::Number(r.books.law_remainder(r.stored_energy), 9),
+        ).in_units_line("energy"),
+        column(
+            "eroded_stress_work",
+            "N mm",
+            "the part of the stresses' trapezoidal work done in the step after a point eroded, by half \
+             its last stress",
+            |r| Cell::Number(r.books.eroded_work, 9),
         ).in_units_line("energy"),
         column(WALL_SETUP, "s", "wall time of the step's set-up", |r| {
             Cell::Number(r.wall_setup, 4)

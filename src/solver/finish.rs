@@ -45,6 +45,10 @@ impl<const D: usize> Step<'_, D> {
         let counted = self.own_point_count();
         let grid_kinetic = self.grid_kinetic_energies(&plan, &out);
         let points_kinetic = self.kinetic_energy(counted);
+        let stress_work =
+            self.work
+                .assembler
+                .stress_work(&self.work.table, &self.state.particles, counted);
         let committed = self.move_points(session, &plan, &out, counted)?;
         self.move_rigid_bodies(&plan, &out);
         let st = &mut *self.state;
@@ -68,6 +72,8 @@ impl<const D: usize> Step<'_, D> {
             committed.eroding,
             out.contact_loss,
             transfer,
+            stress_work[0],
+            stress_work[1],
         ];
         let processes = self.processes(session);
         processes.sum(&mut energies)?;
@@ -79,6 +85,8 @@ impl<const D: usize> Step<'_, D> {
         b.eroding = books[1];
         b.contact += books[2];
         b.transfer += books[3];
+        b.stress_work += books[4];
+        b.eroded_work += books[5];
         let mut report = self.report(&plan, solved, &out, energies, t0);
         report.path = self.path_point(session, plan.path.as_ref())?;
         Ok(report)
