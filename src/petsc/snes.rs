@@ -97,6 +97,9 @@ pub struct Snes {
     /// The linear solver's relative tolerance at the first Newton iteration of a solve
     /// ([`Snes::set_first_linear_rtol`]); `None`: the configured one at every iteration.
     first_linear_rtol: Option<f64>,
+    /// The residual norm, relative to the solve's first, below which a Newton iteration keeps the last
+    /// Jacobian ([`Snes::set_keep_jacobian_below`]); `None`: a Jacobian at every iteration.
+    keep_jacobian_below: Option<f64>,
 }
 
 /// Which of PETSc's preconditioners inside the Krylov solver's the first Jacobian of a solve replaces by
@@ -134,6 +137,17 @@ struct Context<'a> {
     /// The linear solver's relative tolerance at the first Newton iteration and at the others
     /// ([`update_cb`]).
     linear_rtol: Option<(f64, f64)>,
+    /// [`Snes::set_keep_jacobian_below`] for this solve, with the residual norm at its first Jacobian.
+    keep_jacobian: Option<KeepJacobian>,
+}
+
+/// When a Newton iteration keeps the last Jacobian ([`jacobian_cb`]).
+#[derive(Clone, Copy, Debug)]
+struct KeepJacobian {
+    /// Residual norm relative to the solve's first below which the Jacobian is kept.
+    below: f64,
+    /// The residual norm at the solve's first Newton iteration.
+    first: f64,
 }
 
 /// PETSc's generic user error code (`PETSC_ERR_USER`).
@@ -173,6 +187,7 @@ impl Snes {
             replacement: None,
             threaded: 0,
             first_linear_rtol: None,
+            keep_jacobian_below: None,
         };
         if let Some(p) = prefix {
             let c = cstring(p)?;
@@ -269,6 +284,16 @@ impl Snes {
     /// (`docs/theory.md`, "Solver defaults").
     pub fn set_first_linear_rtol(&mut self, rtol: Option<f64>) {
         self.first_linear_rtol = rtol;
+    }
+
+    /// Keeps the last Jacobian (and so the operator GMRES multiplies by) for the Newton iterations whose
+    /// residual norm is below `below` times the solve's first (`None`: a Jacobian at every iteration).
+    /// Near the solution the tangent hardly changes between iterates: an inertia-dominated step goes
+    /// 3460 -> 10 -> 0.04 -> 3e-7 in three iterations (the paper-size CT), and its third iteration,
+    /// at 1e-5 of the first residual, reaches the tolerance as well with the second's Jacobian at the
+    /// cost of a residual evaluation only (`docs/benchmarks.md`, "The Jacobian kept near the solution").
+    pub fn set_keep_jacobian_below(&mut self, below: Option<f64>) {
+        self.keep_jacobian_below = below;
     }
 
     /// The linear solver's relative tolerance (`-ksp_rtol`).
@@ -486,6 +511,10 @@ impl Snes {
             replacement: self.replacement,
             threaded: None,
             linear_rtol: None,
+            keep_jacobian: self.keep_jacobian_below.map(|below| KeepJacobian {
+                below,
+                first: f64::INFINITY,
+            }),
         };
         if let Some(first) = self.first_linear_rtol {
             // The configured tolerance is the options' (read once they are applied); a first solve
@@ -825,6 +854,38 @@ unsafe extern "C" fn residual_cb(
     }
 }
 
+/// Whether this Newton iteration keeps the last Jacobian ([`Snes::set_keep_jacobian_below`]): its
+/// residual norm below the set fraction of the solve's first. The first iteration of a solve records
+/// its norm and never keeps one (the matrix may hold another solve's Jacobian).
+///
+/// # Safety
+/// `snes` is the SNES in SNESSolve whose context is `ctx`.
+unsafe fn keeps_jacobian(snes: sys::SNES, ctx: &mut Context) -> Result<bool> {
+    let Some(keep) = ctx.keep_jacobian.as_mut() else {
+        return Ok(false);
+    };
+    let mut its: sys::PetscInt = 0;
+    let mut f: sys::PetscVec = std::ptr::null_mut();
+    let mut norm = 0.0;
+    // SAFETY: the caller's promise; PETSc's residual vector of the current iterate.
+    unsafe {
+        check(
+            sys::SNESGetIterationNumber(snes, &mut its),
+            "SNESGetIterationNumber",
+        )?;
+        check(
+            sys::SNESGetFunction(snes, &mut f, std::ptr::null_mut(), std::ptr::null_mut()),
+            "SNESGetFunction",
+        )?;
+        check(sys::VecNorm(f, sys::NormType_NORM_2, &mut norm), "VecNorm")?;
+    }
+    if its == 0 {
+        keep.first = norm;
+        return Ok(false);
+    }
+    Ok(norm <= keep.below * keep.first)
+}
+
 unsafe extern "C" fn jacobian_cb(
     snes: sys::SNES,
     x: sys::PetscVec,
@@ -834,6 +895,11 @@ unsafe extern "C" fn jacobian_cb(
 ) -> sys::PetscErrorCode {
     // SAFETY: as in residual_cb.
     unsafe {
+        match keeps_jacobian(snes, &mut *ctx.cast::<Context>()) {
+            Ok(true) => return 0,
+            Ok(false) => {}
+            Err(e) => return e.code,
+        }
         let x = Vector::borrowed(x);
         let mut pmat = Matrix::borrowed(p);
         let code = guarded(snes, ctx, sys::SNESSetJacobianDomainError, |prob| {

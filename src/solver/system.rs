@@ -295,6 +295,7 @@ impl LinearSystem {
             None
         };
         snes.set_first_linear_rtol(first_linear_rtol(session, prefix)?);
+        snes.set_keep_jacobian_below(keep_jacobian_below(session, prefix)?);
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
@@ -318,14 +319,44 @@ fn first_linear_rtol(
     session: &SessionGuard,
     prefix: Option<&str>,
 ) -> Result<Option<f64>, StepError> {
-    let name = format!("{}mpm_first_ksp_rtol", prefix.unwrap_or(""));
+    fraction(
+        session,
+        prefix,
+        "mpm_first_ksp_rtol",
+        "a relative tolerance",
+    )
+}
+
+/// The relative residual norm below which a Newton iteration keeps the last Jacobian,
+/// `-[PREFIX]mpm_keep_jacobian_below R` (`None`: unset or 0, a Jacobian at every iteration;
+/// `Snes::set_keep_jacobian_below`).
+fn keep_jacobian_below(
+    session: &SessionGuard,
+    prefix: Option<&str>,
+) -> Result<Option<f64>, StepError> {
+    fraction(
+        session,
+        prefix,
+        "mpm_keep_jacobian_below",
+        "a relative residual norm",
+    )
+}
+
+/// The option `-[PREFIX]NAME R` with `0 <= R < 1` (`what` in its error): `None` where it is unset or 0.
+fn fraction(
+    session: &SessionGuard,
+    prefix: Option<&str>,
+    name: &str,
+    what: &str,
+) -> Result<Option<f64>, StepError> {
+    let name = format!("{}{name}", prefix.unwrap_or(""));
     let Some(v) = petsc::option_string(session, &name)? else {
         return Ok(None);
     };
     match v.parse::<f64>() {
-        Ok(rtol) if (0.0..1.0).contains(&rtol) => Ok((rtol > 0.0).then_some(rtol)),
+        Ok(r) if (0.0..1.0).contains(&r) => Ok((r > 0.0).then_some(r)),
         _ => Err(StepError::Setup(format!(
-            "-{name} {v}: allowed is a relative tolerance from 0 (off) to below 1"
+            "-{name} {v}: allowed is {what} from 0 (off) to below 1"
         ))),
     }
 }
