@@ -51,6 +51,9 @@ COLUMNS = {
     "integration": "integration_remainder",
 }
 BOOKS = ["K", "Psi", "damage", "erosion", "contact", "transfer", "integration", "remainder"]
+# The integration remainder's split (runs of 2026-12-08 on): the law's time rule, of it the eroded points'
+# last half-stress, and the grid's Newmark balance (integration - law).
+SPLIT = {"law": "law_remainder", "eroded": "eroded_stress_work"}
 
 
 def read_history(run):
@@ -79,6 +82,9 @@ def steps_of(rows):
     dt_max = max(num(r, "dt") for r in rows)
     for row in rows:
         s = {k: num(row, c) for k, c in COLUMNS.items()}
+        s["split"] = all(c in row for c in SPLIT.values())
+        s.update({k: num(row, c) for k, c in SPLIT.items()})
+        s["grid"] = s["integration"] - s["law"]
         s["t"] = num(row, "time")
         s["step"] = int(num(row, "step"))
         # E_0, the kinetic energy at t = 0: dissipated_energy = W + E_0 - K - Psi.
@@ -164,10 +170,12 @@ def report(label, run, steps, times, window):
         s = at_time(steps, t_us)
         if s is None or s["W"] <= 0:
             continue
-        f = {k: 100 * s[k] / s["W"] for k in BOOKS}
+        f = {k: 100 * s[k] / s["W"] for k in BOOKS + list(SPLIT) + ["grid"]}
+        split = (f" | law {f['law']:.2f} (eroded {f['eroded']:.2f}), grid {f['grid']:.2f}"
+                 if s["split"] else "")
         print(f"   {t_us:6.0f} | {s['W']:7.2f} | {f['K']:5.1f} | {f['Psi']:5.2f} | {f['damage']:6.2f} | "
               f"{f['erosion']:7.2f} | {f['contact']:7.3f} | {f['transfer']:8.2f} | "
-              f"{f['integration']:11.2f} | {f['remainder']:9.2f}")
+              f"{f['integration']:11.2f} | {f['remainder']:9.2f}{split}")
     print(f"   per {window:.0f} us window (N mm/mm): growth of R, transfer, integration, damage, erosion, "
           "crack length (mm), mean K")
     t0 = 0.0
