@@ -23,8 +23,9 @@ enum Allowed {
 /// Checked options, matched against the end of an option's name so that prefixed copies
 /// (`-fallback_snes_max_it`, `-sub_ksp_rtol`, `-fieldsplit_u_ksp_max_it`) are checked too. PETSc's own
 /// limits, except that an iteration limit must allow at least one iteration (with 0 every step fails).
-const CHECKED: [(&str, Allowed); 11] = [
+const CHECKED: [(&str, Allowed); 12] = [
     ("ksp_rtol", Allowed::Fraction),
+    ("mpm_keep_jacobian_below", Allowed::Fraction),
     ("snes_rtol", Allowed::Fraction),
     ("ksp_atol", Allowed::NonNegative),
     ("snes_atol", Allowed::NonNegative),

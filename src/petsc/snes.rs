@@ -148,7 +148,14 @@ struct KeepJacobian {
     below: f64,
     /// The residual norm at the solve's first Newton iteration.
     first: f64,
+    /// The residual norm at the previous Newton iteration.
+    previous: f64,
 }
+
+/// The least reduction of the residual norm by the last Newton iteration for the next to keep its
+/// Jacobian: an iteration that did not converge fast (a stall, a line search's short step) is followed
+/// by a fresh Jacobian, as without the option.
+const KEEP_AFTER_REDUCTION: f64 = 0.1;
 
 /// PETSc's generic user error code (`PETSC_ERR_USER`).
 const ERR_USER: sys::PetscErrorCode = 83;
@@ -287,11 +294,12 @@ impl Snes {
     }
 
     /// Keeps the last Jacobian (and so the operator GMRES multiplies by) for the Newton iterations whose
-    /// residual norm is below `below` times the solve's first (`None`: a Jacobian at every iteration).
-    /// Near the solution the tangent hardly changes between iterates: an inertia-dominated step goes
-    /// 3460 -> 10 -> 0.04 -> 3e-7 in three iterations (the paper-size CT), and its third iteration,
-    /// at 1e-5 of the first residual, reaches the tolerance as well with the second's Jacobian at the
-    /// cost of a residual evaluation only (`docs/benchmarks.md`, "The Jacobian kept near the solution").
+    /// residual norm is below `below` times the solve's first and a tenth of the previous iteration's
+    /// (`None`: a Jacobian at every iteration). Near the solution the tangent hardly changes between
+    /// iterates: an inertia-dominated step goes 3460 -> 10 -> 0.04 -> 3e-7 in three iterations (the
+    /// paper-size CT), and its third iteration reaches the tolerance as well with the second's Jacobian
+    /// at the cost of a residual evaluation only (`docs/benchmarks.md`, "The Jacobian kept near the
+    /// solution": faster cracked steps, not a faster whole run).
     pub fn set_keep_jacobian_below(&mut self, below: Option<f64>) {
         self.keep_jacobian_below = below;
     }
@@ -514,6 +522,7 @@ impl Snes {
             keep_jacobian: self.keep_jacobian_below.map(|below| KeepJacobian {
                 below,
                 first: f64::INFINITY,
+                previous: f64::INFINITY,
             }),
         };
         if let Some(first) = self.first_linear_rtol {
@@ -855,8 +864,9 @@ unsafe extern "C" fn residual_cb(
 }
 
 /// Whether this Newton iteration keeps the last Jacobian ([`Snes::set_keep_jacobian_below`]): its
-/// residual norm below the set fraction of the solve's first. The first iteration of a solve records
-/// its norm and never keeps one (the matrix may hold another solve's Jacobian).
+/// residual norm below the set fraction of the solve's first and below [`KEEP_AFTER_REDUCTION`] of
+/// the previous iteration's. The first iteration of a solve never keeps one (the matrix may hold
+/// another solve's Jacobian).
 ///
 /// # Safety
 /// `snes` is the SNES in SNESSolve whose context is `ctx`.
@@ -881,9 +891,11 @@ unsafe fn keeps_jacobian(snes: sys::SNES, ctx: &mut Context) -> Result<bool> {
     }
     if its == 0 {
         keep.first = norm;
-        return Ok(false);
     }
-    Ok(norm <= keep.below * keep.first)
+    let kept =
+        its > 0 && norm <= keep.below * keep.first && norm <= KEEP_AFTER_REDUCTION * keep.previous;
+    keep.previous = norm;
+    Ok(kept)
 }
 
 unsafe extern "C" fn jacobian_cb(
@@ -896,6 +908,13 @@ unsafe extern "C" fn jacobian_cb(
     // SAFETY: as in residual_cb.
     unsafe {
         match keeps_jacobian(snes, &mut *ctx.cast::<Context>()) {
+            // A matrix-free operator (-snes_mf_operator) is still told the state changed: its
+            // products difference the residual about the new iterate.
+            Ok(true) if a != p => {
+                return Matrix::borrowed(a)
+                    .assemble()
+                    .map_or_else(|e| e.code, |()| 0);
+            }
             Ok(true) => return 0,
             Ok(false) => {}
             Err(e) => return e.code,
