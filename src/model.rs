@@ -559,13 +559,15 @@ pub struct EnergyBooks {
     /// Work of the points' stresses by the time integration's trapezoidal rule: per step `sum_p V^0
     /// (P_n + P) : (F - F_n) / 2` ([`crate::assembly::Assembler::stress_work`]), so that
     /// [`EnergyBooks::law_remainder`] is what the rule took out of the law's books and the rest of the
-    /// integration remainder the grid's (zero in checkpoints that predate it).
+    /// integration remainder the grid's. `None` in a run resumed from a checkpoint that predates it
+    /// (its sum from t = 0 is unknown; the columns stay empty).
     #[serde(default)]
-    pub stress_work: f64,
+    pub stress_work: Option<f64>,
     /// The part of `stress_work` done in the step after a point eroded by the half of its last stress
-    /// that the trapezoidal rule still charges (the point carries none at the step's end).
+    /// that the trapezoidal rule still charges (the point carries none at the step's end); `None` as
+    /// `stress_work`.
     #[serde(default)]
-    pub eroded_work: f64,
+    pub eroded_work: Option<f64>,
 }
 
 impl EnergyBooks {
@@ -586,8 +588,18 @@ impl EnergyBooks {
     /// damage - erosion` (N mm). Zero for a law integrated exactly along the step (a linear elastic
     /// one); the rest of [`EnergyBooks::integration_remainder`] is the grid's (Newmark's start from the
     /// projected acceleration, contact, the solver tolerances).
-    pub fn law_remainder(&self, stored: f64) -> f64 {
-        self.stress_work - stored - self.damage - self.erosion
+    pub fn law_remainder(&self, stored: f64) -> Option<f64> {
+        self.stress_work
+            .map(|w| w - stored - self.damage - self.erosion)
+    }
+
+    /// The books of a run that starts now: every sum zero.
+    pub fn start() -> Self {
+        Self {
+            stress_work: Some(0.0),
+            eroded_work: Some(0.0),
+            ..Self::default()
+        }
     }
 }
 
@@ -609,7 +621,7 @@ impl<const D: usize> State<D> {
             accumulated: vec![[0.0; D]; nsets],
             last_reactions: vec![[0.0; D]; nsets],
             contact: ContactMemory::new(nrigid),
-            books: EnergyBooks::default(),
+            books: EnergyBooks::start(),
         };
         Self {
             particles,

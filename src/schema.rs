@@ -284,14 +284,18 @@ pub mod history {
             "the part of integration_remainder the time rule of the stresses took: their trapezoidal \
              work sum_p V^0 (P_n + P) : (F - F_n) / 2 less stored_energy, damage_dissipation and \
              erosion_energy",
-            |r| Cell::Number(r.books.law_remainder(r.stored_energy), 9),
+            |r| {
+                r.books
+                    .law_remainder(r.stored_energy)
+                    .map_or(Cell::Empty, |w| Cell::Number(w, 9))
+            },
         ).in_units_line("energy"),
         column(
             "eroded_stress_work",
             "N mm",
             "the part of the stresses' trapezoidal work done in the step after a point eroded, by half \
              its last stress",
-            |r| Cell::Number(r.books.eroded_work, 9),
+            |r| r.books.eroded_work.map_or(Cell::Empty, |w| Cell::Number(w, 9)),
         ).in_units_line("energy"),
         column(WALL_SETUP, "s", "wall time of the step's set-up", |r| {
             Cell::Number(r.wall_setup, 4)

@@ -167,7 +167,9 @@ fn run(s: &SessionGuard, method: Method) -> Books {
             r.stored_energy,
         ),
         transfer: b.transfer,
-        law: b.law_remainder(r.stored_energy),
+        law: b
+            .law_remainder(r.stored_energy)
+            .expect("books kept from t = 0"),
         split,
     }
 }

@@ -85,8 +85,10 @@ impl<const D: usize> Step<'_, D> {
         b.eroding = books[1];
         b.contact += books[2];
         b.transfer += books[3];
-        b.stress_work += books[4];
-        b.eroded_work += books[5];
+        if let (Some(all), Some(eroded)) = (b.stress_work.as_mut(), b.eroded_work.as_mut()) {
+            *all += books[4];
+            *eroded += books[5];
+        }
         let mut report = self.report(&plan, solved, &out, energies, t0);
         report.path = self.path_point(session, plan.path.as_ref())?;
         Ok(report)
