@@ -644,16 +644,25 @@ fn diagonal_blocks() -> mpm_concrete::petsc::BlockCsr<'static> {
     }
 }
 
+/// `f_i = r(x_i)`: the residual of a problem whose unknowns are uncoupled.
+fn pointwise(
+    x: &mpm_concrete::petsc::Vector,
+    f: &mut mpm_concrete::petsc::Vector,
+    r: impl Fn(f64) -> f64,
+) -> Result<(), mpm_concrete::petsc::CallbackError> {
+    let fatal = |e: petsc::PetscError| mpm_concrete::petsc::CallbackError::Fatal(e.to_string());
+    let v = x.read(|v| v.to_vec()).map_err(fatal)?;
+    f.write(|out| out.iter_mut().zip(&v).for_each(|(o, &x)| *o = r(x)))
+        .map_err(fatal)
+}
+
 impl mpm_concrete::petsc::NonlinearProblem for Scaled {
     fn residual(
         &mut self,
         x: &mpm_concrete::petsc::Vector,
         f: &mut mpm_concrete::petsc::Vector,
     ) -> Result<(), mpm_concrete::petsc::CallbackError> {
-        let fatal = |e: petsc::PetscError| mpm_concrete::petsc::CallbackError::Fatal(e.to_string());
-        let v = x.read(|v| v.to_vec()).map_err(fatal)?;
-        f.write(|r| r.iter_mut().zip(&v).for_each(|(r, x)| *r = x - 1.0))
-            .map_err(fatal)
+        pointwise(x, f, |x| x - 1.0)
     }
 
     fn jacobian(
@@ -738,14 +747,7 @@ impl mpm_concrete::petsc::NonlinearProblem for Cubic {
         x: &mpm_concrete::petsc::Vector,
         f: &mut mpm_concrete::petsc::Vector,
     ) -> Result<(), mpm_concrete::petsc::CallbackError> {
-        let fatal = |e: petsc::PetscError| mpm_concrete::petsc::CallbackError::Fatal(e.to_string());
-        let v = x.read(|v| v.to_vec()).map_err(fatal)?;
-        f.write(|r| {
-            r.iter_mut()
-                .zip(&v)
-                .for_each(|(r, x)| *r = x + x * x * x - 2.0)
-        })
-        .map_err(fatal)
+        pointwise(x, f, |x| x + x * x * x - 2.0)
     }
 
     fn jacobian(

@@ -294,8 +294,23 @@ impl LinearSystem {
         } else {
             None
         };
-        snes.set_first_linear_rtol(first_linear_rtol(session, prefix)?);
-        snes.set_keep_jacobian_below(keep_jacobian_below(session, prefix)?);
+        // The first Newton iteration's linear tolerance (unset or 0: `-ksp_rtol` at every iteration)
+        // and the relative residual below which an iteration keeps the last Jacobian (unset or 0: a
+        // Jacobian at every iteration).
+        let first_rtol = fraction(
+            session,
+            prefix,
+            "mpm_first_ksp_rtol",
+            "a relative tolerance",
+        )?;
+        snes.set_first_linear_rtol(first_rtol);
+        let keep = fraction(
+            session,
+            prefix,
+            "mpm_keep_jacobian_below",
+            "a relative residual norm",
+        )?;
+        snes.set_keep_jacobian_below(keep);
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
@@ -311,35 +326,6 @@ impl LinearSystem {
             multigrid,
         })
     }
-}
-
-/// The first Newton iteration's linear tolerance, `-[PREFIX]mpm_first_ksp_rtol R` (`None`: unset or 0,
-/// the configured `-ksp_rtol` at every iteration; `Snes::set_first_linear_rtol`).
-fn first_linear_rtol(
-    session: &SessionGuard,
-    prefix: Option<&str>,
-) -> Result<Option<f64>, StepError> {
-    fraction(
-        session,
-        prefix,
-        "mpm_first_ksp_rtol",
-        "a relative tolerance",
-    )
-}
-
-/// The relative residual norm below which a Newton iteration keeps the last Jacobian,
-/// `-[PREFIX]mpm_keep_jacobian_below R` (`None`: unset or 0, a Jacobian at every iteration;
-/// `Snes::set_keep_jacobian_below`).
-fn keep_jacobian_below(
-    session: &SessionGuard,
-    prefix: Option<&str>,
-) -> Result<Option<f64>, StepError> {
-    fraction(
-        session,
-        prefix,
-        "mpm_keep_jacobian_below",
-        "a relative residual norm",
-    )
 }
 
 /// The option `-[PREFIX]NAME R` with `0 <= R < 1` (`what` in its error): `None` where it is unset or 0.
