@@ -294,23 +294,7 @@ impl LinearSystem {
         } else {
             None
         };
-        // The first Newton iteration's linear tolerance (unset or 0: `-ksp_rtol` at every iteration)
-        // and the relative residual below which an iteration keeps the last Jacobian (unset or 0: a
-        // Jacobian at every iteration).
-        let first_rtol = fraction(
-            session,
-            prefix,
-            "mpm_first_ksp_rtol",
-            "a relative tolerance",
-        )?;
-        snes.set_first_linear_rtol(first_rtol);
-        let keep = fraction(
-            session,
-            prefix,
-            "mpm_keep_jacobian_below",
-            "a relative residual norm",
-        )?;
-        snes.set_keep_jacobian_below(keep);
+        newton_options(&mut snes, session, prefix)?;
         let tolerances = snes.tolerances()?;
         let lag = snes.lag_preconditioner()?;
         Ok(Self {
@@ -326,6 +310,29 @@ impl LinearSystem {
             multigrid,
         })
     }
+}
+
+/// The solver's own Newton options: the first iteration's linear tolerance, `-[PREFIX]mpm_first_ksp_rtol`
+/// (unset or 0: `-ksp_rtol` at every iteration), and the relative residual below which an iteration keeps
+/// the last Jacobian, `-[PREFIX]mpm_keep_jacobian_below` (unset or 0: a Jacobian at every iteration).
+fn newton_options(
+    snes: &mut Snes,
+    session: &SessionGuard,
+    prefix: Option<&str>,
+) -> Result<(), StepError> {
+    snes.set_first_linear_rtol(fraction(
+        session,
+        prefix,
+        "mpm_first_ksp_rtol",
+        "a relative tolerance",
+    )?);
+    snes.set_keep_jacobian_below(fraction(
+        session,
+        prefix,
+        "mpm_keep_jacobian_below",
+        "a relative residual norm",
+    )?);
+    Ok(())
 }
 
 /// The option `-[PREFIX]NAME R` with `0 <= R < 1` (`what` in its error): `None` where it is unset or 0.
